@@ -1,4 +1,15 @@
-//! `ecmxf-sim`: a chip and EtherCAT network simulator for the ECM-XF.
+//! `ecmxf-sim`: a simulator of the NEXTW ECM-XF EtherCAT master chip and the
+//! EtherCAT network behind it, written from the manuals (PROTOCOL-NOTES.md
+//! is the map), never from what a host happens to send.
 //!
-//! Not built yet (issue #3). Nothing here pretends to work: the crate exists
-//! so the workspace layout is in place.
+//! # Map
+//! - [`net`]: the network: slaves with their state machine ([`net::esm`]),
+//!   object dictionary ([`net::od`]), PDO mapping ([`net::pdo_map`]), SII
+//!   image ([`net::sii`]), CiA402 drives ([`net::cia402`]) and ready-made
+//!   device profiles ([`net::profiles`]).
+//!
+//! Time is simulated: everything takes the current time in nanoseconds as an
+//! argument, so tests advance it deterministically.
+#![warn(missing_docs)]
+
+pub mod net;

@@ -1,0 +1,41 @@
+//! The simulated EtherCAT network: slaves in ring order, each with its
+//! state machine, object dictionary, SII image and device model.
+
+pub mod cia402;
+pub mod esm;
+pub mod od;
+pub mod pdo_map;
+pub mod profiles;
+pub mod sii;
+pub mod slave;
+
+pub use slave::{Device, Slave};
+
+/// The slaves, in ring position order.
+#[derive(Clone, Debug, Default)]
+pub struct Network {
+    /// Slaves by position.
+    pub slaves: Vec<Slave>,
+}
+
+impl Network {
+    /// A network of these slaves.
+    pub fn new(slaves: Vec<Slave>) -> Self {
+        Self { slaves }
+    }
+
+    /// The demo network: a Neuromeka-CORE-like drive, a TI-like 3-axis drive
+    /// and an 8-in/8-out IO slave.
+    pub fn demo() -> Self {
+        Self::new(vec![
+            profiles::neuromeka_core(1001, 1),
+            profiles::ti_three_axis(2001, 2),
+            profiles::digital_io(3001, 3),
+        ])
+    }
+
+    /// Slaves that answer (plugged in).
+    pub fn present(&self) -> impl Iterator<Item = (usize, &Slave)> {
+        self.slaves.iter().enumerate().filter(|(_, s)| s.present)
+    }
+}

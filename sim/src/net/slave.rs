@@ -1,0 +1,358 @@
+//! One simulated EtherCAT slave: identity and SII image, ESM, object
+//! dictionary and process image, ESC registers, FoE file store, and the
+//! device model behind the process data.
+
+use std::collections::BTreeMap;
+
+use ecmxf_wire::payload::sdo::SdoAbortCode;
+
+use super::cia402::{self, Axis, ERROR_PD_TIMEOUT};
+use super::esm::{
+    AL_INVALID_INPUTS, AL_INVALID_MAILBOX, AL_INVALID_OUTPUTS, AL_INVALID_SYNC_CYCLE, AL_SM_WATCHDOG, AlState, Esm,
+    TransitionCheck,
+};
+use super::od::{ObjectDictionary, SdoResult};
+use super::pdo_map::{self, Layout};
+use super::sii::Sii;
+
+/// What drives a slave's process data.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Device {
+    /// A CiA402 drive with one or more axes.
+    Drive(Vec<Axis>),
+    /// Digital outputs at 0x7000:01 looped back to inputs at 0x6000:01, plus
+    /// input bits forced from tests (like the slave-stack "8io" example).
+    DigitalIo {
+        /// Bits ORed into the inputs.
+        forced_inputs: u8,
+    },
+    /// No behaviour (couplers, slaves loaded from an ESI).
+    Passive,
+}
+
+/// An emergency message a slave sent (CiA301 EMCY over CoE).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Emergency {
+    /// Error code.
+    pub error_code: u16,
+    /// Error register (0x1001).
+    pub error_register: u8,
+    /// Manufacturer data.
+    pub data: [u8; 5],
+}
+
+/// One slave.
+#[derive(Clone, Debug)]
+pub struct Slave {
+    /// Name (SII general name string).
+    pub name: String,
+    /// The SII image, as words would be read from the EEPROM.
+    pub eeprom: Vec<u8>,
+    /// Whether the slave speaks CoE (has a mailbox).
+    pub has_mailbox: bool,
+    /// DC supported.
+    pub has_dc: bool,
+    /// Shortest SYNC0 cycle it accepts, ns (0 = no limit).
+    pub min_cycle_ns: u32,
+    /// ESM.
+    pub esm: Esm,
+    /// Object dictionary.
+    pub od: ObjectDictionary,
+    /// Device model.
+    pub device: Device,
+    /// Output layout, fixed when entering SAFE-OP.
+    pub rx: Layout,
+    /// Input layout.
+    pub tx: Layout,
+    /// Last output image received.
+    pub outputs: Vec<u8>,
+    /// Current input image.
+    pub inputs: Vec<u8>,
+    /// Sync manager watchdog, ns (the Neuromeka CORE's process-data timeout
+    /// is 50 ms; ETG default 100 ms).
+    pub watchdog_ns: u64,
+    /// Time since outputs were last written, ns.
+    pub since_outputs_ns: u64,
+    /// Station alias (SII word 4, register 0x0012).
+    pub alias: u16,
+    /// Configured station address (register 0x0010).
+    pub station_address: u16,
+    /// ESC register and memory space (0x0000..0x1000), for raw datagrams.
+    pub registers: Vec<u8>,
+    /// FoE files.
+    pub files: BTreeMap<Vec<u8>, Vec<u8>>,
+    /// FoE password (0 = none).
+    pub foe_password: u32,
+    /// Emergencies not yet collected by the master.
+    pub emergencies: Vec<Emergency>,
+    /// Whether the slave is plugged in (unplug removes it from the ring).
+    pub present: bool,
+    /// The DC cycle the master configured, ns.
+    pub dc_cycle_ns: u32,
+}
+
+/// Register addresses the simulation keeps live.
+pub mod reg {
+    /// Station address.
+    pub const STATION_ADDRESS: u16 = 0x0010;
+    /// Station alias.
+    pub const STATION_ALIAS: u16 = 0x0012;
+    /// AL control.
+    pub const AL_CONTROL: u16 = 0x0120;
+    /// AL status.
+    pub const AL_STATUS: u16 = 0x0130;
+    /// AL status code.
+    pub const AL_STATUS_CODE: u16 = 0x0134;
+}
+
+struct Checks<'a> {
+    slave: &'a Slave,
+}
+
+impl TransitionCheck for Checks<'_> {
+    fn check(&self, _from: AlState, to: AlState) -> Result<(), u16> {
+        let s = self.slave;
+        match to {
+            AlState::PreOp if s.has_mailbox => {
+                let sii = Sii::parse(&s.eeprom).map_err(|_| AL_INVALID_MAILBOX)?;
+                if sii.mailbox.rx_size == 0 || sii.mailbox.tx_size == 0 {
+                    return Err(AL_INVALID_MAILBOX);
+                }
+                Ok(())
+            }
+            AlState::SafeOp => {
+                pdo_map::layout(&s.od, true).map_err(|_| AL_INVALID_OUTPUTS)?;
+                pdo_map::layout(&s.od, false).map_err(|_| AL_INVALID_INPUTS)?;
+                if s.has_dc && s.dc_cycle_ns != 0 && s.dc_cycle_ns < s.min_cycle_ns {
+                    return Err(AL_INVALID_SYNC_CYCLE);
+                }
+                Ok(())
+            }
+            _ => Ok(()),
+        }
+    }
+}
+
+impl Slave {
+    /// A slave from its parts; the SII image decides name, alias and mailbox.
+    pub fn new(eeprom: Vec<u8>, od: ObjectDictionary, device: Device, has_dc: bool) -> Self {
+        let sii = Sii::parse(&eeprom).unwrap_or_default();
+        let name = sii.name().unwrap_or_default();
+        let alias = sii.config[4];
+        let mut s = Self {
+            name,
+            has_mailbox: sii.mailbox.rx_size > 0,
+            eeprom,
+            has_dc,
+            min_cycle_ns: 125_000,
+            esm: Esm::default(),
+            od,
+            device,
+            rx: Layout::default(),
+            tx: Layout::default(),
+            outputs: Vec::new(),
+            inputs: Vec::new(),
+            watchdog_ns: 100_000_000,
+            since_outputs_ns: 0,
+            alias,
+            station_address: 0,
+            registers: vec![0; 0x1000],
+            files: BTreeMap::new(),
+            foe_password: 0,
+            emergencies: Vec::new(),
+            present: true,
+            dc_cycle_ns: 0,
+        };
+        s.relayout();
+        s.sync_registers();
+        s
+    }
+
+    /// SII identity.
+    pub fn sii(&self) -> Sii {
+        Sii::parse(&self.eeprom).unwrap_or_default()
+    }
+
+    /// Recomputes the process-image layout from the dictionary.
+    pub fn relayout(&mut self) {
+        self.rx = pdo_map::layout(&self.od, true).unwrap_or_default();
+        self.tx = pdo_map::layout(&self.od, false).unwrap_or_default();
+        self.outputs = vec![0; self.rx.bytes()];
+        self.inputs = vec![0; self.tx.bytes()];
+    }
+
+    /// An AL control request; returns whether the state was reached.
+    pub fn request_state(&mut self, code: u8) -> bool {
+        let before = self.esm.state;
+        let mut esm = self.esm;
+        let ok = esm.request(code, &Checks { slave: self });
+        self.esm = esm;
+        if ok && before < AlState::SafeOp && self.esm.state >= AlState::SafeOp {
+            self.relayout();
+        }
+        if self.esm.state == AlState::Op && before != AlState::Op {
+            self.since_outputs_ns = 0;
+        }
+        self.sync_registers();
+        ok
+    }
+
+    fn mailbox_ready(&self) -> SdoResult<()> {
+        // Without a mailbox, or below PRE-OP, the request never gets an
+        // answer: the master times out.
+        if !self.present || !self.has_mailbox || matches!(self.esm.state, AlState::Init | AlState::Boot) {
+            return Err(SdoAbortCode::TIMEOUT);
+        }
+        Ok(())
+    }
+
+    /// SDO upload.
+    pub fn sdo_upload(&self, index: u16, sub: u8, complete: bool) -> SdoResult<Vec<u8>> {
+        self.mailbox_ready()?;
+        self.od.upload(index, sub, complete, self.esm.state)
+    }
+
+    /// SDO download.
+    pub fn sdo_download(&mut self, index: u16, sub: u8, complete: bool, data: &[u8]) -> SdoResult<()> {
+        self.mailbox_ready()?;
+        let state = self.esm.state;
+        self.od.download(index, sub, complete, data, state, pdo_map::validate_write)
+    }
+
+    /// Reads an EEPROM word pair (ESCs read 4 bytes at a time).
+    pub fn eeprom_read(&self, word: u16) -> [u8; 4] {
+        let mut out = [0xFF; 4];
+        for (i, b) in out.iter_mut().enumerate() {
+            if let Some(v) = self.eeprom.get(usize::from(word) * 2 + i) {
+                *b = *v;
+            }
+        }
+        out
+    }
+
+    /// Writes one EEPROM word, growing the image if needed.
+    pub fn eeprom_write(&mut self, word: u16, value: u16) {
+        let at = usize::from(word) * 2;
+        if self.eeprom.len() < at + 2 {
+            self.eeprom.resize(at + 2, 0xFF);
+        }
+        self.eeprom[at..at + 2].copy_from_slice(&value.to_le_bytes());
+        if word == 4 {
+            self.alias = value;
+            self.sync_registers();
+        }
+    }
+
+    /// Mirrors ESM and addresses into the ESC registers.
+    pub fn sync_registers(&mut self) {
+        let put = |r: &mut Vec<u8>, at: u16, v: u16| {
+            r[usize::from(at)..usize::from(at) + 2].copy_from_slice(&v.to_le_bytes())
+        };
+        put(&mut self.registers, reg::STATION_ADDRESS, self.station_address);
+        put(&mut self.registers, reg::STATION_ALIAS, self.alias);
+        put(&mut self.registers, reg::AL_STATUS, self.esm.al_status_register());
+        put(&mut self.registers, reg::AL_STATUS_CODE, self.esm.al_status);
+    }
+
+    /// A raw register read.
+    pub fn read_registers(&self, ado: u16, out: &mut [u8]) {
+        for (i, b) in out.iter_mut().enumerate() {
+            *b = *self.registers.get(usize::from(ado) + i).unwrap_or(&0);
+        }
+    }
+
+    /// A raw register write; AL control requests a state.
+    pub fn write_registers(&mut self, ado: u16, data: &[u8]) {
+        for (i, b) in data.iter().enumerate() {
+            let at = usize::from(ado) + i;
+            if at < self.registers.len() && !(0x0130..0x0138).contains(&at) {
+                self.registers[at] = *b;
+            }
+        }
+        if ado <= reg::AL_CONTROL && usize::from(ado) + data.len() > usize::from(reg::AL_CONTROL) {
+            let code = self.registers[usize::from(reg::AL_CONTROL)] & 0x0F;
+            self.request_state(code);
+        }
+        if ado <= reg::STATION_ADDRESS && usize::from(ado) + data.len() >= usize::from(reg::STATION_ADDRESS) + 2 {
+            self.station_address = u16::from_le_bytes([self.registers[0x10], self.registers[0x11]]);
+        }
+    }
+
+    /// One DC cycle. `outputs` is this cycle's output image for the slave, or
+    /// `None` when the master sent none. Returns the working-counter
+    /// contribution of this slave in an LRW: +1 for inputs read (SAFE-OP or
+    /// OP), +2 for outputs written (OP).
+    pub fn cycle(&mut self, outputs: Option<&[u8]>, dt_ns: u64) -> u16 {
+        if !self.present {
+            return 0;
+        }
+        let state = self.esm.state;
+        let mut wkc = 0;
+        match outputs {
+            Some(o) if state == AlState::Op && !self.outputs.is_empty() => {
+                let n = o.len().min(self.outputs.len());
+                self.outputs[..n].copy_from_slice(&o[..n]);
+                pdo_map::image_to_od(&mut self.od, &self.rx, &self.outputs);
+                self.since_outputs_ns = 0;
+                wkc += 2;
+            }
+            _ => self.since_outputs_ns = self.since_outputs_ns.saturating_add(dt_ns),
+        }
+        if state == AlState::Op && !self.outputs.is_empty() && self.since_outputs_ns > self.watchdog_ns {
+            self.esm.fail(AlState::SafeOp, AL_SM_WATCHDOG);
+            self.sync_registers();
+            if let Device::Drive(axes) = &mut self.device {
+                for a in axes.iter_mut() {
+                    if let Some(code) = a.raise_fault(ERROR_PD_TIMEOUT, true) {
+                        self.emergencies.push(Emergency { error_code: code, error_register: 0x11, data: [0; 5] });
+                    }
+                }
+            }
+        }
+        let communicating = !matches!(self.esm.state, AlState::Init | AlState::Boot);
+        match &mut self.device {
+            Device::Drive(axes) => {
+                for a in axes.iter_mut() {
+                    a.step(&mut self.od, dt_ns, communicating);
+                }
+            }
+            Device::DigitalIo { forced_inputs } => {
+                let out = self.od.int(0x7000, 1);
+                self.od.set_int(0x6000, 1, out | i64::from(*forced_inputs));
+            }
+            Device::Passive => {}
+        }
+        if matches!(self.esm.state, AlState::SafeOp | AlState::Op) && !self.inputs.is_empty() {
+            pdo_map::od_to_image(&self.od, &self.tx, &mut self.inputs);
+            wkc += 1;
+        }
+        wkc
+    }
+
+    /// Injects a drive fault on an axis (fault injection).
+    pub fn inject_drive_fault(&mut self, axis: usize, code: u16) -> bool {
+        let Device::Drive(axes) = &mut self.device else { return false };
+        let Some(a) = axes.get_mut(axis) else { return false };
+        if let Some(c) = a.raise_fault(code, false) {
+            self.emergencies.push(Emergency { error_code: c, error_register: 0x81, data: [0; 5] });
+        }
+        true
+    }
+
+    /// Clears an injected fault's cause so a fault reset succeeds.
+    pub fn clear_drive_fault(&mut self, axis: usize) -> bool {
+        let Device::Drive(axes) = &mut self.device else { return false };
+        axes.get_mut(axis).map(Axis::clear_fault_cause).is_some()
+    }
+
+    /// Forces an AL error (fault injection): the slave drops to SAFE-OP (or
+    /// stays lower) with the given AL status code.
+    pub fn inject_al_error(&mut self, code: u16) {
+        let to = self.esm.state.min(AlState::SafeOp);
+        self.esm.fail(to, code);
+        self.sync_registers();
+    }
+}
+
+/// Re-exported for device builders.
+pub use cia402::AxisSpec;
