@@ -12,4 +12,8 @@
 //! argument, so tests advance it deterministically.
 #![warn(missing_docs)]
 
+pub mod chip;
 pub mod net;
+
+pub use chip::{Chip, ChipConfig};
+pub use net::Network;

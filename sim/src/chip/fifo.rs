@@ -1,0 +1,155 @@
+//! The PDO FIFOs (v049 FIFO_SET_TX_CNT/RX_CNT notes, PDO_DATA_FIFO_OP):
+//! RxFIFO holds output frames the host pushed, consumed one per DC cycle;
+//! TxFIFO holds input frames produced one per cycle, pulled by the host.
+//! Depths share 0x4000 bytes. TxFIFO full drops the OLDEST frame (the host
+//! always finds the newest data); RxFIFO full drops the NEWEST (it cannot be
+//! stored).
+
+use std::collections::VecDeque;
+
+use ecmxf_wire::payload::fifo::{FIFO_BUDGET, FIFO_DEFAULT_DEPTH};
+
+/// Both FIFOs and their settings.
+#[derive(Clone, Debug)]
+pub struct Fifos {
+    /// Output frames waiting to be sent.
+    pub rx: VecDeque<Vec<u8>>,
+    /// Input frames waiting for the host.
+    pub tx: VecDeque<Vec<u8>>,
+    /// RxFIFO depth in force.
+    pub rx_depth: u8,
+    /// TxFIFO depth in force.
+    pub tx_depth: u8,
+    /// RxFIFO depth set with 54, applied by FIFO_INIT.
+    pub rx_depth_set: u8,
+    /// TxFIFO depth set with 52, applied by FIFO_INIT.
+    pub tx_depth_set: u8,
+    /// Cyclic output from the RxFIFO enabled (FIFO_ENABLE).
+    pub enabled: bool,
+    /// TxFIFO high mark, when enabled.
+    pub tx_high: Option<u8>,
+    /// RxFIFO low mark, when enabled.
+    pub rx_low: Option<u8>,
+    /// Cycles that found the RxFIFO empty while enabled.
+    pub underruns: u64,
+    /// Output frames dropped because the RxFIFO was full.
+    pub rx_dropped: u64,
+    /// Input frames dropped because the TxFIFO was full.
+    pub tx_dropped: u64,
+}
+
+impl Default for Fifos {
+    fn default() -> Self {
+        Self {
+            rx: VecDeque::new(),
+            tx: VecDeque::new(),
+            rx_depth: FIFO_DEFAULT_DEPTH,
+            tx_depth: FIFO_DEFAULT_DEPTH,
+            rx_depth_set: FIFO_DEFAULT_DEPTH,
+            tx_depth_set: FIFO_DEFAULT_DEPTH,
+            enabled: false,
+            tx_high: None,
+            rx_low: None,
+            underruns: 0,
+            rx_dropped: 0,
+            tx_dropped: 0,
+        }
+    }
+}
+
+impl Fifos {
+    /// Pushes an output frame; returns false when the RxFIFO was full and
+    /// the frame was dropped.
+    pub fn push_output(&mut self, frame: Vec<u8>) -> bool {
+        if self.rx.len() >= usize::from(self.rx_depth) {
+            self.rx_dropped += 1;
+            return false;
+        }
+        self.rx.push_back(frame);
+        true
+    }
+
+    /// Stores an input frame, dropping the oldest when full.
+    pub fn push_input(&mut self, frame: Vec<u8>) {
+        if self.tx_depth == 0 {
+            self.tx_dropped += 1;
+            return;
+        }
+        while self.tx.len() >= usize::from(self.tx_depth) {
+            self.tx.pop_front();
+            self.tx_dropped += 1;
+        }
+        self.tx.push_back(frame);
+    }
+
+    /// Applies the depths set with 52/54 (FIFO_INIT); fails when they do not
+    /// fit the budget for these frame sizes.
+    pub fn init(&mut self, rx_size: usize, tx_size: usize) -> bool {
+        let need = usize::from(self.rx_depth_set) * rx_size + usize::from(self.tx_depth_set) * tx_size;
+        if need > FIFO_BUDGET {
+            return false;
+        }
+        self.rx_depth = self.rx_depth_set;
+        self.tx_depth = self.tx_depth_set;
+        self.rx.clear();
+        self.tx.clear();
+        true
+    }
+
+    /// Whether the TxFIFO is at or above its high mark.
+    pub fn tx_high_reached(&self) -> bool {
+        self.tx_high.is_some_and(|m| self.tx.len() >= usize::from(m))
+    }
+
+    /// Whether the RxFIFO is at or below its low mark.
+    pub fn rx_low_reached(&self) -> bool {
+        self.rx_low.is_some_and(|m| self.rx.len() <= usize::from(m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn tx_full_drops_the_oldest() {
+        let mut f = Fifos { tx_depth: 3, ..Fifos::default() };
+        for i in 0..5u8 {
+            f.push_input(vec![i]);
+        }
+        assert_eq!(f.tx.iter().map(|v| v[0]).collect::<Vec<_>>(), [2, 3, 4]);
+        assert_eq!(f.tx_dropped, 2);
+    }
+
+    #[test]
+    fn rx_full_drops_the_newest() {
+        let mut f = Fifos { rx_depth: 2, ..Fifos::default() };
+        assert!(f.push_output(vec![0]));
+        assert!(f.push_output(vec![1]));
+        assert!(!f.push_output(vec![2]));
+        assert_eq!(f.rx.iter().map(|v| v[0]).collect::<Vec<_>>(), [0, 1]);
+        assert_eq!(f.rx_dropped, 1);
+    }
+
+    #[test]
+    fn budget_is_enforced_at_init() {
+        let mut f = Fifos { rx_depth_set: 128, tx_depth_set: 128, ..Fifos::default() };
+        assert!(f.init(64, 64));
+        assert_eq!((f.rx_depth, f.tx_depth), (128, 128));
+        f.rx_depth_set = 129;
+        assert!(!f.init(64, 64));
+        assert_eq!(f.rx_depth, 128, "a refused init changes nothing");
+    }
+
+    #[test]
+    fn marks() {
+        let mut f = Fifos { tx_high: Some(2), rx_low: Some(1), ..Fifos::default() };
+        assert!(f.rx_low_reached() && !f.tx_high_reached());
+        f.push_input(vec![]);
+        f.push_input(vec![]);
+        assert!(f.tx_high_reached());
+        f.push_output(vec![]);
+        f.push_output(vec![]);
+        assert!(!f.rx_low_reached());
+    }
+}
