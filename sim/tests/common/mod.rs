@@ -20,6 +20,8 @@ pub struct Host {
     pub control: ControlFlags,
     /// INT0 polarity the host expects (active-high after power-up).
     pub int0_active_high: bool,
+    /// RxFIFO count from the last header read.
+    pub last_rx_count: u8,
 }
 
 /// What came back from one exchange.
@@ -43,6 +45,7 @@ impl Host {
             data_size: 112,
             control: ControlFlags::empty(),
             int0_active_high: true,
+            last_rx_count: 0,
         }
     }
 
