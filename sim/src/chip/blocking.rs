@@ -277,7 +277,7 @@ impl Chip {
             .net
             .slaves
             .iter()
-            .map(|s| if s.present { u8::try_from(s.esm.al_status_register()).unwrap_or(0x10) } else { 0 })
+            .map(|s| if s.present { u8::try_from(s.esm.al_status_register()).unwrap_or(0x10) } else { 0x10 })
             .collect();
     }
 

@@ -129,7 +129,8 @@ pub struct Master {
     /// The latest input image.
     pub inputs: Vec<u8>,
     /// States as the chip last read them (refreshed by 57, 41, 12 and
-    /// control bit1).
+    /// control bit1): AL status register values, 0x10 for a slave that no
+    /// longer answers.
     pub cached_states: Vec<u8>,
     /// LRW enabled (142).
     pub lrw: bool,
@@ -411,11 +412,11 @@ impl Chip {
         if !self.master.inited {
             return EcatState::None;
         }
-        match self.master.cached_states.iter().min_by_key(|s| *s & 0x0F) {
-            Some(s) if s & 0x10 != 0 => EcatState::Error,
-            Some(s) => EcatState::from_u8(*s),
-            None => EcatState::None,
+        let states = &self.master.cached_states;
+        if states.iter().any(|s| s & 0x10 != 0) {
+            return EcatState::Error;
         }
+        states.iter().map(|s| s & 0x0F).min().map_or(EcatState::None, EcatState::from_u8)
     }
 
     fn snapshot(&self, index: u8, code: CommandCode, value: u8, data_len: u16) -> ResponseHeader {

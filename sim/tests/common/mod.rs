@@ -143,3 +143,39 @@ impl Host {
 pub fn code(h: &ResponseHeader) -> CommandCode {
     h.code
 }
+
+/// Frame sizes after [`bring_up_to_op`].
+#[derive(Clone, Copy, Debug)]
+pub struct Frames {
+    pub rx: usize,
+    pub tx: usize,
+}
+
+/// ECAT_INIT (125 us DC), PRE-OP, SAFE-OP, OP with the default mappings,
+/// FIFO on with `prefill` zero frames. No assertions beyond success.
+pub fn bring_up_to_op(h: &mut Host, prefill: usize) -> Frames {
+    use ecmxf_wire::EcatState;
+    use ecmxf_wire::payload::ecat_init::{DcTiming, EcatInit};
+    use ecmxf_wire::payload::fifo::{FifoEnable, FifoPackSize, FifoPackSizeGet};
+    use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoDirection, PdoFifoOp};
+    use ecmxf_wire::payload::state::{SlaveSelector, StateSet};
+    h.call(&InfoUpdate);
+    let dc = DcTiming { assign_activate: 0x0300, sync0_ns: 125_000, sync1_ns: 0, shift_ns: 0 };
+    h.blocking(&EcatInit { special_slaves: false, master_shift: false, disable_lrw: false, dc });
+    h.blocking(&StateSet { target: SlaveSelector::All, state: EcatState::SafeOp });
+    let rx: FifoPackSize = h.get(&FifoPackSizeGet(PdoDirection::Outputs));
+    let tx: FifoPackSize = h.get(&FifoPackSizeGet(PdoDirection::Inputs));
+    let frames = Frames { rx: rx.0.into(), tx: tx.0.into() };
+    let per_packet = h.data_size / frames.rx.max(1);
+    let mut left = prefill;
+    while left > 0 {
+        let n = left.min(per_packet);
+        let zeros = vec![0u8; frames.rx * n];
+        h.call(&PdoFifoOp { op: FifoOpFlags::WRITE, frames: n as u8, outputs: &zeros });
+        left -= n;
+    }
+    let st = h.blocking(&StateSet { target: SlaveSelector::All, state: EcatState::Op });
+    assert_eq!(st.ecat_state, EcatState::Op);
+    h.call(&FifoEnable(true));
+    frames
+}

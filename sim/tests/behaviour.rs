@@ -1,0 +1,213 @@
+//! Documented chip behaviour beyond the happy path: the blocking-slot rules,
+//! FIFO underrun, the WKC limit and the slaves' watchdog, emergencies, warm
+//! reset, EEPROM, raw datagrams and FoE.
+
+mod common;
+
+use common::{Host, bring_up_to_op};
+use ecmxf_sim::Network;
+use ecmxf_wire::flags::{ControlFlags, ErrorFlags, StatusFlags};
+use ecmxf_wire::payload::control::{
+    AsyncCmdReset, AsyncReset, FwVersionGet, InfoUpdate, WkcErrorLimit, WkcErrorLimitSet,
+};
+use ecmxf_wire::payload::ecat_init::StateUpdate;
+use ecmxf_wire::payload::ecat_init::{DcTiming, EcatInit};
+use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromRequest};
+use ecmxf_wire::payload::emergency::{CoeEmergencyGet, CoeEmergencyReply};
+use ecmxf_wire::payload::foe::{FoeGet, FoeRequest, FoeTransfer};
+use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RawGet, RawReply, RawRequest};
+use ecmxf_wire::payload::sdo::{SdoAccess, SdoRequest};
+use ecmxf_wire::payload::state::SlaveSelector;
+use ecmxf_wire::{CommandCode, EcatState, Reply, ReplyFields};
+
+fn fields(a: &common::Answer) -> ReplyFields {
+    ReplyFields { value: a.header.return_value, data_len: a.header.data_len }
+}
+
+fn sdo_read(slave: u8, index: u16) -> SdoRequest<'static> {
+    SdoRequest {
+        slave,
+        index,
+        subindex: 0,
+        complete_access: false,
+        timeout_us: 100_000,
+        access: SdoAccess::Read { max_len: 4 },
+    }
+}
+
+#[test]
+fn one_blocking_command_at_a_time() {
+    let mut h = Host::new(Network::demo());
+    h.call(&InfoUpdate);
+    let dc = DcTiming { assign_activate: 0, sync0_ns: 1_000_000, sync1_ns: 0, shift_ns: 0 };
+    let a = h.call(&EcatInit { special_slaves: false, master_shift: false, disable_lrw: false, dc });
+    assert!(a.header.status.flags.contains(StatusFlags::BLOCKING_BUSY));
+    // A second blocking command while busy: command error, not executed.
+    let executed_sdo = h.call(&sdo_read(0, 0x1000));
+    assert!(executed_sdo.header.errors.contains(ErrorFlags::COMMAND_ERROR));
+    assert!(matches!(h.chip.pending, Some((ecmxf_sim::chip::BlockingOp::EcatInit(_), _))));
+    // Non-blocking commands keep working meanwhile.
+    let v = h.call(&FwVersionGet);
+    assert_eq!(v.header.return_value, 0x24);
+    // The clear bit clears the command error.
+    h.control = ControlFlags::CLEAR_COMMAND_ERROR;
+    let a = h.call(&InfoUpdate);
+    assert!(!a.header.errors.contains(ErrorFlags::COMMAND_ERROR));
+    // ASYNC_CMD_RESET 1 frees a stuck slot.
+    let a = h.call(&AsyncCmdReset(AsyncReset::CLEAR_BUSY));
+    assert!(!a.header.blocking_busy());
+    assert!(!h.chip.master.inited, "the abandoned init never completed");
+}
+
+#[test]
+fn a_dry_rxfifo_repeats_the_last_outputs_and_flags_a_fifo_error() {
+    let mut h = Host::new(Network::demo());
+    let f = bring_up_to_op(&mut h, 4);
+    // Push one frame with IO outputs 0x5A, then stop feeding.
+    let mut frame = vec![0u8; f.rx];
+    frame[f.rx - 1] = 0x5A;
+    h.call(&ecmxf_wire::payload::pdo::PdoFifoOp {
+        op: ecmxf_wire::payload::pdo::FifoOpFlags::WRITE,
+        frames: 1,
+        outputs: &frame,
+    });
+    h.idle(5_000_000);
+    assert!(h.chip.fifo.underruns > 30);
+    let a = h.call(&InfoUpdate);
+    assert!(a.header.errors.contains(ErrorFlags::FIFO_ERROR));
+    assert_eq!(h.chip.net.slaves[2].outputs, [0x5A], "last outputs repeat");
+    assert_eq!(a.header.wkc_errors, 0, "slaves still get outputs every cycle");
+    h.control = ControlFlags::CLEAR_FIFO_ERROR;
+    let a = h.call(&InfoUpdate);
+    // Still dry, so the error comes straight back on the next cycle.
+    assert!(a.header.errors.contains(ErrorFlags::FIFO_ERROR) || h.chip.fifo.underruns > 0);
+}
+
+#[test]
+fn wkc_limit_stops_exchange_and_slaves_fall_to_safeop_with_0x001b() {
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 8);
+    h.call(&WkcErrorLimitSet(WkcErrorLimit(10)));
+    // Unplug the IO slave: the working counter drops by 3 every cycle.
+    h.chip.net.slaves[2].present = false;
+    h.idle(2_000_000);
+    let a = h.call(&InfoUpdate);
+    assert!(a.header.wkc_errors > 10);
+    assert!(h.chip.master.exchange_stopped);
+    assert!(
+        !a.header.status.flags.intersects(StatusFlags::PDO_CONFIGURED | StatusFlags::FIFO_ENABLED),
+        "bits 4 and 6 read 0"
+    );
+    // Without outputs the Neuromeka drive's 50 ms watchdog fires first.
+    h.idle(60_000_000);
+    let s = &h.chip.net.slaves[0];
+    assert_eq!((s.esm.state, s.esm.al_status), (ecmxf_sim::net::esm::AlState::SafeOp, 0x001B));
+    assert_eq!(h.chip.net.slaves[1].esm.state, ecmxf_sim::net::esm::AlState::Op, "TI drive: 100 ms watchdog");
+    h.idle(50_000_000);
+    assert_eq!(h.chip.net.slaves[1].esm.al_status, 0x001B);
+    // The chip shows it once the states are refreshed.
+    h.blocking(&StateUpdate);
+    let a = h.call(&InfoUpdate);
+    assert_eq!(a.header.ecat_state, EcatState::Error);
+    // The drives raised emergencies for the lost process data.
+    let a = h.call(&CoeEmergencyGet(8));
+    let r = CoeEmergencyReply::decode(&fields(&a), &a.data).unwrap();
+    let codes: Vec<(u8, u16)> = r.records().filter(|r| !r.is_empty()).map(|r| (r.slave, r.error_code)).collect();
+    assert!(codes.contains(&(0, 0x8700)) && codes.contains(&(1, 0x8700)), "{codes:?}");
+    let _ = SlaveSelector::All;
+}
+
+#[test]
+fn injected_drive_fault_reaches_the_emergency_history() {
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 16);
+    assert!(h.chip.net.slaves[1].inject_drive_fault(2, 0x2310));
+    h.idle(1_000_000);
+    let a = h.call(&CoeEmergencyGet(2));
+    assert_eq!(a.header.data_len, 24);
+    let recs: Vec<_> = CoeEmergencyReply::decode(&fields(&a), &a.data).unwrap().records().collect();
+    assert_eq!((recs[0].slot, recs[0].slave, recs[0].error_code, recs[0].number), (0, 1, 0x2310, 1));
+    assert!(recs[1].is_empty());
+}
+
+#[test]
+fn warm_reset_returns_to_power_up_state() {
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 16);
+    h.send(&ecmxf_wire::payload::control::WarmReset);
+    assert!(!h.chip.ready(h.now + 10_000_000), "initialising");
+    h.check = ecmxf_wire::CheckType::Fixed;
+    let (bytes, _) = h.send(&InfoUpdate);
+    let a = h.decode(&bytes).unwrap();
+    assert!(a.header.is_nop(), "first answer after reset is a NOP");
+    assert_eq!(a.header.ecat_state, EcatState::None);
+    let a = h.call(&InfoUpdate);
+    assert!(!a.header.status.flags.contains(StatusFlags::ETHERNET_READY));
+}
+
+#[test]
+fn eeprom_raw_datagrams_and_foe() {
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 16);
+    // EEPROM: the vendor id words of slave 1.
+    h.blocking(&EepromRequest { slave: 1, access: EepromAccess::Read { address: 0x08 }, timeout_us: 10_000 });
+    let a = h.call(&EepromGet);
+    assert_eq!(a.header.return_value, 0);
+    assert_eq!(&a.data[..4], &0x059Du32.to_le_bytes());
+    // Write the alias word and read it back.
+    h.blocking(&EepromRequest {
+        slave: 1,
+        access: EepromAccess::Write { address: 0x04, value: 0x0042 },
+        timeout_us: 10_000,
+    });
+    h.blocking(&EepromRequest { slave: 1, access: EepromAccess::Read { address: 0x04 }, timeout_us: 10_000 });
+    let a = h.call(&EepromGet);
+    assert_eq!(&a.data[..2], &[0x42, 0x00]);
+
+    // Raw FPRD of the AL status register of station 0x1002.
+    let head = DatagramHead {
+        command: DatagramCommand::Fprd,
+        length: 2,
+        adp: 0x1002,
+        ado: 0x0130,
+        logical: 0,
+        timeout_us: 1000,
+    };
+    h.blocking(&RawRequest { head, data: &[] });
+    let a = h.call(&RawGet);
+    let r = RawReply::decode(&fields(&a), &a.data).unwrap();
+    assert_eq!((r.working_counter, r.data), (1, &[0x08, 0x00][..]));
+    // BWR to AL control: every slave to PRE-OP.
+    let head =
+        DatagramHead { command: DatagramCommand::Bwr, length: 2, adp: 0, ado: 0x0120, logical: 0, timeout_us: 1000 };
+    h.blocking(&RawRequest { head, data: &[0x02, 0x00] });
+    let a = h.call(&RawGet);
+    assert_eq!(RawReply::decode(&fields(&a), &a.data).unwrap().working_counter, 3);
+    assert!(h.chip.net.slaves.iter().all(|s| s.esm.state == ecmxf_sim::net::esm::AlState::PreOp));
+
+    // FoE: stage a file in flash, download it to slave 0, upload it back.
+    let file = b"firmware image v2";
+    h.blocking(&FoeRequest::WriteFlash { offset: 0x100, data: file });
+    let t = FoeTransfer {
+        slave: 0,
+        password: 0,
+        file_length: file.len() as u32,
+        timeout_us: 1_000_000,
+        flash_offset: 0x100,
+        name: b"fw.bin",
+    };
+    let st = h.blocking(&FoeRequest::Download(t));
+    assert!(!st.errors.contains(ErrorFlags::BLOCKING_FAILED));
+    assert_eq!(h.chip.net.slaves[0].files.get(&b"fw.bin".to_vec()).map(Vec::as_slice), Some(&file[..]));
+    let t = FoeTransfer { flash_offset: 0x2000, file_length: 256, ..t };
+    h.blocking(&FoeRequest::Upload(t));
+    h.blocking(&FoeRequest::ReadFlash { offset: 0x2000, length: file.len() as u16 });
+    let a = h.call(&FoeGet);
+    assert_eq!(a.data, file);
+    // A missing file fails the blocking command.
+    let t = FoeTransfer { name: b"missing", ..t };
+    let st = h.blocking(&FoeRequest::Upload(t));
+    assert!(st.errors.contains(ErrorFlags::BLOCKING_FAILED));
+    let (bytes, _) = h.send(&InfoUpdate);
+    assert_eq!(h.decode(&bytes).unwrap().header.code, CommandCode::InfoUpdate);
+}
