@@ -198,7 +198,7 @@ fn eeprom_raw_datagrams_and_foe() {
     };
     let st = h.blocking(&FoeRequest::Download(t));
     assert!(!st.errors.contains(ErrorFlags::BLOCKING_FAILED));
-    assert_eq!(h.chip.net.slaves[0].files.get(&b"fw.bin".to_vec()).map(Vec::as_slice), Some(&file[..]));
+    assert_eq!(h.chip.net.slaves[0].files.get(b"fw.bin".as_slice()).map(Vec::as_slice), Some(&file[..]));
     let t = FoeTransfer { flash_offset: 0x2000, file_length: 256, ..t };
     h.blocking(&FoeRequest::Upload(t));
     h.blocking(&FoeRequest::ReadFlash { offset: 0x2000, length: file.len() as u16 });
