@@ -2,6 +2,7 @@
 //! state machine, object dictionary, SII image and device model.
 
 pub mod cia402;
+pub mod esi;
 pub mod esm;
 pub mod od;
 pub mod pdo_map;

@@ -38,6 +38,8 @@ pub enum DataType {
     VisibleString(u16),
     /// 0x000A, with its length in bytes.
     OctetString(u16),
+    /// BITn (ETG.1000.6 0x0030..0x0037), n = 1..=8 bits.
+    Bits(u8),
 }
 
 impl DataType {
@@ -50,6 +52,7 @@ impl DataType {
             Self::Int32 | Self::UInt32 | Self::Real32 => 32,
             Self::Int64 | Self::UInt64 | Self::Real64 => 64,
             Self::VisibleString(n) | Self::OctetString(n) => u32::from(n) * 8,
+            Self::Bits(n) => u32::from(n),
         }
     }
 
@@ -74,6 +77,7 @@ impl DataType {
             Self::Real64 => 0x11,
             Self::Int64 => 0x15,
             Self::UInt64 => 0x1B,
+            Self::Bits(n) => 0x2F + u16::from(n),
         }
     }
 
