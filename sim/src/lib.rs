@@ -8,12 +8,22 @@
 //!   image ([`net::sii`]), CiA402 drives ([`net::cia402`]) and ready-made
 //!   device profiles ([`net::profiles`]).
 //!
+//! - [`chip`]: the chip: SPI byte stream, command execution, blocking slot,
+//!   FIFOs and DC cycle, INT lines, peripherals.
+//! - [`config`]: the network description file (TOML).
+//! - [`control`]: run-time fault injection and outside-world commands.
+//! - [`server`]: the chip over a Unix socket in real time, and its client.
+//!
 //! Time is simulated: everything takes the current time in nanoseconds as an
-//! argument, so tests advance it deterministically.
+//! argument, so tests advance it deterministically; [`server::Server`] runs
+//! it against the wall clock.
 #![warn(missing_docs)]
 
 pub mod chip;
+pub mod config;
+pub mod control;
 pub mod net;
+pub mod server;
 
 pub use chip::{Chip, ChipConfig};
 pub use net::Network;

@@ -200,6 +200,11 @@ impl Axis {
         }
     }
 
+    /// The axis' static description.
+    pub fn spec(&self) -> &AxisSpec {
+        &self.spec
+    }
+
     /// The active error code, if the drive has a fault pending or latched.
     pub fn fault(&self) -> Option<u16> {
         self.fault

@@ -40,3 +40,27 @@ impl Network {
         self.slaves.iter().enumerate().filter(|(_, s)| s.present)
     }
 }
+
+impl Network {
+    /// Pulls a slave out of the ring: it stops answering.
+    pub fn unplug(&mut self, i: usize) -> bool {
+        self.slaves.get_mut(i).map(|s| s.present = false).is_some()
+    }
+
+    /// Plugs a slave back: it powers up again in INIT without a station
+    /// address, as a real slave does.
+    pub fn replug(&mut self, i: usize) -> bool {
+        let Some(s) = self.slaves.get_mut(i) else { return false };
+        s.present = true;
+        s.esm = esm::Esm::default();
+        s.station_address = 0;
+        s.since_outputs_ns = 0;
+        if let Device::Drive(axes) = &mut s.device {
+            for (n, a) in axes.iter_mut().enumerate() {
+                *a = cia402::Axis::new(n as u16, a.spec().clone());
+            }
+        }
+        s.sync_registers();
+        true
+    }
+}

@@ -1,0 +1,110 @@
+//! `ecmxf-sim`: serve the simulated ECM-XF chip on a Unix socket, control a
+//! running one, or check a network file.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+use std::sync::Arc;
+use std::sync::atomic::AtomicBool;
+
+use clap::{Parser, Subcommand};
+use ecmxf_sim::config::NetworkFile;
+use ecmxf_sim::server::{self, Server, SocketClient};
+use ecmxf_sim::{Chip, ChipConfig, Network};
+
+#[derive(Parser)]
+#[command(name = "ecmxf-sim", version, about = "Simulated NEXTW ECM-XF EtherCAT master chip and network")]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Serve the chip on a Unix socket in real time (framing: sim/README.md).
+    Serve {
+        /// Socket path.
+        #[arg(long)]
+        socket: PathBuf,
+        /// Network file (TOML); the built-in demo network when absent.
+        #[arg(long)]
+        network: Option<PathBuf>,
+        /// Seed for bit-flip fault injection.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+    },
+    /// Send a control command to a serving simulator (e.g. "unplug 2").
+    Ctl {
+        /// Socket path.
+        #[arg(long)]
+        socket: PathBuf,
+        /// The command words; `help` lists them.
+        #[arg(required = true, num_args = 1..)]
+        command: Vec<String>,
+    },
+    /// Validate a network file and list its slaves.
+    Check {
+        /// Network file.
+        network: PathBuf,
+    },
+}
+
+fn load(network: Option<&PathBuf>) -> Result<(Network, ChipConfig), String> {
+    match network {
+        None => Ok((Network::demo(), ChipConfig::default())),
+        Some(p) => {
+            let f = NetworkFile::load(p).map_err(|e| e.to_string())?;
+            Ok((f.build(p).map_err(|e| e.to_string())?, f.chip_config()))
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<(), String> {
+    match cli.command {
+        Command::Serve { socket, network, seed } => {
+            let (net, config) = load(network.as_ref())?;
+            let slaves = net.slaves.len();
+            let mut chip = Chip::new(net, config);
+            chip.faults.seed(seed);
+            let listener = server::bind(&socket).map_err(|e| format!("{}: {e}", socket.display()))?;
+            eprintln!("ecmxf-sim: {slaves} slaves, serving on {}", socket.display());
+            let stop = Arc::new(AtomicBool::new(false));
+            Arc::new(Server::new(chip)).serve(listener, stop).map_err(|e| e.to_string())
+        }
+        Command::Ctl { socket, command } => {
+            let mut c = SocketClient::connect(&socket).map_err(|e| format!("{}: {e}", socket.display()))?;
+            match c.control(&command.join(" ")).map_err(|e| e.to_string())? {
+                Ok(text) => {
+                    println!("{text}");
+                    Ok(())
+                }
+                Err(text) => Err(text),
+            }
+        }
+        Command::Check { network } => {
+            let (net, _) = load(Some(&network))?;
+            for (i, s) in net.slaves.iter().enumerate() {
+                let sii = s.sii();
+                println!(
+                    "{i}: {:<24} vendor {:#010x} product {:#010x} revision {:#010x} outputs {} B inputs {} B",
+                    s.name,
+                    sii.vendor_id,
+                    sii.product_code,
+                    sii.revision,
+                    s.rx.bytes(),
+                    s.tx.bytes()
+                );
+            }
+            Ok(())
+        }
+    }
+}
+
+fn main() -> ExitCode {
+    match run(Cli::parse()) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            eprintln!("ecmxf-sim: {e}");
+            ExitCode::FAILURE
+        }
+    }
+}

@@ -1,0 +1,206 @@
+//! Run-time control of a simulated chip: fault injection and the outside
+//! world, as one-line text commands. The socket server and tests use the
+//! same language, documented in sim/README.md.
+
+use crate::chip::Chip;
+use crate::net::slave::Device;
+
+/// The commands, for `help`.
+pub const HELP: &str = "\
+status                          counters, state, FIFO levels
+flip mosi|miso RATE             flip one bit in a byte with probability RATE (0..1)
+seed N                          seed the bit-flip generator
+int0 stuck high|low|off         hold INT0 at a level, or release it
+unplug SLAVE | replug SLAVE     pull a slave out of the ring / plug it back (powers up in INIT)
+al-error SLAVE CODE             force an AL error (drops to SAFE-OP at most)
+drive-fault SLAVE AXIS CODE     raise a CiA402 fault with an error code (emergency sent)
+clear-fault SLAVE AXIS          remove the fault's cause so a fault reset succeeds
+warm-reset                      reset the chip as command 127 does
+gpio LINE high|low|float        drive a GPIO pin from outside
+qei EDGES                       encoder edges (X4 count)
+adc VOLTS                       analog input voltage
+io-input SLAVE BYTE             bits ORed into a digital-IO slave's inputs
+help                            this list";
+
+fn num(s: Option<&str>, what: &str) -> Result<u64, String> {
+    let s = s.ok_or_else(|| format!("missing {what}"))?;
+    let v = if let Some(h) = s.strip_prefix("0x").or_else(|| s.strip_prefix("0X")) {
+        u64::from_str_radix(h, 16)
+    } else {
+        s.parse()
+    };
+    v.map_err(|_| format!("{what} {s:?} is not a number"))
+}
+
+fn slave_index(chip: &Chip, s: Option<&str>) -> Result<usize, String> {
+    let i = num(s, "slave")? as usize;
+    if i < chip.net.slaves.len() {
+        Ok(i)
+    } else {
+        Err(format!("no slave {i} (the network has {})", chip.net.slaves.len()))
+    }
+}
+
+/// Runs one command; `Ok` carries the answer text.
+pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
+    let mut w = line.split_whitespace();
+    let cmd = w.next().ok_or("empty command")?;
+    let ok = || Ok("ok".to_string());
+    match cmd {
+        "help" => Ok(HELP.to_string()),
+        "status" => {
+            let s = chip.stats;
+            Ok(format!(
+                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={}",
+                chip.now_ns,
+                s.packets,
+                s.not_ready,
+                s.crc_failures,
+                s.executed,
+                s.cycles,
+                chip.fifo.underruns,
+                chip.fifo.rx.len(),
+                chip.fifo.tx.len(),
+                chip.ecat_state(),
+                chip.crc_errors,
+                chip.wkc_errors
+            ))
+        }
+        "flip" => {
+            let dir = w.next().ok_or("flip needs mosi or miso")?;
+            let rate: f64 = w.next().ok_or("flip needs a rate")?.parse().map_err(|_| "rate is not a number")?;
+            if !(0.0..=1.0).contains(&rate) {
+                return Err(format!("rate {rate} is outside 0..1"));
+            }
+            match dir {
+                "mosi" => chip.faults.flip_mosi = rate,
+                "miso" => chip.faults.flip_miso = rate,
+                other => return Err(format!("flip {other:?}: say mosi or miso")),
+            }
+            ok()
+        }
+        "seed" => {
+            chip.faults.seed(num(w.next(), "seed")?);
+            ok()
+        }
+        "int0" => match (w.next(), w.next()) {
+            (Some("stuck"), Some("high")) => {
+                chip.faults.int0_stuck = Some(true);
+                ok()
+            }
+            (Some("stuck"), Some("low")) => {
+                chip.faults.int0_stuck = Some(false);
+                ok()
+            }
+            (Some("stuck"), Some("off")) => {
+                chip.faults.int0_stuck = None;
+                ok()
+            }
+            _ => Err("int0 stuck high|low|off".into()),
+        },
+        "unplug" => {
+            let i = slave_index(chip, w.next())?;
+            chip.net.unplug(i);
+            ok()
+        }
+        "replug" => {
+            let i = slave_index(chip, w.next())?;
+            chip.net.replug(i);
+            ok()
+        }
+        "al-error" => {
+            let i = slave_index(chip, w.next())?;
+            let code = num(w.next(), "AL status code")? as u16;
+            chip.net.slaves[i].inject_al_error(code);
+            ok()
+        }
+        "drive-fault" => {
+            let i = slave_index(chip, w.next())?;
+            let axis = num(w.next(), "axis")? as usize;
+            let code = num(w.next(), "error code")? as u16;
+            if chip.net.slaves[i].inject_drive_fault(axis, code) {
+                ok()
+            } else {
+                Err(format!("slave {i} has no drive axis {axis}"))
+            }
+        }
+        "clear-fault" => {
+            let i = slave_index(chip, w.next())?;
+            let axis = num(w.next(), "axis")? as usize;
+            if chip.net.slaves[i].clear_drive_fault(axis) {
+                ok()
+            } else {
+                Err(format!("slave {i} has no drive axis {axis}"))
+            }
+        }
+        "warm-reset" => {
+            chip.warm_reset();
+            ok()
+        }
+        "gpio" => {
+            let line = num(w.next(), "line")? as u8;
+            let level = match w.next() {
+                Some("high") => Some(true),
+                Some("low") => Some(false),
+                Some("float") => None,
+                _ => return Err("gpio LINE high|low|float".into()),
+            };
+            if usize::from(line) >= crate::chip::periph::LINES {
+                return Err(format!("no GPIO line {line}"));
+            }
+            let now = chip.now_ns;
+            chip.periph.set_input(line, level, now);
+            ok()
+        }
+        "qei" => {
+            let edges: i32 = w.next().ok_or("qei needs edges")?.parse().map_err(|_| "edges is not a number")?;
+            chip.periph.qei_pulses(edges);
+            ok()
+        }
+        "adc" => {
+            let v: f64 = w.next().ok_or("adc needs volts")?.parse().map_err(|_| "volts is not a number")?;
+            chip.periph.adc_volts = v;
+            ok()
+        }
+        "io-input" => {
+            let i = slave_index(chip, w.next())?;
+            let bits = num(w.next(), "byte")? as u8;
+            match &mut chip.net.slaves[i].device {
+                Device::DigitalIo { forced_inputs } => {
+                    *forced_inputs = bits;
+                    ok()
+                }
+                _ => Err(format!("slave {i} is not a digital-IO slave")),
+            }
+        }
+        other => Err(format!("unknown command {other:?}; try help")),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::{ChipConfig, Network};
+
+    #[test]
+    fn commands_act_and_errors_say_why() {
+        let mut c = Chip::new(Network::demo(), ChipConfig::default());
+        assert_eq!(execute(&mut c, "unplug 2"), Ok("ok".into()));
+        assert!(!c.net.slaves[2].present);
+        assert!(execute(&mut c, "replug 2").is_ok());
+        assert!(c.net.slaves[2].present);
+        assert_eq!(execute(&mut c, "unplug 9"), Err("no slave 9 (the network has 3)".into()));
+        assert!(execute(&mut c, "flip mosi 2").unwrap_err().contains("outside"));
+        assert!(execute(&mut c, "flip miso 0.5").is_ok());
+        assert!(execute(&mut c, "int0 stuck low").is_ok());
+        assert!(!c.int0_level(0));
+        assert!(execute(&mut c, "drive-fault 2 0 0x2310").unwrap_err().contains("no drive axis"));
+        assert!(execute(&mut c, "drive-fault 1 2 0x2310").is_ok());
+        assert!(execute(&mut c, "al-error 0 0x1B").is_ok());
+        assert_eq!(c.net.slaves[0].esm.al_status, 0x1B);
+        assert!(execute(&mut c, "io-input 2 0x0F").is_ok());
+        assert!(execute(&mut c, "bogus").unwrap_err().contains("unknown command"));
+        assert!(execute(&mut c, "status").unwrap().starts_with("ok time_ns=0"));
+        assert!(execute(&mut c, "gpio 25 high").is_err());
+    }
+}

@@ -1,0 +1,278 @@
+//! The simulator over a Unix stream socket, in real time: one SPI transfer
+//! per message, plus the INT0/INT1 line states and run-time control. The
+//! framing is documented in sim/README.md so a host driver in C or Python
+//! can be written against it; [`SocketClient`] is the Rust side.
+//!
+//! Every message, both ways, is an 8-byte header and a payload:
+//! `kind: u8, flags: u8, reserved: u16 = 0, length: u32 LE`.
+
+use std::io::{self, Read, Write};
+use std::os::unix::net::{UnixListener, UnixStream};
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::thread;
+use std::time::{Duration, Instant};
+
+use crate::chip::Chip;
+use crate::control;
+
+/// One full-duplex transfer: payload = MOSI; reply payload = MISO, flags =
+/// lines after the transfer.
+pub const KIND_TRANSFER: u8 = 0x01;
+/// Line states: reply flags = lines, payload = sim time (u64 LE, ns) and
+/// time until the chip is ready (u64 LE, ns; 0 = ready).
+pub const KIND_LINES: u8 = 0x02;
+/// Wait until INT0 is active: payload = timeout (u32 LE, us); reply payload
+/// = one byte, 1 when ready.
+pub const KIND_WAIT_READY: u8 = 0x03;
+/// Wait until INT1 is active: payload = timeout (u32 LE, us); reply payload
+/// = one byte, 1 when active.
+pub const KIND_WAIT_INT1: u8 = 0x04;
+/// A control command (UTF-8 text); reply flags 0 = ok, 1 = error, payload =
+/// the answer text.
+pub const KIND_CONTROL: u8 = 0x10;
+/// The reply to a message the server could not understand; payload = text.
+pub const KIND_ERROR: u8 = 0x7F;
+/// Lines byte: INT0 electrical level.
+pub const LINE_INT0: u8 = 1 << 0;
+/// Lines byte: INT1 electrical level.
+pub const LINE_INT1: u8 = 1 << 1;
+/// Largest payload accepted.
+pub const MAX_PAYLOAD: usize = 64 * 1024;
+
+fn write_msg(w: &mut impl Write, kind: u8, flags: u8, payload: &[u8]) -> io::Result<()> {
+    let mut h = [0u8; 8];
+    h[0] = kind;
+    h[1] = flags;
+    h[4..8].copy_from_slice(&(payload.len() as u32).to_le_bytes());
+    w.write_all(&h)?;
+    w.write_all(payload)
+}
+
+fn read_msg(r: &mut impl Read) -> io::Result<(u8, u8, Vec<u8>)> {
+    let mut h = [0u8; 8];
+    r.read_exact(&mut h)?;
+    let len = u32::from_le_bytes([h[4], h[5], h[6], h[7]]) as usize;
+    if len > MAX_PAYLOAD {
+        return Err(io::Error::new(
+            io::ErrorKind::InvalidData,
+            format!("payload of {len} bytes exceeds {MAX_PAYLOAD}"),
+        ));
+    }
+    let mut payload = vec![0u8; len];
+    r.read_exact(&mut payload)?;
+    Ok((h[0], h[1], payload))
+}
+
+/// A chip running against the wall clock, shared by connections.
+#[derive(Debug)]
+pub struct Server {
+    chip: Mutex<Chip>,
+    epoch: Instant,
+}
+
+impl Server {
+    /// Starts the clock at 0 now.
+    pub fn new(chip: Chip) -> Self {
+        Self { chip: Mutex::new(chip), epoch: Instant::now() }
+    }
+
+    /// Simulated time: nanoseconds since start.
+    pub fn now_ns(&self) -> u64 {
+        self.epoch.elapsed().as_nanos() as u64
+    }
+
+    /// The chip, brought up to now. A poisoned lock (a panicked handler) is
+    /// taken over: the chip's state is still consistent per call.
+    pub fn chip(&self) -> MutexGuard<'_, Chip> {
+        let mut c = self.chip.lock().unwrap_or_else(|e| e.into_inner());
+        let now = self.now_ns();
+        c.advance_to(now);
+        c
+    }
+
+    fn lines(chip: &Chip, now: u64) -> u8 {
+        (if chip.int0_level(now) { LINE_INT0 } else { 0 }) | if chip.int1_level() { LINE_INT1 } else { 0 }
+    }
+
+    /// Accepts connections until `stop` is set, one thread per connection.
+    pub fn serve(self: Arc<Self>, listener: UnixListener, stop: Arc<AtomicBool>) -> io::Result<()> {
+        listener.set_nonblocking(true)?;
+        while !stop.load(Ordering::Relaxed) {
+            match listener.accept() {
+                Ok((stream, _)) => {
+                    stream.set_nonblocking(false)?;
+                    let me = Arc::clone(&self);
+                    thread::spawn(move || {
+                        // A client that disconnects mid-message ends here.
+                        let _ = me.handle(stream);
+                    });
+                }
+                Err(e) if e.kind() == io::ErrorKind::WouldBlock => thread::sleep(Duration::from_millis(5)),
+                Err(e) => return Err(e),
+            }
+        }
+        Ok(())
+    }
+
+    fn wait(&self, timeout_us: u32, mut done: impl FnMut(&Chip, u64) -> bool) -> bool {
+        let deadline = self.now_ns() + u64::from(timeout_us) * 1000;
+        loop {
+            let (ok, ready_at) = {
+                let c = self.chip();
+                let now = self.now_ns();
+                (done(&c, now), c.ready_at())
+            };
+            let now = self.now_ns();
+            if ok {
+                return true;
+            }
+            if now >= deadline {
+                return false;
+            }
+            let until = ready_at.clamp(now + 1_000, now + 100_000).min(deadline);
+            thread::sleep(Duration::from_nanos(until - now));
+        }
+    }
+
+    /// Serves one connection.
+    pub fn handle(&self, mut stream: UnixStream) -> io::Result<()> {
+        loop {
+            let (kind, _flags, payload) = match read_msg(&mut stream) {
+                Ok(m) => m,
+                Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => return Ok(()),
+                Err(e) => {
+                    let _ = write_msg(&mut stream, KIND_ERROR, 0, e.to_string().as_bytes());
+                    return Err(e);
+                }
+            };
+            match kind {
+                KIND_TRANSFER => {
+                    let mut miso = vec![0u8; payload.len()];
+                    let lines = {
+                        let mut c = self.chip();
+                        let now = self.now_ns();
+                        c.transfer(now, &payload, &mut miso);
+                        let after = self.now_ns().max(c.now_ns);
+                        Self::lines(&c, after)
+                    };
+                    write_msg(&mut stream, KIND_TRANSFER, lines, &miso)?;
+                }
+                KIND_LINES => {
+                    let (lines, now, wait) = {
+                        let c = self.chip();
+                        let now = self.now_ns();
+                        (Self::lines(&c, now), now, c.ready_at().saturating_sub(now))
+                    };
+                    let mut p = now.to_le_bytes().to_vec();
+                    p.extend_from_slice(&wait.to_le_bytes());
+                    write_msg(&mut stream, KIND_LINES, lines, &p)?;
+                }
+                KIND_WAIT_READY | KIND_WAIT_INT1 => {
+                    let Ok(t) = <[u8; 4]>::try_from(payload.as_slice()) else {
+                        write_msg(&mut stream, KIND_ERROR, 0, b"wait needs a 4-byte timeout in microseconds")?;
+                        continue;
+                    };
+                    let timeout = u32::from_le_bytes(t);
+                    let ok = if kind == KIND_WAIT_READY {
+                        self.wait(timeout, |c, now| c.ready(now) && c.faults.int0_stuck.is_none())
+                    } else {
+                        self.wait(timeout, |c, _| c.int1_active())
+                    };
+                    let lines = {
+                        let c = self.chip();
+                        Self::lines(&c, self.now_ns())
+                    };
+                    write_msg(&mut stream, kind, lines, &[u8::from(ok)])?;
+                }
+                KIND_CONTROL => {
+                    let text = String::from_utf8_lossy(&payload).into_owned();
+                    let result = control::execute(&mut self.chip(), &text);
+                    let (flags, answer) = match result {
+                        Ok(a) => (0, a),
+                        Err(e) => (1, e),
+                    };
+                    write_msg(&mut stream, KIND_CONTROL, flags, answer.as_bytes())?;
+                }
+                other => {
+                    write_msg(&mut stream, KIND_ERROR, 0, format!("unknown message kind {other:#04x}").as_bytes())?
+                }
+            }
+        }
+    }
+}
+
+/// Binds the socket, removing a stale file left by a previous run.
+pub fn bind(path: &Path) -> io::Result<UnixListener> {
+    if path.exists() && UnixStream::connect(path).is_err() {
+        std::fs::remove_file(path)?;
+    }
+    UnixListener::bind(path)
+}
+
+/// The host side of the socket.
+#[derive(Debug)]
+pub struct SocketClient {
+    stream: UnixStream,
+}
+
+/// An answer that is not what was asked for.
+fn unexpected(kind: u8, payload: &[u8]) -> io::Error {
+    io::Error::new(
+        io::ErrorKind::InvalidData,
+        format!("simulator answered kind {kind:#04x}: {}", String::from_utf8_lossy(payload)),
+    )
+}
+
+impl SocketClient {
+    /// Connects to a serving simulator.
+    pub fn connect(path: &Path) -> io::Result<Self> {
+        Ok(Self { stream: UnixStream::connect(path)? })
+    }
+
+    fn request(&mut self, kind: u8, payload: &[u8]) -> io::Result<(u8, Vec<u8>)> {
+        write_msg(&mut self.stream, kind, 0, payload)?;
+        let (k, flags, p) = read_msg(&mut self.stream)?;
+        if k != kind {
+            return Err(unexpected(k, &p));
+        }
+        Ok((flags, p))
+    }
+
+    /// One transfer; returns MISO and the lines byte.
+    pub fn transfer(&mut self, mosi: &[u8], miso: &mut [u8]) -> io::Result<u8> {
+        let (lines, p) = self.request(KIND_TRANSFER, mosi)?;
+        let n = p.len().min(miso.len());
+        miso[..n].copy_from_slice(&p[..n]);
+        Ok(lines)
+    }
+
+    /// Lines byte, simulated time and ns until ready.
+    pub fn lines(&mut self) -> io::Result<(u8, u64, u64)> {
+        let (lines, p) = self.request(KIND_LINES, &[])?;
+        let word = |i: usize| p.get(i..i + 8).map_or(0, |b| u64::from_le_bytes(b.try_into().unwrap_or([0; 8])));
+        Ok((lines, word(0), word(8)))
+    }
+
+    /// Waits for INT0 ready; false on timeout.
+    pub fn wait_ready(&mut self, timeout: Duration) -> io::Result<bool> {
+        let us = timeout.as_micros().min(u128::from(u32::MAX)) as u32;
+        let (_, p) = self.request(KIND_WAIT_READY, &us.to_le_bytes())?;
+        Ok(p.first() == Some(&1))
+    }
+
+    /// Waits for INT1 active; false on timeout.
+    pub fn wait_int1(&mut self, timeout: Duration) -> io::Result<bool> {
+        let us = timeout.as_micros().min(u128::from(u32::MAX)) as u32;
+        let (_, p) = self.request(KIND_WAIT_INT1, &us.to_le_bytes())?;
+        Ok(p.first() == Some(&1))
+    }
+
+    /// Runs a control command; `Err` text for refused commands.
+    pub fn control(&mut self, command: &str) -> io::Result<Result<String, String>> {
+        let (flags, p) = self.request(KIND_CONTROL, command.as_bytes())?;
+        let text = String::from_utf8_lossy(&p).into_owned();
+        Ok(if flags == 0 { Ok(text) } else { Err(text) })
+    }
+}

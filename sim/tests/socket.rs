@@ -1,0 +1,107 @@
+//! The simulator over its Unix socket: the real `ecmxf-sim` binary serving,
+//! a host speaking the documented framing, run-time control.
+
+use std::path::PathBuf;
+use std::process::{Child, Command};
+use std::time::{Duration, Instant};
+
+use ecmxf_sim::server::{LINE_INT0, SocketClient};
+use ecmxf_wire::payload::control::{FwVersionGet, InfoUpdate};
+use ecmxf_wire::payload::slave_info::SlaveCountGet;
+use ecmxf_wire::{CheckType, CommandCode, CommandHeader, Request, decode_response, encode_request};
+
+struct Served {
+    child: Child,
+    socket: PathBuf,
+}
+
+impl Drop for Served {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.socket);
+    }
+}
+
+fn serve(args: &[&str]) -> Served {
+    let socket = std::env::temp_dir().join(format!("ecmxf-sim-test-{}-{}.sock", std::process::id(), args.len()));
+    let child = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))
+        .arg("serve")
+        .arg("--socket")
+        .arg(&socket)
+        .args(args)
+        .spawn()
+        .expect("start ecmxf-sim");
+    let start = Instant::now();
+    while SocketClient::connect(&socket).is_err() {
+        assert!(start.elapsed() < Duration::from_secs(10), "ecmxf-sim did not start");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Served { child, socket }
+}
+
+fn exchange<'a, R: Request<'a>>(c: &mut SocketClient, req: &R, index: u8) -> Vec<u8> {
+    assert!(c.wait_ready(Duration::from_secs(1)).unwrap(), "INT0 ready");
+    let mut buf = [0u8; 144];
+    encode_request(req, CommandHeader::new(R::CODE, index), CheckType::Fixed, &mut buf).unwrap();
+    let mut miso = [0u8; 144];
+    c.transfer(&buf, &mut miso).unwrap();
+    miso.to_vec()
+}
+
+#[test]
+fn a_host_talks_to_the_served_chip() {
+    let s = serve(&["--network", concat!(env!("CARGO_MANIFEST_DIR"), "/../config/demo-network.toml")]);
+    let mut c = SocketClient::connect(&s.socket).unwrap();
+    let (lines, t0, _) = c.lines().unwrap();
+    assert!(lines & LINE_INT0 != 0, "INT0 active-high when idle");
+    let first = exchange(&mut c, &FwVersionGet, 1);
+    assert!(decode_response(&first, CheckType::Fixed).unwrap().header.is_nop());
+    let second = exchange(&mut c, &SlaveCountGet, 2);
+    let a = decode_response(&second, CheckType::Fixed).unwrap();
+    assert_eq!((a.header.code, a.header.return_value), (CommandCode::FwVersionGet, 0x24));
+    let third = exchange(&mut c, &InfoUpdate, 3);
+    assert_eq!(decode_response(&third, CheckType::Fixed).unwrap().header.return_value, 3);
+    let (_, t1, _) = c.lines().unwrap();
+    assert!(t1 > t0, "simulated time runs with the wall clock");
+
+    // Run-time control from a second connection while the first stays open.
+    let mut ctl = SocketClient::connect(&s.socket).unwrap();
+    assert_eq!(ctl.control("unplug 2").unwrap(), Ok("ok".into()));
+    assert!(ctl.control("unplug 7").unwrap().unwrap_err().contains("no slave 7"));
+    let status = ctl.control("status").unwrap().unwrap();
+    assert!(status.contains("packets=3"), "{status}");
+    // Stuck INT0: waiting for ready times out.
+    ctl.control("int0 stuck low").unwrap().unwrap();
+    assert!(!c.wait_ready(Duration::from_millis(20)).unwrap());
+    ctl.control("int0 stuck off").unwrap().unwrap();
+    assert!(c.wait_ready(Duration::from_millis(20)).unwrap());
+}
+
+#[test]
+fn check_and_ctl_commands() {
+    let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))
+        .args(["check", concat!(env!("CARGO_MANIFEST_DIR"), "/../config/demo-network.toml")])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_eq!(text.lines().count(), 3, "{text}");
+    assert!(text.contains("CORE") && text.contains("0x0000059d") && text.contains("8io"), "{text}");
+
+    let bad = std::env::temp_dir().join(format!("ecmxf-bad-{}.toml", std::process::id()));
+    std::fs::write(&bad, "version = 1\n[[slave]]\nprofile = \"coupler\"\nspeed = 3\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim")).args(["check", bad.to_str().unwrap()]).output().unwrap();
+    std::fs::remove_file(&bad).ok();
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("speed") && err.contains("line 4"), "{err}");
+
+    let s = serve(&[]);
+    let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))
+        .args(["ctl", "--socket", s.socket.to_str().unwrap(), "help"])
+        .output()
+        .unwrap();
+    assert!(out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("drive-fault"));
+}
