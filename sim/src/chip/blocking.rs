@@ -3,6 +3,7 @@
 //! applied when it completes, error bit3 when it fails. A modelled duration
 //! per operation stands in for the EtherCAT traffic it needs.
 
+use ecmxf_wire::AnyRequest;
 use ecmxf_wire::flags::ErrorFlags;
 use ecmxf_wire::payload::ecat_init::{DcSync, DcTiming, EcatInit};
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromRequest};
@@ -11,7 +12,6 @@ use ecmxf_wire::payload::pdo::{ConfigSm, PdoConfig, PdoConfigReq, PdoEntry, PdoM
 use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead};
 use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAccess};
 use ecmxf_wire::payload::state::SlaveSelector;
-use ecmxf_wire::{AnyRequest, EcatState};
 
 use super::exec::CommandError;
 use super::{Chip, Slot};
@@ -558,10 +558,5 @@ impl Chip {
                 true
             }
         }
-    }
-
-    /// The chip's view of whether the network is in OP.
-    pub(super) fn network_op(&self) -> bool {
-        self.ecat_state() == EcatState::Op
     }
 }

@@ -60,7 +60,11 @@ impl Chip {
             let Some(s) = self.net.slaves.get_mut(slot.slave) else { continue };
             cycled[slot.slave] = true;
             let out = self.master.outputs.get(slot.rx_offset..slot.rx_offset + slot.rx_len);
-            wkc += s.cycle(if running { out } else { None }, dt);
+            // No datagram while exchange is stopped: no working counter.
+            let counted = s.cycle(if running { out } else { None }, dt);
+            if running {
+                wkc += counted;
+            }
             if running {
                 let n = slot.tx_len.min(s.inputs.len());
                 if let Some(dst) = inputs.get_mut(slot.tx_offset..slot.tx_offset + n) {
@@ -77,7 +81,10 @@ impl Chip {
         self.master.wkc = wkc;
         self.collect_emergencies();
 
-        if running && self.network_op() {
+        // Checked while process data flows through the FIFO (enabled after
+        // OP in the bring-up order): any slave that stops answering for its
+        // share, whatever the master asked of it, is a WKC error.
+        if running && self.fifo.enabled {
             let expected: u16 = slots.iter().map(|s| u16::from(s.tx_len > 0) + 2 * u16::from(s.rx_len > 0)).sum();
             if wkc != expected {
                 self.wkc_errors = self.wkc_errors.wrapping_add(1);
