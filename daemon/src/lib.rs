@@ -1,4 +1,12 @@
 //! `ecmxfd`: the daemon that owns the ECM-XF chip.
 //!
-//! Not built yet (issue #4). Nothing here pretends to work: the crate exists
-//! so the workspace layout is in place.
+//! # Map
+//! - [`link`]: the chip behind a small trait (spidev + GPIO, simulator,
+//!   simulator socket).
+//! - [`port`]: packet exchange with the chip's rules: one-behind answers,
+//!   fresh indices, retries that never execute a command twice.
+#![warn(missing_docs)]
+
+pub mod link;
+/// Packet exchange.
+pub mod port;

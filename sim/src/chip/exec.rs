@@ -71,7 +71,9 @@ impl Chip {
                     self.errors |= ErrorFlags::SPI_CRC_ERROR;
                     self.int_flags |= InterruptFlags::CRC_ERROR;
                 }
-                self.last_key = None;
+                // A packet refused for its check word is never parsed, so
+                // the remembered index and code stay as they were: resending
+                // the previous packet still only polls its answer.
                 let h = self.snapshot(0, CommandCode::InfoUpdate, 0, 0);
                 return self.encode(&h, &[]);
             }

@@ -1,0 +1,187 @@
+//! The real chip: `/dev/spidevX.Y` (SPI mode 0, 8-bit words, MSB first:
+//! v049 SPI模式) and INT0/INT1 through the GPIO character device (uAPI v2,
+//! via `gpiocdev`), with edge events timestamped by the kernel.
+//!
+//! Lines are requested active-high, so a line's logical value is its
+//! electrical level; the polarity the chip was given with command 58 decides
+//! which level means "active" (INT0 active-high, INT1 active-low after
+//! reset).
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use gpiocdev::Request;
+use gpiocdev::line::{EdgeDetection, EventClock, Value};
+use spidev::{SpiModeFlags, Spidev, SpidevOptions, SpidevTransfer};
+
+use super::{Link, LinkError};
+
+/// Where the chip is wired.
+#[derive(Clone, Debug, PartialEq)]
+pub struct HardwareConfig {
+    /// SPI device, e.g. `/dev/spidev0.0`.
+    pub spi_device: PathBuf,
+    /// SPI clock in Hz (the chip takes up to 96 MHz).
+    pub spi_hz: u32,
+    /// GPIO chip of the interrupt lines, e.g. `/dev/gpiochip0`.
+    pub gpio_chip: Option<PathBuf>,
+    /// Line offset of INT0, when wired.
+    pub int0_line: Option<u32>,
+    /// Line offset of INT1, when wired.
+    pub int1_line: Option<u32>,
+    /// Kernel debounce on the lines.
+    pub debounce: Option<Duration>,
+    /// Wait after each transfer when INT0 is not wired (vendor: 150-200 us).
+    pub idle: Duration,
+}
+
+/// The link.
+#[derive(Debug)]
+pub struct HardwareLink {
+    config: HardwareConfig,
+    spi: Spidev,
+    int0: Option<Request>,
+    int1: Option<Request>,
+    int0_active_high: bool,
+    int1_active_high: bool,
+    last_transfer: Instant,
+    /// Kernel timestamp (CLOCK_MONOTONIC, ns) of the last INT0 edge seen.
+    pub last_int0_edge_ns: u64,
+}
+
+fn gpio_err(what: String, e: gpiocdev::Error) -> LinkError {
+    LinkError::io(what, std::io::Error::other(e.to_string()))
+}
+
+impl HardwareLink {
+    /// Opens and configures the SPI device and requests the lines.
+    pub fn open(config: HardwareConfig) -> Result<Self, LinkError> {
+        let spi_name = config.spi_device.display().to_string();
+        let mut spi = Spidev::open(&config.spi_device).map_err(|e| LinkError::io(format!("open {spi_name}"), e))?;
+        let options = SpidevOptions::new()
+            .bits_per_word(8)
+            .max_speed_hz(config.spi_hz)
+            .lsb_first(false)
+            .mode(SpiModeFlags::SPI_MODE_0)
+            .build();
+        spi.configure(&options)
+            .map_err(|e| LinkError::io(format!("configure {spi_name} (mode 0, {} Hz)", config.spi_hz), e))?;
+        let request = |line: Option<u32>, name: &str| -> Result<Option<Request>, LinkError> {
+            let (Some(line), Some(chip)) = (line, config.gpio_chip.as_ref()) else { return Ok(None) };
+            let mut b = Request::builder();
+            b.on_chip(chip)
+                .with_consumer(format!("ecmxfd-{name}"))
+                .with_line(line)
+                .as_input()
+                .as_active_high()
+                .with_edge_detection(EdgeDetection::BothEdges)
+                .with_event_clock(EventClock::Monotonic);
+            if let Some(d) = config.debounce {
+                b.with_debounce_period(d);
+            }
+            b.request().map(Some).map_err(|e| gpio_err(format!("request {name} line {line} on {}", chip.display()), e))
+        };
+        let int0 = request(config.int0_line, "int0")?;
+        let int1 = request(config.int1_line, "int1")?;
+        Ok(Self {
+            config,
+            spi,
+            int0,
+            int1,
+            int0_active_high: true,
+            int1_active_high: false,
+            last_transfer: Instant::now(),
+            last_int0_edge_ns: 0,
+        })
+    }
+
+    fn level(req: &Request, line: u32, what: &str) -> Result<bool, LinkError> {
+        req.value(line).map(|v| v == Value::Active).map_err(|e| gpio_err(format!("read {what} line {line}"), e))
+    }
+}
+
+impl Link for HardwareLink {
+    fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        let mut t = SpidevTransfer::read_write(tx, rx);
+        let result = self.spi.transfer(&mut t);
+        self.last_transfer = Instant::now();
+        result.map_err(|e| {
+            LinkError::io(format!("SPI transfer of {} bytes on {}", tx.len(), self.config.spi_device.display()), e)
+        })
+    }
+
+    fn wait_ready(&mut self, timeout: Duration) -> Result<bool, LinkError> {
+        let Some(req) = &self.int0 else {
+            // No INT0: the vendor driver's fixed idle time after a transfer.
+            let due = self.last_transfer + self.config.idle;
+            let now = Instant::now();
+            if due > now {
+                std::thread::sleep((due - now).min(timeout));
+            }
+            return Ok(Instant::now() >= due);
+        };
+        let line = self.config.int0_line.unwrap_or(0);
+        let deadline = Instant::now() + timeout;
+        loop {
+            if Self::level(req, line, "INT0")? == self.int0_active_high {
+                return Ok(true);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(false);
+            }
+            let edge =
+                req.wait_edge_event(deadline - now).map_err(|e| gpio_err(format!("wait for INT0 line {line}"), e))?;
+            if edge {
+                let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
+                self.last_int0_edge_ns = ev.timestamp_ns;
+            }
+        }
+    }
+
+    fn int1_active(&mut self) -> Result<bool, LinkError> {
+        match &self.int1 {
+            Some(req) => Ok(Self::level(req, self.config.int1_line.unwrap_or(0), "INT1")? == self.int1_active_high),
+            None => Ok(false),
+        }
+    }
+
+    fn set_polarity(&mut self, int0_active_high: bool, int1_active_high: bool) {
+        self.int0_active_high = int0_active_high;
+        self.int1_active_high = int1_active_high;
+    }
+
+    fn describe(&self) -> String {
+        let line = |l: Option<u32>| l.map_or("not wired".to_string(), |l| format!("line {l}"));
+        format!(
+            "{} at {} Hz, INT0 {}, INT1 {}",
+            self.config.spi_device.display(),
+            self.config.spi_hz,
+            line(self.config.int0_line),
+            line(self.config.int1_line)
+        )
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config() -> HardwareConfig {
+        HardwareConfig {
+            spi_device: "/dev/ecmxf-no-such-spidev".into(),
+            spi_hz: 20_000_000,
+            gpio_chip: Some("/dev/ecmxf-no-such-gpiochip".into()),
+            int0_line: Some(17),
+            int1_line: None,
+            debounce: None,
+            idle: Duration::from_micros(200),
+        }
+    }
+
+    #[test]
+    fn a_missing_device_is_named_in_the_error() {
+        let e = HardwareLink::open(config()).unwrap_err().to_string();
+        assert!(e.contains("open /dev/ecmxf-no-such-spidev"), "{e}");
+    }
+}

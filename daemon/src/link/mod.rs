@@ -1,0 +1,93 @@
+//! The chip behind a small trait: one full-duplex SPI transfer, waiting for
+//! INT0 ("ready for the next transfer"), reading INT1 ("events pending").
+//! Implementations: Linux hardware (spidev + GPIO character device), the
+//! in-process simulator, and the simulator's socket.
+//!
+//! INT0 gating is the fast path (v049 ECM-XF中斷: processing usually takes
+//! < 150 us; INT0 says exactly when it is done). Without INT0 wired, a link
+//! waits a fixed idle time after each transfer, as the vendor driver does.
+
+use std::fmt;
+use std::time::Duration;
+
+#[cfg(target_os = "linux")]
+pub mod hardware;
+pub mod sim;
+pub mod socket;
+
+/// Why the link failed.
+#[derive(Debug)]
+pub enum LinkError {
+    /// An OS call failed; `what` names the call and device.
+    Io {
+        /// What was being done, e.g. "SPI transfer on /dev/spidev0.0".
+        what: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The far end went away (simulator socket closed).
+    Closed,
+}
+
+impl fmt::Display for LinkError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io { what, source } => write!(f, "{what}: {source}"),
+            Self::Closed => f.write_str("link closed"),
+        }
+    }
+}
+
+impl std::error::Error for LinkError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Io { source, .. } => Some(source),
+            Self::Closed => None,
+        }
+    }
+}
+
+impl LinkError {
+    /// An I/O error with its context.
+    pub fn io(what: impl Into<String>, source: std::io::Error) -> Self {
+        Self::Io { what: what.into(), source }
+    }
+}
+
+/// The SPI link to one chip.
+pub trait Link: Send {
+    /// One full-duplex transfer: `tx` out, `rx` (same length) in.
+    fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError>;
+
+    /// Waits until the chip is ready (INT0 active) or `timeout` passes;
+    /// `Ok(false)` on timeout. Links without INT0 wait their idle time.
+    fn wait_ready(&mut self, timeout: Duration) -> Result<bool, LinkError>;
+
+    /// Whether INT1 is active now.
+    fn int1_active(&mut self) -> Result<bool, LinkError>;
+
+    /// The line polarities the chip was told with command 58 (`true` =
+    /// active-high). Links that read electrical levels need them.
+    fn set_polarity(&mut self, _int0_active_high: bool, _int1_active_high: bool) {}
+
+    /// A description for logs.
+    fn describe(&self) -> String;
+}
+
+impl<L: Link + ?Sized> Link for Box<L> {
+    fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        (**self).transfer(tx, rx)
+    }
+    fn wait_ready(&mut self, timeout: Duration) -> Result<bool, LinkError> {
+        (**self).wait_ready(timeout)
+    }
+    fn int1_active(&mut self) -> Result<bool, LinkError> {
+        (**self).int1_active()
+    }
+    fn set_polarity(&mut self, int0_active_high: bool, int1_active_high: bool) {
+        (**self).set_polarity(int0_active_high, int1_active_high);
+    }
+    fn describe(&self) -> String {
+        (**self).describe()
+    }
+}

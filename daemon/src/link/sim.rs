@@ -1,0 +1,106 @@
+//! The in-process simulator as a link, against the wall clock: simulated
+//! time is the time since the link was made. The chip sits behind a mutex
+//! only so tests and fault injection can reach it through [`SimHandle`];
+//! the engine's thread is its only regular user.
+
+use std::sync::{Arc, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use ecmxf_sim::Chip;
+
+use super::{Link, LinkError};
+
+/// The link.
+#[derive(Debug)]
+pub struct SimLink {
+    shared: Arc<Shared>,
+}
+
+#[derive(Debug)]
+struct Shared {
+    chip: Mutex<Chip>,
+    epoch: Instant,
+}
+
+impl Shared {
+    fn now_ns(&self) -> u64 {
+        self.epoch.elapsed().as_nanos() as u64
+    }
+
+    fn chip(&self) -> MutexGuard<'_, Chip> {
+        // A panic elsewhere while holding the lock leaves a usable chip.
+        self.chip.lock().unwrap_or_else(|e| e.into_inner())
+    }
+}
+
+/// Reaches the simulated chip from outside the engine: fault injection,
+/// driving inputs, inspecting counters.
+#[derive(Clone, Debug)]
+pub struct SimHandle {
+    shared: Arc<Shared>,
+}
+
+impl SimHandle {
+    /// Runs `f` on the chip, brought up to now.
+    pub fn with_chip<T>(&self, f: impl FnOnce(&mut Chip) -> T) -> T {
+        let mut c = self.shared.chip();
+        c.advance_to(self.shared.now_ns());
+        f(&mut c)
+    }
+
+    /// A control command (see sim/README.md).
+    pub fn control(&self, command: &str) -> Result<String, String> {
+        self.with_chip(|c| ecmxf_sim::control::execute(c, command))
+    }
+}
+
+impl SimLink {
+    /// A link to `chip`, and a handle to it.
+    pub fn new(chip: Chip) -> (Self, SimHandle) {
+        let shared = Arc::new(Shared { chip: Mutex::new(chip), epoch: Instant::now() });
+        (Self { shared: Arc::clone(&shared) }, SimHandle { shared })
+    }
+}
+
+impl Link for SimLink {
+    fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        let now = self.shared.now_ns();
+        self.shared.chip().transfer(now, tx, rx);
+        Ok(())
+    }
+
+    fn wait_ready(&mut self, timeout: Duration) -> Result<bool, LinkError> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let ready_in = {
+                let mut c = self.shared.chip();
+                let now = self.shared.now_ns();
+                c.advance_to(now);
+                if c.ready(now) && c.faults.int0_stuck.is_none() {
+                    return Ok(true);
+                }
+                if c.faults.int0_stuck.is_some() {
+                    Duration::from_micros(100)
+                } else {
+                    Duration::from_nanos(c.ready_at().saturating_sub(now))
+                }
+            };
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(false);
+            }
+            std::thread::sleep(ready_in.min(deadline - now).max(Duration::from_micros(1)));
+        }
+    }
+
+    fn int1_active(&mut self) -> Result<bool, LinkError> {
+        let now = self.shared.now_ns();
+        let mut c = self.shared.chip();
+        c.advance_to(now);
+        Ok(c.int1_active())
+    }
+
+    fn describe(&self) -> String {
+        "in-process simulator".into()
+    }
+}

@@ -1,0 +1,412 @@
+//! Packet exchange with the chip's rules (v049 SPI 命令傳送與回應接收說明;
+//! PROTOCOL-NOTES "Pipelining and deduplication").
+//!
+//! The answer to a packet arrives with the next one, and a packet with the
+//! same index and code as the one before it does not execute again but
+//! repeats its answer. Two ways of sending follow:
+//!
+//! - **Guarded** ([`Port::call`]): send `C` with a fresh index, then resend
+//!   the identical packet until `C`'s answer arrives intact. The resend never
+//!   executes `C` twice; a corrupt answer is recovered by resending again; an
+//!   intact answer that does not echo `C` means `C` failed its check word
+//!   and never ran, so resending it is safe too. Every command whose answer
+//!   matters goes this way.
+//! - **Pipelined** ([`Port::pipelined`]): send once; the answer (to the packet
+//!   before) comes back now. Used for cyclic FIFO data, where a lost answer
+//!   costs one batch of inputs (counted) and is never worth a second
+//!   execution.
+//!
+//! A packet the chip was not ready for comes back with the "not ready" check
+//! word and was not taken: it is resent as is.
+
+use std::time::Duration;
+
+use ecmxf_wire::flags::ControlFlags;
+use ecmxf_wire::framing::{DATA_DEFAULT, DATA_MAX, PacketLayout};
+use ecmxf_wire::payload::control::InfoUpdate;
+use ecmxf_wire::payload::spi::{CrcTypeSet, SpiReconfig};
+use ecmxf_wire::{
+    CheckType, CommandCode, CommandHeader, DecodeError, EncodeError, Request, ResponseHeader, decode_response,
+    encode_request,
+};
+
+use crate::link::{Link, LinkError};
+
+/// Why an exchange failed for good.
+#[derive(Debug)]
+pub enum PortError {
+    /// The link failed.
+    Link(LinkError),
+    /// INT0 never said ready within the timeout.
+    NotReady(Duration),
+    /// A command could not be encoded (a bug or a bad argument upstream).
+    Encode(EncodeError),
+    /// No intact answer after this many attempts.
+    NoAnswer {
+        /// The command.
+        code: CommandCode,
+        /// Attempts made.
+        attempts: u32,
+        /// The last decode failure.
+        last: Option<DecodeError>,
+    },
+    /// The packet size could not be found in the byte stream.
+    Unsynchronized,
+}
+
+impl std::fmt::Display for PortError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Link(e) => write!(f, "{e}"),
+            Self::NotReady(t) => write!(f, "chip not ready (INT0) within {t:?}"),
+            Self::Encode(e) => write!(f, "cannot encode command: {e}"),
+            Self::NoAnswer { code, attempts, last: Some(d) } => {
+                write!(f, "no intact answer to {code} after {attempts} attempts (last: {d})")
+            }
+            Self::NoAnswer { code, attempts, last: None } => {
+                write!(f, "no intact answer to {code} after {attempts} attempts")
+            }
+            Self::Unsynchronized => f.write_str("no packet boundary found in the chip's byte stream"),
+        }
+    }
+}
+
+impl std::error::Error for PortError {}
+
+impl From<LinkError> for PortError {
+    fn from(e: LinkError) -> Self {
+        Self::Link(e)
+    }
+}
+
+/// Exchange counters.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PortStats {
+    /// Packets clocked.
+    pub exchanges: u64,
+    /// Answers with the "not ready" check word (packet resent).
+    pub not_ready: u64,
+    /// Answers that failed validation.
+    pub corrupt: u64,
+    /// Guarded commands resent after a corrupt answer or a refused packet.
+    pub retries: u64,
+    /// Pipelined answers lost.
+    pub lost: u64,
+}
+
+/// What an exchange brought back.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Received {
+    NotReady,
+    Corrupt(DecodeError),
+    Answer(ResponseHeader),
+}
+
+/// An answer: header and valid data, borrowed until the next exchange.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Answer<'a> {
+    /// The header.
+    pub header: ResponseHeader,
+    /// Valid data.
+    pub data: &'a [u8],
+}
+
+/// The chip's packet port over a link.
+#[derive(Debug)]
+pub struct Port<L> {
+    link: L,
+    check: CheckType,
+    layout: PacketLayout,
+    tx: Vec<u8>,
+    rx: Vec<u8>,
+    prev_rx: Vec<u8>,
+    prev_header: Option<ResponseHeader>,
+    next_index: u8,
+    last_sent: Option<(u8, CommandCode)>,
+    /// Control bits to send with the next packet (error clears).
+    pub pending_control: ControlFlags,
+    ready_timeout: Duration,
+    max_attempts: u32,
+    status: ResponseHeader,
+    stats: PortStats,
+}
+
+impl<L: Link> Port<L> {
+    /// A port in the chip's power-up state (112-byte data, fixed check word).
+    pub fn new(link: L) -> Self {
+        Self {
+            link,
+            check: CheckType::Fixed,
+            layout: PacketLayout::default(),
+            tx: Vec::with_capacity(DATA_MAX + 32),
+            rx: Vec::with_capacity(DATA_MAX + 32),
+            prev_rx: Vec::with_capacity(DATA_MAX + 32),
+            prev_header: None,
+            next_index: 0,
+            last_sent: None,
+            pending_control: ControlFlags::empty(),
+            ready_timeout: Duration::from_millis(100),
+            max_attempts: 16,
+            status: ResponseHeader::default(),
+            stats: PortStats::default(),
+        }
+    }
+
+    /// The link.
+    pub fn link_mut(&mut self) -> &mut L {
+        &mut self.link
+    }
+
+    /// Gives the link back.
+    pub fn into_link(self) -> L {
+        self.link
+    }
+
+    /// How long to wait for INT0 before giving up.
+    pub fn set_ready_timeout(&mut self, t: Duration) {
+        self.ready_timeout = t;
+    }
+
+    /// Counters.
+    pub fn stats(&self) -> PortStats {
+        self.stats
+    }
+
+    /// The newest intact header.
+    pub fn status(&self) -> &ResponseHeader {
+        &self.status
+    }
+
+    /// Check type in force.
+    pub fn check(&self) -> CheckType {
+        self.check
+    }
+
+    /// Data-section size in force.
+    pub fn data_size(&self) -> usize {
+        self.layout.data_size()
+    }
+
+    fn fresh_index(&mut self) -> u8 {
+        self.next_index = self.next_index.wrapping_add(1);
+        if self.last_sent.is_some_and(|(i, _)| i == self.next_index) {
+            self.next_index = self.next_index.wrapping_add(1);
+        }
+        self.next_index
+    }
+
+    fn encode<'a, R: Request<'a>>(&mut self, req: &R, index: u8, check: CheckType) -> Result<CommandHeader, PortError> {
+        let mut header = CommandHeader::new(R::CODE, index);
+        header.control = std::mem::take(&mut self.pending_control);
+        self.tx.clear();
+        self.tx.resize(self.layout.packet_len(), 0);
+        encode_request(req, header, check, &mut self.tx).map_err(PortError::Encode)
+    }
+
+    /// Waits for INT0, clocks `self.tx`, decodes into `self.rx`.
+    fn clock(&mut self, decode_as: CheckType) -> Result<Received, PortError> {
+        if !self.link.wait_ready(self.ready_timeout)? {
+            return Err(PortError::NotReady(self.ready_timeout));
+        }
+        self.rx.clear();
+        self.rx.resize(self.tx.len(), 0);
+        self.link.transfer(&self.tx, &mut self.rx)?;
+        self.stats.exchanges += 1;
+        Ok(match decode_response(&self.rx, decode_as) {
+            Ok(p) => {
+                self.status = p.header;
+                Received::Answer(p.header)
+            }
+            Err(DecodeError::ChipNotReady) => {
+                self.stats.not_ready += 1;
+                Received::NotReady
+            }
+            Err(e) => {
+                self.stats.corrupt += 1;
+                Received::Corrupt(e)
+            }
+        })
+    }
+
+    fn keep_prev(&mut self, header: Option<ResponseHeader>) {
+        std::mem::swap(&mut self.prev_rx, &mut self.rx);
+        self.prev_header = header;
+    }
+
+    /// The answer to the packet sent before the last call, if it arrived
+    /// intact during that call.
+    pub fn previous(&self) -> Option<Answer<'_>> {
+        let h = self.prev_header?;
+        let n = usize::from(h.data_len);
+        Some(Answer { header: h, data: self.prev_rx.get(24..24 + n).unwrap_or(&[]) })
+    }
+
+    fn current(&self, header: ResponseHeader) -> Answer<'_> {
+        let n = usize::from(header.data_len);
+        Answer { header, data: self.rx.get(24..24 + n).unwrap_or(&[]) }
+    }
+
+    /// Sends `req` guarded (see the module doc) and returns its answer. The
+    /// answer to the packet before it is kept in [`Port::previous`].
+    pub fn call<'a, R: Request<'a>>(&mut self, req: &R) -> Result<Answer<'_>, PortError> {
+        let index = self.fresh_index();
+        self.encode(req, index, self.check)?;
+        self.send_guarded(index, R::CODE, self.check)
+    }
+
+    fn send_guarded(&mut self, index: u8, code: CommandCode, decode_as: CheckType) -> Result<Answer<'_>, PortError> {
+        let mut sent_once = false;
+        let mut last = None;
+        for _ in 0..self.max_attempts * 2 {
+            let got = self.clock(decode_as)?;
+            if !sent_once {
+                match got {
+                    Received::NotReady => continue,
+                    Received::Answer(h) => self.keep_prev(Some(h)),
+                    Received::Corrupt(e) => {
+                        last = Some(e);
+                        self.keep_prev(None);
+                    }
+                }
+                sent_once = true;
+                self.last_sent = Some((index, code));
+                continue;
+            }
+            match got {
+                Received::NotReady => {}
+                Received::Answer(h) if h.index == index && h.code == code && !h.is_nop() => {
+                    return Ok(self.current(h));
+                }
+                // An intact answer that is not ours: our packet failed its
+                // check word and did not run. Resending is safe.
+                Received::Answer(_) => self.stats.retries += 1,
+                Received::Corrupt(e) => {
+                    last = Some(e);
+                    self.stats.retries += 1;
+                }
+            }
+        }
+        Err(PortError::NoAnswer { code, attempts: self.max_attempts * 2, last })
+    }
+
+    /// Sends `req` once (cyclic data). Returns the answer to the packet
+    /// before, if intact; a lost one is counted.
+    pub fn pipelined<'a, R: Request<'a>>(&mut self, req: &R) -> Result<Option<Answer<'_>>, PortError> {
+        let index = self.fresh_index();
+        self.encode(req, index, self.check)?;
+        loop {
+            match self.clock(self.check)? {
+                Received::NotReady => continue,
+                Received::Answer(h) => {
+                    self.last_sent = Some((index, R::CODE));
+                    return Ok(Some(self.current(h)));
+                }
+                Received::Corrupt(_) => {
+                    self.last_sent = Some((index, R::CODE));
+                    self.stats.lost += 1;
+                    return Ok(None);
+                }
+            }
+        }
+    }
+
+    /// Switches the check type (command 25): the command goes out with the
+    /// old type, everything after it with the new one. A guarded status call
+    /// in the new type only succeeds if the chip switched; otherwise the old
+    /// type is kept and the switch sent again.
+    pub fn set_check(&mut self, new: CheckType) -> Result<(), PortError> {
+        let old = self.check;
+        for _ in 0..self.max_attempts {
+            let index = self.fresh_index();
+            self.encode(&CrcTypeSet(new), index, old)?;
+            while let Received::NotReady = self.clock(old)? {}
+            self.last_sent = Some((index, CommandCode::CrcTypeSet));
+            self.check = new;
+            if self.call(&InfoUpdate).is_ok() {
+                return Ok(());
+            }
+            self.check = old;
+            self.stats.retries += 1;
+        }
+        Err(PortError::NoAnswer { code: CommandCode::CrcTypeSet, attempts: self.max_attempts, last: None })
+    }
+
+    /// Changes the data-section size (command 23, always with the fixed check
+    /// word; the chip counts one CRC error for it, v049 note under 23). If
+    /// the answer does not come back in the new size, the port finds the
+    /// size in the byte stream and tries again while it is still the old one.
+    pub fn resize(&mut self, data_size: usize) -> Result<(), PortError> {
+        let new = PacketLayout::new(data_size).map_err(PortError::Encode)?;
+        for _ in 0..self.max_attempts {
+            if self.layout == new {
+                return Ok(());
+            }
+            let index = self.fresh_index();
+            self.encode(&SpiReconfig { data_size: data_size as u16 }, index, CheckType::Fixed)?;
+            while let Received::NotReady = self.clock(self.check)? {}
+            self.last_sent = Some((index, CommandCode::SpiReconfig));
+            self.layout = new;
+            if self.call(&InfoUpdate).is_err() {
+                self.synchronize()?;
+            }
+        }
+        if self.layout == new {
+            Ok(())
+        } else {
+            Err(PortError::NoAnswer { code: CommandCode::SpiReconfig, attempts: self.max_attempts, last: None })
+        }
+    }
+
+    /// Finds the packet size and check type of a chip in an unknown state:
+    /// clocks single bytes until it has seen an end word followed by a start
+    /// word twice, takes their distance as the packet length (PROTOCOL-NOTES
+    /// "Resizing"; the vendor driver does the same), completes the packet in
+    /// progress with zeros (the chip refuses it as a bad packet), then reads
+    /// the check type from the status byte of the next answer.
+    pub fn synchronize(&mut self) -> Result<(), PortError> {
+        const END_START: [u8; 8] = [0x59, 0x58, 0x57, 0x56, 0xA4, 0xA3, 0xA2, 0xA1];
+        let mut stream: Vec<u8> = Vec::with_capacity(3 * (DATA_MAX + 32));
+        let mut starts: Vec<usize> = Vec::new();
+        let mut byte = [0u8; 1];
+        while starts.len() < 2 {
+            if stream.len() > 3 * (DATA_MAX + 32) {
+                return Err(PortError::Unsynchronized);
+            }
+            if !self.link.wait_ready(self.ready_timeout)? {
+                return Err(PortError::NotReady(self.ready_timeout));
+            }
+            self.link.transfer(&[0], &mut byte)?;
+            stream.push(byte[0]);
+            if stream.ends_with(&END_START) {
+                starts.push(stream.len() - 4);
+            }
+        }
+        let layout = PacketLayout::from_packet_len(starts[1] - starts[0]).ok_or(PortError::Unsynchronized)?;
+        let in_packet = stream.len() - starts[1];
+        let fill = vec![0u8; layout.packet_len() - in_packet];
+        let mut sink = vec![0u8; fill.len()];
+        if !self.link.wait_ready(self.ready_timeout)? {
+            return Err(PortError::NotReady(self.ready_timeout));
+        }
+        self.link.transfer(&fill, &mut sink)?;
+        self.layout = layout;
+        self.last_sent = None;
+        for _ in 0..self.max_attempts {
+            let index = self.fresh_index();
+            self.encode(&InfoUpdate, index, self.check)?;
+            if let Received::Answer(h) = self.clock(self.check)? {
+                self.check = h.status.check_type;
+            } else if let Some(check) = CheckType::ALL.into_iter().find(|c| decode_response(&self.rx, *c).is_ok()) {
+                self.check = check;
+            }
+            self.last_sent = Some((index, CommandCode::InfoUpdate));
+            if self.call(&InfoUpdate).is_ok() {
+                return Ok(());
+            }
+        }
+        Err(PortError::Unsynchronized)
+    }
+
+    /// Size of the data section a fresh chip uses.
+    pub const POWER_UP_DATA: usize = DATA_DEFAULT;
+}
