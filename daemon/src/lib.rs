@@ -5,8 +5,16 @@
 //!   simulator socket).
 //! - [`port`]: packet exchange with the chip's rules: one-behind answers,
 //!   fresh indices, retries that never execute a command twice.
+//! - [`engine`]: the thread that owns the chip: bring-up, cyclic FIFO
+//!   exchange, the blocking-slot transactions, supervision and recovery.
+//! - [`master`]: the async handle to the engine ([`master::Master`]).
+//! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
+//! - [`config`]: the configuration file.
 #![warn(missing_docs)]
 
+pub mod config;
+pub mod engine;
 pub mod link;
-/// Packet exchange.
+pub mod master;
 pub mod port;
+pub mod realtime;

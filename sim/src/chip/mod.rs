@@ -420,7 +420,9 @@ impl Chip {
     }
 
     fn snapshot(&self, index: u8, code: CommandCode, value: u8, data_len: u16) -> ResponseHeader {
-        let (tx, rx) = self.fifo_history[2];
+        // The answer goes out with the next exchange, so a host sees the
+        // level as it was two exchanges before it reads it.
+        let (tx, rx) = self.fifo_history[1];
         let mut errors = self.errors;
         errors.set(ErrorFlags::LINK_PIN, self.net.slaves.iter().any(|s| s.present));
         errors.set(ErrorFlags::PHY_LINK_AT_INIT, self.master.inited);
@@ -453,9 +455,10 @@ impl Chip {
         buf
     }
 
-    /// Records FIFO levels at each packet taken; headers report the value
-    /// from two packets earlier (the vendor driver's comment: the counts lag
-    /// by two exchanges).
+    /// Records FIFO levels at each packet taken; an answer reports the value
+    /// from the packet before, and reaches the host one exchange later: the
+    /// counts the host reads lag by two exchanges (the vendor driver's
+    /// comment).
     fn note_fifo_levels(&mut self) {
         self.fifo_history.rotate_right(1);
         let clamp = |n: usize| n.min(255) as u8;

@@ -1,0 +1,496 @@
+//! The daemon's configuration file (TOML). A `version` key, unknown keys
+//! rejected, and every mistake reported with the key that holds it (and, for
+//! syntax, the line), so `ecmxfd --check-config FILE` tells an engineer what
+//! to fix before the daemon touches a bus.
+
+use std::fmt;
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use serde::Deserialize;
+
+/// The file format version this build reads.
+pub const VERSION: u32 = 1;
+
+/// The whole file.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Config {
+    /// Format version, 1.
+    pub version: u32,
+    /// How the chip is reached.
+    pub link: LinkConfig,
+    /// Link settings the daemon gives the chip.
+    #[serde(default)]
+    pub chip: ChipSettings,
+    /// Real-time thread.
+    #[serde(default)]
+    pub realtime: RealtimeConfig,
+    /// Cyclic exchange.
+    #[serde(default)]
+    pub cycle: CycleConfig,
+    /// The expected network, in ring order (empty: accept what is found).
+    #[serde(default, rename = "slave")]
+    pub slaves: Vec<SlaveConfig>,
+    /// Axes driven by the chip's CiA402 helper.
+    #[serde(default, rename = "axis")]
+    pub axes: Vec<AxisConfig>,
+    /// Automatic recovery.
+    #[serde(default)]
+    pub recovery: RecoveryConfig,
+}
+
+/// `[link]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, tag = "backend", rename_all = "kebab-case")]
+pub enum LinkConfig {
+    /// The in-process simulator.
+    Sim {
+        /// Network file (the demo network when absent).
+        network: Option<PathBuf>,
+    },
+    /// A simulator served on a Unix socket (`ecmxf-sim serve`).
+    SimSocket {
+        /// Socket path.
+        socket: PathBuf,
+    },
+    /// Real hardware.
+    Spidev {
+        /// SPI device.
+        device: PathBuf,
+        /// SPI clock, Hz.
+        #[serde(default = "default_spi_hz")]
+        spi_hz: u32,
+        /// GPIO chip of INT0/INT1.
+        gpio_chip: Option<PathBuf>,
+        /// INT0 line offset (ready); absent = not wired, fixed idle time.
+        int0_line: Option<u32>,
+        /// INT1 line offset (events).
+        int1_line: Option<u32>,
+        /// Kernel debounce on the lines, us.
+        debounce_us: Option<u32>,
+        /// Idle time after a transfer without INT0, us (vendor: 150-200).
+        #[serde(default = "default_idle_us")]
+        idle_us: u32,
+    },
+}
+
+fn default_spi_hz() -> u32 {
+    20_000_000
+}
+
+fn default_idle_us() -> u32 {
+    200
+}
+
+/// `[chip]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ChipSettings {
+    /// SPI data-section size to switch to (32..=1408).
+    pub data_size: usize,
+    /// Use CRC-32 check words (strongly advised: the fixed word protects
+    /// nothing).
+    pub crc32: bool,
+    /// INT0 polarity to program (command 58).
+    pub int0_active_high: bool,
+    /// INT1 polarity to program.
+    pub int1_active_high: bool,
+    /// How long to wait for INT0, ms.
+    pub ready_timeout_ms: u64,
+}
+
+impl Default for ChipSettings {
+    fn default() -> Self {
+        Self { data_size: 512, crc32: true, int0_active_high: true, int1_active_high: false, ready_timeout_ms: 100 }
+    }
+}
+
+/// `[realtime]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RealtimeConfig {
+    /// SCHED_FIFO priority 1..=99; 0 = normal scheduling.
+    pub priority: u8,
+    /// CPU to pin the thread to.
+    pub cpu: Option<usize>,
+    /// mlockall the process.
+    pub lock_memory: bool,
+}
+
+impl Default for RealtimeConfig {
+    fn default() -> Self {
+        Self { priority: 80, cpu: None, lock_memory: true }
+    }
+}
+
+/// `[cycle]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct CycleConfig {
+    /// SYNC0 cycle, us (>= 125).
+    pub sync0_us: u32,
+    /// DC AssignActivate (0 = DC off, free-run 1 ms).
+    pub dc_assign_activate: u16,
+    /// SYNC0 shift, ns.
+    pub shift_ns: i32,
+    /// RxFIFO depth, frames.
+    pub fifo_rx_depth: u8,
+    /// TxFIFO depth, frames.
+    pub fifo_tx_depth: u8,
+    /// Keep at least this many output frames queued in the chip.
+    pub fifo_low: u8,
+    /// And at most this many.
+    pub fifo_high: u8,
+    /// Consecutive WKC errors that stop exchange (255 = never).
+    pub wkc_error_limit: u8,
+    /// State to bring the network to: "preop", "safeop" or "op".
+    pub target_state: String,
+}
+
+impl Default for CycleConfig {
+    fn default() -> Self {
+        Self {
+            sync0_us: 1000,
+            dc_assign_activate: 0x0300,
+            shift_ns: 0,
+            fifo_rx_depth: 32,
+            fifo_tx_depth: 32,
+            fifo_low: 8,
+            fifo_high: 20,
+            wkc_error_limit: 255,
+            target_state: "op".into(),
+        }
+    }
+}
+
+/// One expected slave (`[[slave]]`).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct SlaveConfig {
+    /// A label for logs and the API.
+    pub name: Option<String>,
+    /// Vendor id the slave must have.
+    pub vendor_id: Option<u32>,
+    /// Product code it must have.
+    pub product_code: Option<u32>,
+    /// Revision it must have.
+    pub revision: Option<u32>,
+    /// RxPDO assignment to configure (PDO_CONFIG_SET, at most 3 PDOs of 8).
+    #[serde(default)]
+    pub rx_pdos: Vec<PdoConfig>,
+    /// TxPDO assignment to configure.
+    #[serde(default)]
+    pub tx_pdos: Vec<PdoConfig>,
+    /// SDOs written in PRE-OP, in order (like ENI init commands).
+    #[serde(default, rename = "sdo")]
+    pub sdos: Vec<StartupSdo>,
+}
+
+/// One PDO of an assignment.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct PdoConfig {
+    /// Mapping object (0x16xx / 0x1Axx).
+    pub index: u16,
+    /// Entries as `[index, subindex, bits]`.
+    pub entries: Vec<[u32; 3]>,
+}
+
+/// A start-up SDO download.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct StartupSdo {
+    /// Object index.
+    pub index: u16,
+    /// Subindex.
+    #[serde(default)]
+    pub subindex: u8,
+    /// Integer value, written in `size` bytes little-endian.
+    pub value: Option<i64>,
+    /// Size of `value` in bytes (1, 2, 4, 8).
+    pub size: Option<u8>,
+    /// Raw bytes instead of `value`.
+    pub bytes: Option<Vec<u8>>,
+    /// Complete access.
+    #[serde(default)]
+    pub complete_access: bool,
+}
+
+impl StartupSdo {
+    /// The bytes to write.
+    pub fn payload(&self) -> Vec<u8> {
+        match (&self.bytes, self.value) {
+            (Some(b), _) => b.clone(),
+            (None, Some(v)) => v.to_le_bytes()[..usize::from(self.size.unwrap_or(4)).min(8)].to_vec(),
+            (None, None) => Vec::new(),
+        }
+    }
+}
+
+/// One axis of the chip's CiA402 helper (`[[axis]]`).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AxisConfig {
+    /// Slave position.
+    pub slave: u8,
+    /// Controlword byte offset in the slave's outputs.
+    #[serde(default)]
+    pub controlword_offset: u8,
+    /// Statusword byte offset in the slave's inputs.
+    #[serde(default)]
+    pub statusword_offset: u8,
+    /// Reset faults automatically.
+    #[serde(default)]
+    pub auto_fault_reset: bool,
+}
+
+/// `[recovery]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct RecoveryConfig {
+    /// Bring the network back to the target state after faults.
+    pub enabled: bool,
+    /// First back-off, ms.
+    pub backoff_ms: u64,
+    /// Longest back-off, ms.
+    pub max_backoff_ms: u64,
+}
+
+impl Default for RecoveryConfig {
+    fn default() -> Self {
+        Self { enabled: true, backoff_ms: 200, max_backoff_ms: 10_000 }
+    }
+}
+
+/// A configuration mistake.
+#[derive(Debug)]
+pub enum ConfigError {
+    /// Could not read the file.
+    Io(PathBuf, std::io::Error),
+    /// Syntax or schema (toml names key, line and column).
+    Parse(PathBuf, String),
+    /// A value is not allowed.
+    Invalid {
+        /// The file.
+        file: PathBuf,
+        /// Dotted key, e.g. `cycle.sync0_us`.
+        key: String,
+        /// Why.
+        message: String,
+    },
+}
+
+impl fmt::Display for ConfigError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Io(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Parse(p, e) => write!(f, "{}: {e}", p.display()),
+            Self::Invalid { file, key, message } => write!(f, "{}: {key}: {message}", file.display()),
+        }
+    }
+}
+
+impl std::error::Error for ConfigError {}
+
+impl Config {
+    /// The configuration `--sim` runs: the in-process simulator with the demo
+    /// network, 125 us cycle, normal scheduling (the simulator needs no
+    /// real-time priority and a trial run should not lock memory).
+    pub fn simulator() -> Self {
+        Self {
+            version: VERSION,
+            link: LinkConfig::Sim { network: None },
+            chip: ChipSettings::default(),
+            realtime: RealtimeConfig { priority: 0, cpu: None, lock_memory: false },
+            // Without real-time priority, and on a virtual machine, a thread
+            // can stall for 25 ms: keep about 23 ms of outputs queued (32 ms
+            // of depth) at the cost of that much output latency. Bring-up
+            // fits the depths to the 16 KiB FIFO memory.
+            cycle: CycleConfig {
+                sync0_us: 125,
+                fifo_rx_depth: 255,
+                fifo_tx_depth: 40,
+                fifo_low: 128,
+                fifo_high: 240,
+                ..CycleConfig::default()
+            },
+            slaves: Vec::new(),
+            axes: Vec::new(),
+            recovery: RecoveryConfig::default(),
+        }
+    }
+
+    /// Parses and validates `text`, read from `path`.
+    pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
+        let c: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(path.into(), e.to_string()))?;
+        c.validate(path)?;
+        Ok(c)
+    }
+
+    /// Reads, parses and validates a file.
+    pub fn load(path: &Path) -> Result<Self, ConfigError> {
+        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io(path.into(), e))?;
+        Self::parse(&text, path)
+    }
+
+    /// Checks values serde cannot.
+    pub fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad =
+            |key: &str, message: String| Err(ConfigError::Invalid { file: path.into(), key: key.into(), message });
+        if self.version != VERSION {
+            return bad("version", format!("version {} is not supported (this build reads {VERSION})", self.version));
+        }
+        if !(32..=1408).contains(&self.chip.data_size) {
+            return bad("chip.data_size", format!("{} is outside 32..=1408", self.chip.data_size));
+        }
+        if self.realtime.priority > 99 {
+            return bad("realtime.priority", format!("{} is outside 0..=99", self.realtime.priority));
+        }
+        if self.cycle.sync0_us < 125 {
+            return bad("cycle.sync0_us", format!("{} us is below the chip's 125 us minimum", self.cycle.sync0_us));
+        }
+        let c = &self.cycle;
+        if c.fifo_low >= c.fifo_high || c.fifo_high > c.fifo_rx_depth {
+            return bad(
+                "cycle.fifo_high",
+                format!(
+                    "need fifo_low < fifo_high <= fifo_rx_depth, got {} < {} <= {}",
+                    c.fifo_low, c.fifo_high, c.fifo_rx_depth
+                ),
+            );
+        }
+        if !matches!(c.target_state.as_str(), "preop" | "safeop" | "op") {
+            return bad("cycle.target_state", format!("{:?} is not one of preop, safeop, op", c.target_state));
+        }
+        if let LinkConfig::Spidev { int0_line: None, idle_us, .. } = &self.link {
+            if *idle_us < 100 {
+                return bad(
+                    "link.idle_us",
+                    format!("{idle_us} us without INT0 is shorter than the chip's processing time"),
+                );
+            }
+        }
+        for (i, s) in self.slaves.iter().enumerate() {
+            for (dir, pdos) in [("rx_pdos", &s.rx_pdos), ("tx_pdos", &s.tx_pdos)] {
+                if pdos.len() > 3 {
+                    return bad(
+                        &format!("slave[{i}].{dir}"),
+                        format!("{} PDOs; PDO_CONFIG_SET carries 3 (use SDOs for more)", pdos.len()),
+                    );
+                }
+                for (k, p) in pdos.iter().enumerate() {
+                    if p.entries.len() > 8 {
+                        return bad(
+                            &format!("slave[{i}].{dir}[{k}].entries"),
+                            format!("{} entries; a PDO here holds 8", p.entries.len()),
+                        );
+                    }
+                    for e in &p.entries {
+                        if e[0] > 0xFFFF || e[1] > 0xFF || e[2] > 0xFF {
+                            return bad(
+                                &format!("slave[{i}].{dir}[{k}].entries"),
+                                format!("{e:?} is not [index u16, subindex u8, bits u8]"),
+                            );
+                        }
+                    }
+                }
+            }
+            for (k, sdo) in s.sdos.iter().enumerate() {
+                let key = format!("slave[{i}].sdo[{k}]");
+                match (&sdo.bytes, sdo.value, sdo.size) {
+                    (Some(_), Some(_), _) => return bad(&key, "give value or bytes, not both".into()),
+                    (None, None, _) => return bad(&key, "needs value (with size) or bytes".into()),
+                    (None, Some(_), Some(n)) if ![1, 2, 4, 8].contains(&n) => {
+                        return bad(&format!("{key}.size"), format!("{n} is not 1, 2, 4 or 8"));
+                    }
+                    _ => {}
+                }
+            }
+        }
+        for (i, a) in self.axes.iter().enumerate() {
+            if !self.slaves.is_empty() && usize::from(a.slave) >= self.slaves.len() {
+                return bad(
+                    &format!("axis[{i}].slave"),
+                    format!("slave {} is not in the expected network of {}", a.slave, self.slaves.len()),
+                );
+            }
+        }
+        Ok(())
+    }
+
+    /// The INT0 wait timeout.
+    pub fn ready_timeout(&self) -> Duration {
+        Duration::from_millis(self.chip.ready_timeout_ms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn parse(t: &str) -> Result<Config, ConfigError> {
+        Config::parse(t, Path::new("ecmxfd.toml"))
+    }
+
+    const MINIMAL: &str = "version = 1\n[link]\nbackend = \"sim\"\n";
+
+    #[test]
+    fn minimal_and_full() {
+        let c = parse(MINIMAL).unwrap();
+        assert_eq!(c.link, LinkConfig::Sim { network: None });
+        assert_eq!(c.cycle.sync0_us, 1000);
+        let full = r#"
+version = 1
+[link]
+backend = "spidev"
+device = "/dev/spidev0.0"
+spi_hz = 24000000
+gpio_chip = "/dev/gpiochip0"
+int0_line = 25
+int1_line = 24
+[chip]
+data_size = 1024
+[realtime]
+priority = 90
+cpu = 3
+[cycle]
+sync0_us = 250
+[[slave]]
+name = "x"
+vendor_id = 0x89A
+product_code = 0x30000000
+  [[slave.sdo]]
+  index = 0x6060
+  value = 10
+  size = 1
+[[axis]]
+slave = 0
+"#;
+        let c = parse(full).unwrap();
+        assert_eq!(c.slaves[0].sdos[0].payload(), vec![10]);
+        assert!(matches!(c.link, LinkConfig::Spidev { int0_line: Some(25), .. }));
+    }
+
+    #[test]
+    fn mistakes_name_their_key() {
+        let e = parse("version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0 = 125\n").unwrap_err().to_string();
+        assert!(e.contains("sync0") && e.contains("line 5"), "{e}");
+        let e = parse(&format!("{MINIMAL}[cycle]\nsync0_us = 100\n")).unwrap_err().to_string();
+        assert!(e.contains("cycle.sync0_us") && e.contains("125"), "{e}");
+        let e = parse(&format!("{MINIMAL}[chip]\ndata_size = 2000\n")).unwrap_err().to_string();
+        assert!(e.contains("chip.data_size"), "{e}");
+        let e = parse("version = 2\n[link]\nbackend = \"sim\"\n").unwrap_err().to_string();
+        assert!(e.contains("version 2"), "{e}");
+        let e = parse("version = 1\n[link]\nbackend = \"usb\"\n").unwrap_err().to_string();
+        assert!(e.contains("usb"), "{e}");
+        let e = parse(&format!("{MINIMAL}[[slave]]\n[[slave.sdo]]\nindex = 0x6060\n")).unwrap_err().to_string();
+        assert!(e.contains("slave[0].sdo[0]"), "{e}");
+        let e = parse(&format!("{MINIMAL}[cycle]\nfifo_low = 30\n")).unwrap_err().to_string();
+        assert!(e.contains("cycle.fifo_high"), "{e}");
+        let e = parse("version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nidle_us = 20\n")
+            .unwrap_err()
+            .to_string();
+        assert!(e.contains("link.idle_us"), "{e}");
+    }
+}

@@ -1,0 +1,405 @@
+//! Bring-up from the configuration, in the order of the manual's figure 7
+//! (v049 "ECM-XF 初始化EtherCAT網路及從站配置說明"): link (size sync,
+//! CRC-32, packet size, INT polarity), init network with DC (1), identity
+//! check against the expected network, PRE-OP (12/41), PDO mapping (7, then
+//! 2), start-up SDOs (10), CiA402 helper (26/27), FIFO sizes (19, 52/54, 66),
+//! SAFE-OP, a prefilled RxFIFO, OP, FIFO on (18). Each failure names the
+//! step, and the slave when one is at fault.
+
+use std::fmt;
+use std::time::{Duration, Instant};
+
+use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
+use ecmxf_wire::payload::cia402::{Cia402ConfigSet, Cia402Control, Cia402State, Cia402StateSet};
+use ecmxf_wire::payload::control::{FwVersionGet, InfoUpdate, WkcErrorLimit, WkcErrorLimitSet};
+use ecmxf_wire::payload::ecat_init::{DcTiming, EcatInit, EcatReconfig};
+use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSize, FifoPackSizeGet, FifoSetRxCount, FifoSetTxCount};
+use ecmxf_wire::payload::interrupt::{IntConfig, IntPolarity, IntSetEnable};
+use ecmxf_wire::payload::pdo::{
+    FifoOpFlags, PdoConfig, PdoDirection, PdoEntry, PdoFifoOp, RX_PDO_ASSIGN, TX_PDO_ASSIGN,
+};
+use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoRequest};
+use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
+use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
+use ecmxf_wire::{CheckType, EcatState, Reply, ReplyFields, Request};
+
+use tracing::warn;
+
+use crate::config::Config;
+use crate::link::Link;
+use crate::port::{Port, PortError};
+
+/// Why bring-up stopped.
+#[derive(Debug)]
+pub enum BringUpError {
+    /// The link or the exchange failed.
+    Port(PortError),
+    /// A step failed.
+    Step {
+        /// The step.
+        step: &'static str,
+        /// What happened.
+        detail: String,
+    },
+    /// The network differs from the configured one.
+    Identity {
+        /// Slave position.
+        position: usize,
+        /// What was expected.
+        expected: String,
+        /// What was found.
+        found: String,
+    },
+}
+
+impl fmt::Display for BringUpError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Port(e) => write!(f, "{e}"),
+            Self::Step { step, detail } => write!(f, "{step}: {detail}"),
+            Self::Identity { position, expected, found } => {
+                write!(f, "slave {position} is {found}, the configuration expects {expected}")
+            }
+        }
+    }
+}
+
+impl std::error::Error for BringUpError {}
+
+impl From<PortError> for BringUpError {
+    fn from(e: PortError) -> Self {
+        Self::Port(e)
+    }
+}
+
+fn step(step: &'static str, detail: impl Into<String>) -> BringUpError {
+    BringUpError::Step { step, detail: detail.into() }
+}
+
+/// What bring-up found and set up.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct NetworkLayout {
+    /// Firmware version.
+    pub firmware: u8,
+    /// Slaves in ring order.
+    pub slaves: Vec<SlaveSummary>,
+    /// Output frame size.
+    pub rx_size: usize,
+    /// Input frame size.
+    pub tx_size: usize,
+    /// State reached.
+    pub state: EcatState,
+    /// RxFIFO depth in force (configured, fitted to the FIFO memory).
+    pub fifo_rx_depth: u8,
+    /// Low mark in force.
+    pub fifo_low: u8,
+    /// High mark in force.
+    pub fifo_high: u8,
+}
+
+/// One slave as found.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SlaveSummary {
+    /// Vendor id.
+    pub vendor_id: u32,
+    /// Product code.
+    pub product_code: u32,
+    /// Revision.
+    pub revision: u32,
+    /// Name.
+    pub name: String,
+    /// Output bytes.
+    pub rx_bytes: usize,
+    /// Input bytes.
+    pub tx_bytes: usize,
+    /// Offset of its outputs in the output frame.
+    pub rx_offset: usize,
+    /// Offset of its inputs in the input frame.
+    pub tx_offset: usize,
+}
+
+fn reply<'a, R: Reply<'a>>(h: &ecmxf_wire::ResponseHeader, data: &'a [u8]) -> Option<R> {
+    R::decode(&ReplyFields { value: h.return_value, data_len: h.data_len }, data).ok()
+}
+
+/// Runs a blocking command to its end: refused (bit7) and failed (bit3) are
+/// errors; the bits are cleared for what follows.
+pub fn blocking<'a, L: Link, R: Request<'a>>(
+    port: &mut Port<L>,
+    req: &R,
+    timeout: Duration,
+) -> Result<(), BringUpError> {
+    let name = R::CODE.name();
+    let a = port.call(req)?;
+    if a.header.errors.contains(ErrorFlags::COMMAND_ERROR) {
+        port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+        return Err(step(name, "refused by the chip (bad parameter or slot busy)"));
+    }
+    let deadline = Instant::now() + timeout;
+    loop {
+        let h = port.call(&InfoUpdate)?.header;
+        if !h.blocking_busy() {
+            if h.errors.contains(ErrorFlags::BLOCKING_FAILED) {
+                port.pending_control |= ControlFlags::CLEAR_BLOCKING_ERROR;
+                return Err(step(name, "failed on the chip"));
+            }
+            return Ok(());
+        }
+        if Instant::now() >= deadline {
+            return Err(step(name, format!("still busy after {timeout:?}")));
+        }
+        std::thread::sleep(Duration::from_micros(200));
+    }
+}
+
+fn number<L: Link>(port: &mut Port<L>, slave: u8, item: SlaveInfoCode) -> Result<u32, PortError> {
+    let a = port.call(&SlaveInfoGet { slave, item })?;
+    Ok(match SlaveInfo::decode(item, a.data) {
+        Ok(SlaveInfo::VendorId(v) | SlaveInfo::ProductCode(v) | SlaveInfo::Revision(v)) => v,
+        Ok(SlaveInfo::OutputBytes(v) | SlaveInfo::InputBytes(v)) => v.into(),
+        _ => 0,
+    })
+}
+
+fn pdo_config(slave: u8, assign: u16, pdos: &[crate::config::PdoConfig]) -> Result<PdoConfig, BringUpError> {
+    let entries: Vec<(u16, Vec<PdoEntry>)> = pdos
+        .iter()
+        .map(|p| {
+            (
+                p.index,
+                p.entries
+                    .iter()
+                    .map(|e| PdoEntry { index: e[0] as u16, subindex: e[1] as u8, bits: e[2] as u8 })
+                    .collect(),
+            )
+        })
+        .collect();
+    let refs: Vec<(u16, &[PdoEntry])> = entries.iter().map(|(i, e)| (*i, e.as_slice())).collect();
+    PdoConfig::new(slave, assign, &refs).map_err(|e| step("PDO mapping", format!("slave {slave}: {e}")))
+}
+
+/// Brings the network up as `config` says.
+pub fn bring_up<L: Link>(port: &mut Port<L>, config: &Config) -> Result<NetworkLayout, BringUpError> {
+    const SLOW: Duration = Duration::from_secs(5);
+
+    // Link: find where the chip is, then CRC-32 and the packet size.
+    if port.call(&InfoUpdate).is_err() {
+        port.synchronize()?;
+    }
+    if config.chip.crc32 && port.check() != CheckType::Crc32 {
+        port.set_check(CheckType::Crc32)?;
+    }
+    if port.data_size() != config.chip.data_size {
+        port.resize(config.chip.data_size)?;
+    }
+    let firmware = port.call(&FwVersionGet)?.header.return_value;
+    let mut polarity = IntPolarity::empty();
+    polarity.set(IntPolarity::INT0_ACTIVE_HIGH, config.chip.int0_active_high);
+    polarity.set(IntPolarity::INT1_ACTIVE_HIGH, config.chip.int1_active_high);
+    port.call(&IntSetEnable(IntConfig { polarity, ..IntConfig::default() }))?;
+    port.link_mut().set_polarity(config.chip.int0_active_high, config.chip.int1_active_high);
+    port.pending_control |= ControlFlags::CLEAR_ALL_ERRORS;
+    port.call(&InfoUpdate)?;
+
+    // 1. Init network with DC.
+    let c = &config.cycle;
+    let dc = DcTiming {
+        assign_activate: c.dc_assign_activate,
+        sync0_ns: if c.dc_assign_activate != 0 { c.sync0_us * 1000 } else { 0 },
+        sync1_ns: 0,
+        shift_ns: c.shift_ns,
+    };
+    blocking(port, &EcatInit { special_slaves: false, master_shift: false, disable_lrw: false, dc }, SLOW)
+        .map_err(|e| step("ECAT_INIT", format!("{e} (are slaves connected and powered?)")))?;
+    let count = port.call(&SlaveCountGet)?.header.return_value;
+
+    // Identity check.
+    let mut slaves = Vec::new();
+    for i in 0..count {
+        let s = SlaveSummary {
+            vendor_id: number(port, i, SlaveInfoCode::VendorId)?,
+            product_code: number(port, i, SlaveInfoCode::ProductCode)?,
+            revision: number(port, i, SlaveInfoCode::Revision)?,
+            name: String::from_utf8_lossy(port.call(&SlaveInfoGet { slave: i, item: SlaveInfoCode::Name })?.data)
+                .trim_end_matches('\0')
+                .to_string(),
+            ..SlaveSummary::default()
+        };
+        slaves.push(s);
+    }
+    if !config.slaves.is_empty() && config.slaves.len() != slaves.len() {
+        return Err(BringUpError::Identity {
+            position: slaves.len().min(config.slaves.len()),
+            expected: format!("a network of {} slaves", config.slaves.len()),
+            found: format!("a network of {} slaves", slaves.len()),
+        });
+    }
+    for (i, (want, got)) in config.slaves.iter().zip(&slaves).enumerate() {
+        let differs = want.vendor_id.is_some_and(|v| v != got.vendor_id)
+            || want.product_code.is_some_and(|p| p != got.product_code)
+            || want.revision.is_some_and(|r| r != got.revision);
+        if differs {
+            let show = |v: Option<u32>| v.map_or("any".to_string(), |v| format!("{v:#010x}"));
+            return Err(BringUpError::Identity {
+                position: i,
+                expected: format!(
+                    "{}vendor {} product {} revision {}",
+                    want.name.as_ref().map(|n| format!("{n:?}: ")).unwrap_or_default(),
+                    show(want.vendor_id),
+                    show(want.product_code),
+                    show(want.revision)
+                ),
+                found: format!(
+                    "{:?}: vendor {:#010x} product {:#010x} revision {:#010x}",
+                    got.name, got.vendor_id, got.product_code, got.revision
+                ),
+            });
+        }
+    }
+    if c.wkc_error_limit != 255 {
+        port.call(&WkcErrorLimitSet(WkcErrorLimit(c.wkc_error_limit.max(1))))?;
+    }
+
+    // 2. PRE-OP.
+    blocking(port, &StateCheck { target: SlaveSelector::All, state: EcatState::PreOp }, SLOW)?;
+
+    // 3. PDO mapping, then RECONFIG.
+    let mut remapped = false;
+    for (i, s) in config.slaves.iter().enumerate() {
+        for (assign, pdos) in [(RX_PDO_ASSIGN, &s.rx_pdos), (TX_PDO_ASSIGN, &s.tx_pdos)] {
+            if pdos.is_empty() {
+                continue;
+            }
+            let cfg = pdo_config(i as u8, assign, pdos)?;
+            if let Err(e) = blocking(port, &cfg, SLOW) {
+                let code = abort_code(port)?;
+                return Err(step("PDO mapping", format!("slave {i} {assign:#06x}: {e}: {code}")));
+            }
+            remapped = true;
+        }
+    }
+    if remapped {
+        blocking(port, &EcatReconfig, SLOW)?;
+    }
+
+    // 4. Start-up SDOs.
+    for (i, s) in config.slaves.iter().enumerate() {
+        for sdo in &s.sdos {
+            let data = sdo.payload();
+            let req = SdoRequest {
+                slave: i as u8,
+                index: sdo.index,
+                subindex: sdo.subindex,
+                complete_access: sdo.complete_access,
+                timeout_us: 1_000_000,
+                access: SdoAccess::Write(&data),
+            };
+            if blocking(port, &req, SLOW).is_err() {
+                let code = abort_code(port)?;
+                return Err(step("start-up SDO", format!("slave {i} {:#06x}:{:02x}: {code}", sdo.index, sdo.subindex)));
+            }
+        }
+    }
+
+    // 5./6. CiA402 helper.
+    let op = c.target_state == "op";
+    for (n, a) in config.axes.iter().enumerate() {
+        let mut control = Cia402Control::ENABLE;
+        control.set(Cia402Control::AUTO_FAULT_RESET, a.auto_fault_reset);
+        let r = port.call(&Cia402ConfigSet {
+            axis: n as u8,
+            controlword_offset: a.controlword_offset,
+            statusword_offset: a.statusword_offset,
+            control,
+            slave: a.slave,
+        })?;
+        if r.header.errors.contains(ErrorFlags::COMMAND_ERROR) {
+            port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+            return Err(step("CiA402 helper", format!("axis {n} on slave {} refused", a.slave)));
+        }
+        let target = if op { Cia402State::OperationEnabled } else { Cia402State::SwitchOnDisabled };
+        port.call(&Cia402StateSet { axis: n as u8, state: target })?;
+    }
+
+    // 7. FIFO sizes.
+    let rx = port.call(&FifoPackSizeGet(PdoDirection::Outputs))?;
+    let rx_size = reply::<FifoPackSize>(&rx.header, rx.data).map_or(0, |r| usize::from(r.0));
+    let tx = port.call(&FifoPackSizeGet(PdoDirection::Inputs))?;
+    let tx_size = reply::<FifoPackSize>(&tx.header, tx.data).map_or(0, |r| usize::from(r.0));
+    let (rx_depth, tx_depth, low, high) =
+        fit_fifo(c.fifo_rx_depth, c.fifo_low, c.fifo_high, c.fifo_tx_depth, rx_size, tx_size);
+    if (rx_depth, tx_depth) != (c.fifo_rx_depth, c.fifo_tx_depth) {
+        warn!(rx_depth, tx_depth, low, high, "FIFO depths fitted to the 16 KiB FIFO memory");
+    }
+    port.call(&FifoSetRxCount(rx_depth))?;
+    port.call(&FifoSetTxCount(tx_depth))?;
+    blocking(port, &FifoInit, SLOW)
+        .map_err(|e| step("FIFO_INIT", format!("{e}: {rx_depth} x {rx_size} + {tx_depth} x {tx_size} bytes")))?;
+    let (mut ro, mut to) = (0, 0);
+    for (i, s) in slaves.iter_mut().enumerate() {
+        s.rx_bytes = number(port, i as u8, SlaveInfoCode::OutputBytes)? as usize;
+        s.tx_bytes = number(port, i as u8, SlaveInfoCode::InputBytes)? as usize;
+        s.rx_offset = ro;
+        s.tx_offset = to;
+        ro += s.rx_bytes;
+        to += s.tx_bytes;
+    }
+
+    let mut state = EcatState::PreOp;
+    if c.target_state != "preop" {
+        blocking(port, &StateCheck { target: SlaveSelector::All, state: EcatState::SafeOp }, SLOW)?;
+        state = EcatState::SafeOp;
+    }
+    if op {
+        // Outputs must be waiting when the slaves enter OP.
+        let per_packet = port.data_size().checked_div(rx_size).unwrap_or(0);
+        let mut left = usize::from(high);
+        let zeros = vec![0u8; rx_size * per_packet.max(1)];
+        while left > 0 && per_packet > 0 {
+            let n = left.min(per_packet);
+            port.call(&PdoFifoOp { op: FifoOpFlags::WRITE, frames: n as u8, outputs: &zeros[..n * rx_size] })?;
+            left -= n;
+        }
+        blocking(port, &StateCheck { target: SlaveSelector::All, state: EcatState::Op }, SLOW)?;
+        port.call(&FifoEnable(true))?;
+        state = EcatState::Op;
+    }
+    Ok(NetworkLayout {
+        firmware,
+        slaves,
+        rx_size,
+        tx_size,
+        state,
+        fifo_rx_depth: rx_depth,
+        fifo_low: low,
+        fifo_high: high,
+    })
+}
+
+/// Depths that fit the FIFO memory (v049 under 52/54: RxCnt x RxSize +
+/// TxCnt x TxSize <= 0x4000): unchanged when they fit; otherwise the TxFIFO
+/// gets at most a quarter of the memory and the RxFIFO, which is what keeps
+/// outputs flowing, the rest, with the marks scaled by the same ratio.
+/// Returns (rx depth, tx depth, low, high).
+pub fn fit_fifo(depth: u8, low: u8, high: u8, tx_depth: u8, rx_size: usize, tx_size: usize) -> (u8, u8, u8, u8) {
+    let budget = ecmxf_wire::payload::fifo::FIFO_BUDGET;
+    if usize::from(depth) * rx_size + usize::from(tx_depth) * tx_size <= budget {
+        return (depth, tx_depth, low, high);
+    }
+    let tx = if usize::from(tx_depth) * tx_size * 4 <= budget {
+        tx_depth
+    } else {
+        (budget / 4 / tx_size.max(1)).clamp(1, 255) as u8
+    };
+    let left = budget - usize::from(tx) * tx_size;
+    let fitted = (left / rx_size.max(1)).clamp(2, usize::from(depth)) as u8;
+    let scale = |m: u8| ((usize::from(m) * usize::from(fitted)) / usize::from(depth.max(1))) as u8;
+    let h = scale(high).clamp(1, fitted);
+    let l = scale(low).min(h - 1);
+    (fitted, tx, l, h)
+}
+
+fn abort_code<L: Link>(port: &mut Port<L>) -> Result<SdoAbortCode, PortError> {
+    let a = port.call(&SdoAbortCodeGet)?;
+    Ok(reply::<SdoAbortReply>(&a.header, a.data).map_or(SdoAbortCode::GENERAL, |r| r.0))
+}

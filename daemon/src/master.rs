@@ -1,0 +1,329 @@
+//! [`Master`]: the engine as async code sees it. Requests go into a bounded
+//! queue (full: [`EngineError::QueueFull`]) with a deadline; dropping the
+//! future, or the deadline passing, tells the engine to stop caring (it then
+//! finishes or abandons the chip operation cleanly). Input frames come out
+//! of the engine's wait-free ring through a distributor thread into a
+//! broadcast channel: a subscriber that falls behind is told how many frames
+//! it missed and slows no one.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use ecmxf_wire::EcatState;
+use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
+use ecmxf_wire::payload::state::SlaveSelector;
+use tokio::sync::{broadcast, oneshot};
+
+use crate::config::{Config, LinkConfig};
+use crate::engine::bringup::NetworkLayout;
+use crate::engine::cyclic::read_record;
+use crate::engine::error::EngineError;
+use crate::engine::job::{Job, OutputWrite, Request};
+use crate::engine::telemetry::{Snapshot, Telemetry};
+use crate::engine::{Command, Engine, Parts};
+use crate::link::sim::{SimHandle, SimLink};
+use crate::link::{Link, LinkError};
+
+/// Requests that may wait at once.
+pub const QUEUE_DEPTH: usize = 256;
+/// Input frames a subscriber may fall behind by before losing some.
+pub const SUBSCRIBER_BACKLOG: usize = 4096;
+
+/// One input frame (one DC cycle's inputs).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InputFrame {
+    /// Sequence number, +1 per frame received.
+    pub seq: u64,
+    /// When the engine received it, ns since start.
+    pub time_ns: u64,
+    /// The frame.
+    pub data: Vec<u8>,
+}
+
+/// Why the master could not start.
+#[derive(Debug)]
+pub enum StartError {
+    /// The link could not be opened.
+    Link(LinkError),
+    /// The simulator's network file is wrong.
+    Network(String),
+}
+
+impl std::fmt::Display for StartError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Link(e) => write!(f, "{e}"),
+            Self::Network(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for StartError {}
+
+/// The running master.
+#[derive(Debug)]
+pub struct Master {
+    commands: SyncSender<Command>,
+    outputs: SyncSender<OutputWrite>,
+    telemetry: Arc<Telemetry>,
+    layout: Arc<Mutex<NetworkLayout>>,
+    inputs: broadcast::Sender<Arc<InputFrame>>,
+    threads: Mutex<Vec<JoinHandle<()>>>,
+    stop_distributor: Arc<AtomicBool>,
+    /// Timeout for requests that give none.
+    pub default_timeout: Duration,
+}
+
+/// Opens the link the configuration names. For the in-process simulator,
+/// also returns the handle to it.
+pub fn open_link(config: &Config) -> Result<(Box<dyn Link>, Option<SimHandle>), StartError> {
+    match &config.link {
+        LinkConfig::Sim { network } => {
+            let (net, chip_config) = match network {
+                None => (ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()),
+                Some(p) => {
+                    let f = ecmxf_sim::config::NetworkFile::load(p).map_err(|e| StartError::Network(e.to_string()))?;
+                    (f.build(p).map_err(|e| StartError::Network(e.to_string()))?, f.chip_config())
+                }
+            };
+            let (link, handle) = SimLink::new(ecmxf_sim::Chip::new(net, chip_config));
+            Ok((Box::new(link), Some(handle)))
+        }
+        LinkConfig::SimSocket { socket } => {
+            Ok((Box::new(crate::link::socket::SocketLink::connect(socket).map_err(StartError::Link)?), None))
+        }
+        #[cfg(target_os = "linux")]
+        LinkConfig::Spidev { device, spi_hz, gpio_chip, int0_line, int1_line, debounce_us, idle_us } => {
+            let hw = crate::link::hardware::HardwareConfig {
+                spi_device: device.clone(),
+                spi_hz: *spi_hz,
+                gpio_chip: gpio_chip.clone(),
+                int0_line: *int0_line,
+                int1_line: *int1_line,
+                debounce: debounce_us.map(|us| Duration::from_micros(us.into())),
+                idle: Duration::from_micros((*idle_us).into()),
+            };
+            Ok((Box::new(crate::link::hardware::HardwareLink::open(hw).map_err(StartError::Link)?), None))
+        }
+        #[cfg(not(target_os = "linux"))]
+        LinkConfig::Spidev { device, .. } => Err(StartError::Link(LinkError::io(
+            format!("open {}", device.display()),
+            std::io::Error::new(std::io::ErrorKind::Unsupported, "spidev needs Linux"),
+        ))),
+    }
+}
+
+impl Master {
+    /// Starts the engine thread (real-time as configured) over `link`, and
+    /// the input distributor.
+    pub fn start<L: Link + 'static>(link: L, config: Config) -> Self {
+        let (commands, command_rx) = sync_channel(QUEUE_DEPTH);
+        let (outputs, output_rx) = sync_channel(1024);
+        let telemetry = Arc::new(Telemetry::default());
+        let layout = Arc::new(Mutex::new(NetworkLayout::default()));
+        let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
+        let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
+        let stop_distributor = Arc::new(AtomicBool::new(false));
+
+        let tx = inputs.clone();
+        let stop = Arc::clone(&stop_distributor);
+        let distributor = std::thread::Builder::new()
+            .name("ecmxf-inputs".into())
+            .spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    while let Some(r) = read_record(&mut consumer) {
+                        // No subscribers is fine: the frame is dropped.
+                        let _ = tx.send(Arc::new(InputFrame { seq: r.seq, time_ns: r.time_ns, data: r.data }));
+                    }
+                    std::thread::park_timeout(Duration::from_millis(5));
+                }
+            })
+            .expect("spawn the input distributor thread");
+        let parts = Parts {
+            link,
+            config: config.clone(),
+            commands: command_rx,
+            outputs: output_rx,
+            telemetry: Arc::clone(&telemetry),
+            layout: Arc::clone(&layout),
+            ring: producer,
+            distributor: Some(distributor.thread().clone()),
+        };
+        let rt = config.realtime.clone();
+        let engine = std::thread::Builder::new()
+            .name("ecmxf-rt".into())
+            .spawn(move || {
+                crate::realtime::apply(&rt);
+                Engine::new(parts).run();
+            })
+            .expect("spawn the engine thread");
+        Self {
+            commands,
+            outputs,
+            telemetry,
+            layout,
+            inputs,
+            threads: Mutex::new(vec![engine, distributor]),
+            stop_distributor,
+            default_timeout: Duration::from_secs(3),
+        }
+    }
+
+    /// Opens the configured link and starts.
+    pub fn from_config(config: Config) -> Result<(Self, Option<SimHandle>), StartError> {
+        let (link, sim) = open_link(&config)?;
+        Ok((Self::start(link, config), sim))
+    }
+
+    async fn request(&self, request: Request, timeout: Option<Duration>) -> Result<Vec<u8>, EngineError> {
+        let timeout = timeout.unwrap_or(self.default_timeout);
+        let (reply, rx) = oneshot::channel();
+        let job = Job { request, deadline: Instant::now() + timeout, reply };
+        match self.commands.try_send(Command::Job(job)) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),
+            Err(TrySendError::Disconnected(_)) => return Err(EngineError::Unavailable("engine stopped".into())),
+        }
+        match tokio::time::timeout(timeout, rx).await {
+            Ok(Ok(r)) => r,
+            Ok(Err(_)) => Err(EngineError::Unavailable("engine stopped".into())),
+            // Dropping `rx` here tells the engine.
+            Err(_) => Err(EngineError::Timeout),
+        }
+    }
+
+    /// SDO upload.
+    pub async fn sdo_read(
+        &self,
+        slave: u8,
+        index: u16,
+        subindex: u8,
+        complete: bool,
+        timeout: Option<Duration>,
+    ) -> Result<Vec<u8>, EngineError> {
+        self.request(Request::SdoRead { slave, index, subindex, complete }, timeout).await
+    }
+
+    /// SDO download.
+    pub async fn sdo_write(
+        &self,
+        slave: u8,
+        index: u16,
+        subindex: u8,
+        complete: bool,
+        data: Vec<u8>,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        self.request(Request::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
+    }
+
+    /// SII words `word` and `word + 1`.
+    pub async fn eeprom_read(&self, slave: u8, word: u16, timeout: Option<Duration>) -> Result<[u8; 4], EngineError> {
+        let d = self.request(Request::EepromRead { slave, word }, timeout).await?;
+        let mut out = [0xFF; 4];
+        for (o, b) in out.iter_mut().zip(d) {
+            *o = b;
+        }
+        Ok(out)
+    }
+
+    /// Writes one SII word and verifies it.
+    pub async fn eeprom_write(
+        &self,
+        slave: u8,
+        word: u16,
+        value: u16,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        self.request(Request::EepromWrite { slave, word, value }, timeout).await.map(|_| ())
+    }
+
+    /// Requests a state.
+    pub async fn set_state(
+        &self,
+        target: SlaveSelector,
+        state: EcatState,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        if !state.is_requestable() {
+            return Err(EngineError::BadArgument { field: "state", reason: format!("{state} cannot be requested") });
+        }
+        self.request(Request::SetState { target, state }, timeout).await.map(|_| ())
+    }
+
+    /// One item of slave information, as the chip answers it; decode with
+    /// [`SlaveInfo::decode`] for `item`.
+    pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
+        let d = self.request(Request::SlaveInfo { slave, item }, None).await?;
+        SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("slave {slave} {item:?}: {e}")))?;
+        Ok(d)
+    }
+
+    /// Writes bytes into the output image at `offset` (of the whole output
+    /// frame); they go out with the next frames pushed.
+    pub fn write_outputs(&self, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
+        let size = self.layout().rx_size;
+        if offset + bytes.len() > size {
+            return Err(EngineError::BadArgument {
+                field: "offset",
+                reason: format!("{} bytes at {offset} exceed the {size}-byte output image", bytes.len()),
+            });
+        }
+        for (i, chunk) in bytes.chunks(32).enumerate() {
+            let mut data = [0u8; 32];
+            data[..chunk.len()].copy_from_slice(chunk);
+            let w = OutputWrite { offset: (offset + i * 32) as u32, len: chunk.len() as u8, data };
+            self.outputs.try_send(w).map_err(|e| match e {
+                TrySendError::Full(_) => EngineError::QueueFull,
+                TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+            })?;
+        }
+        Ok(())
+    }
+
+    /// A new subscriber to input frames.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<InputFrame>> {
+        self.inputs.subscribe()
+    }
+
+    /// The engine's status.
+    pub fn status(&self) -> Snapshot {
+        self.telemetry.snapshot()
+    }
+
+    /// The network as bring-up found it.
+    pub fn layout(&self) -> NetworkLayout {
+        self.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Safe stop, then waits for the threads (blocking).
+    pub fn stop(&self) {
+        // A full queue still takes the stop: retry briefly.
+        for _ in 0..100 {
+            match self.commands.try_send(Command::Stop) {
+                Err(TrySendError::Full(_)) => std::thread::sleep(Duration::from_millis(10)),
+                _ => break,
+            }
+        }
+        let mut threads = self.threads.lock().unwrap_or_else(|e| e.into_inner());
+        // The engine thread first (it finishes the safe stop), then the
+        // distributor.
+        if !threads.is_empty() {
+            let _ = threads.remove(0).join();
+        }
+        self.stop_distributor.store(true, Ordering::Relaxed);
+        for t in threads.drain(..) {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Master {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}
