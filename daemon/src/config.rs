@@ -321,10 +321,22 @@ impl Config {
         }
     }
 
-    /// Parses and validates `text`, read from `path`.
+    /// Parses and validates `text`, read from `path`. Relative paths in it
+    /// are taken relative to the file's folder.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        let c: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(path.into(), e.to_string()))?;
+        let mut c: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(path.into(), e.to_string()))?;
         c.validate(path)?;
+        let base = path.parent().unwrap_or(Path::new(""));
+        let resolve = |p: &mut PathBuf| {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        };
+        match &mut c.link {
+            LinkConfig::Sim { network: Some(p) } => resolve(p),
+            LinkConfig::SimSocket { socket } => resolve(socket),
+            _ => {}
+        }
         Ok(c)
     }
 

@@ -1,0 +1,68 @@
+//! The real `ecmxfd` binary: `--check-config` on good and bad files, and
+//! `--sim` running until SIGTERM, then stopping safely with exit code 0.
+
+use std::io::{BufRead, BufReader};
+use std::process::{Command, Stdio};
+use std::time::{Duration, Instant};
+
+const BIN: &str = env!("CARGO_BIN_EXE_ecmxfd");
+
+fn repo(path: &str) -> String {
+    format!("{}/../{path}", env!("CARGO_MANIFEST_DIR"))
+}
+
+#[test]
+fn check_config_accepts_the_examples_and_names_mistakes() {
+    let out = Command::new(BIN).args(["--check-config", &repo("config/ecmxfd-sim.toml")]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(String::from_utf8_lossy(&out.stdout).contains(": ok (in-process simulator"));
+
+    let bad = std::env::temp_dir().join(format!("ecmxfd-bad-{}.toml", std::process::id()));
+    for (text, expect) in [
+        ("version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 100\n", "cycle.sync0_us"),
+        ("version = 1\n[link]\nbackend = \"sim\"\n[chip]\ndatasize = 1\n", "line 5"),
+        ("version = 1\n", "link"),
+    ] {
+        std::fs::write(&bad, text).unwrap();
+        let out = Command::new(BIN).args(["--check-config", bad.to_str().unwrap()]).output().unwrap();
+        assert_eq!(out.status.code(), Some(2), "{text}");
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert!(err.contains(expect), "{text}: {err}");
+    }
+    std::fs::remove_file(&bad).ok();
+    let out = Command::new(BIN).output().unwrap();
+    assert_eq!(out.status.code(), Some(2), "no config and no --sim");
+}
+
+#[test]
+fn runs_on_the_simulator_until_sigterm() {
+    let mut child = Command::new(BIN)
+        .args(["--config", &repo("config/ecmxfd-sim.toml"), "--status-every", "0"])
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stderr = child.stderr.take().unwrap();
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stderr).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let start = Instant::now();
+    let mut log = Vec::new();
+    while !log.iter().any(|l: &String| l.contains("ready")) {
+        let line = rx.recv_timeout(Duration::from_secs(30)).expect("ecmxfd printed nothing for 30 s");
+        log.push(line);
+        assert!(start.elapsed() < Duration::from_secs(30), "not ready: {log:#?}");
+    }
+    assert!(log.iter().any(|l| l.contains("slave") && l.contains("8io")), "{log:#?}");
+    std::thread::sleep(Duration::from_millis(300));
+    nix::sys::signal::kill(nix::unistd::Pid::from_raw(child.id() as i32), nix::sys::signal::Signal::SIGTERM).unwrap();
+    let status = child.wait().unwrap();
+    log.extend(rx.try_iter());
+    assert!(status.success(), "{status:?} {log:#?}");
+    assert!(
+        log.iter().any(|l| l.contains("safe stop")) && log.iter().any(|l| l.contains("engine stopped")),
+        "{log:#?}"
+    );
+}
