@@ -116,11 +116,16 @@ pub struct RealtimeConfig {
     pub cpu: Option<usize>,
     /// mlockall the process.
     pub lock_memory: bool,
+    /// Waits shorter than this many us are spent yielding instead of
+    /// sleeping: a short sleep can overshoot by milliseconds without
+    /// PREEMPT_RT (or on a virtual machine), and the FIFO margin is made of
+    /// such times. 0: always sleep (idle core, RT kernel).
+    pub spin_us: u32,
 }
 
 impl Default for RealtimeConfig {
     fn default() -> Self {
-        Self { priority: 80, cpu: None, lock_memory: true }
+        Self { priority: 80, cpu: None, lock_memory: true, spin_us: 2000 }
     }
 }
 
@@ -302,7 +307,7 @@ impl Config {
             version: VERSION,
             link: LinkConfig::Sim { network: None },
             chip: ChipSettings::default(),
-            realtime: RealtimeConfig { priority: 0, cpu: None, lock_memory: false },
+            realtime: RealtimeConfig { priority: 0, cpu: None, lock_memory: false, spin_us: 2000 },
             // Without real-time priority, and on a virtual machine, a thread
             // can stall for 25 ms: keep about 23 ms of outputs queued (32 ms
             // of depth) at the cost of that much output latency. Bring-up

@@ -70,7 +70,7 @@ mod tests {
     #[test]
     fn refusals_are_not_failures() {
         // Whatever this machine allows, applying must return, not panic.
-        let a = apply(&RealtimeConfig { priority: 1, cpu: Some(0), lock_memory: false });
+        let a = apply(&RealtimeConfig { priority: 1, cpu: Some(0), lock_memory: false, spin_us: 0 });
         assert!(!a.memory_locked);
     }
 }

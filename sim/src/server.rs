@@ -131,8 +131,14 @@ impl Server {
             if now >= deadline {
                 return false;
             }
-            let until = ready_at.clamp(now + 1_000, now + 100_000).min(deadline);
-            thread::sleep(Duration::from_nanos(until - now));
+            // Short waits yield: a short sleep can overshoot by milliseconds
+            // on a busy or virtual machine.
+            let until = ready_at.max(now).min(deadline);
+            if until - now > 2_000_000 {
+                thread::sleep(Duration::from_nanos(until - now - 1_000_000));
+            } else {
+                thread::yield_now();
+            }
         }
     }
 

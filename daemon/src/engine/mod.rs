@@ -61,6 +61,9 @@ const WKC_QUIET: Duration = Duration::from_millis(20);
 /// size): recover, which resynchronises.
 const LOST_IN_A_ROW: u32 = 16;
 
+/// How often a transaction waiting for the chip polls its status.
+const POLL: Duration = Duration::from_micros(100);
+
 /// Why the running loop left.
 enum Exit {
     Stop,
@@ -333,21 +336,41 @@ impl<L: Link> Engine<L> {
                 self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
             }
             if !progressed {
+                let now = Instant::now();
                 let wake = match cyclic.as_ref() {
-                    Some(c) => {
-                        c.next_exchange(Instant::now(), self.rx_room(c), self.port.data_size() / c.tx_size.max(1))
-                    }
-                    None => Instant::now() + Duration::from_millis(50),
+                    Some(c) => c.next_exchange(now, self.rx_room(c), self.port.data_size() / c.tx_size.max(1)),
+                    None => now + Duration::from_millis(50),
                 };
-                let wait = if self.active.is_some() {
-                    Duration::from_micros(200)
-                } else {
-                    wake.saturating_duration_since(Instant::now())
-                };
-                match self.commands.recv_timeout(wait) {
-                    Ok(Command::Job(j)) => self.queue.push_back(j),
-                    Ok(Command::Stop) | Err(RecvTimeoutError::Disconnected) => return self.safe_stop(cyclic.as_mut()),
+                let until = if self.active.is_some() { now + POLL } else { wake };
+                match self.idle_until(until) {
+                    Some(Command::Job(j)) => self.queue.push_back(j),
+                    Some(Command::Stop) => return self.safe_stop(cyclic.as_mut()),
+                    None => {}
+                }
+            }
+        }
+    }
+
+    /// Waits until `until` or the next command. The last `spin_us` of a
+    /// wait are spent yielding, not sleeping (see [`RealtimeConfig`]).
+    ///
+    /// [`RealtimeConfig`]: crate::config::RealtimeConfig
+    fn idle_until(&mut self, until: Instant) -> Option<Command> {
+        let spin = Duration::from_micros(self.config.realtime.spin_us.into());
+        loop {
+            let now = Instant::now();
+            let left = until.checked_duration_since(now).filter(|d| !d.is_zero())?;
+            if left > spin {
+                match self.commands.recv_timeout(left - spin) {
+                    Ok(c) => return Some(c),
+                    Err(RecvTimeoutError::Disconnected) => return Some(Command::Stop),
                     Err(RecvTimeoutError::Timeout) => {}
+                }
+            } else {
+                match self.commands.try_recv() {
+                    Ok(c) => return Some(c),
+                    Err(TryRecvError::Disconnected) => return Some(Command::Stop),
+                    Err(TryRecvError::Empty) => std::thread::yield_now(),
                 }
             }
         }
@@ -397,7 +420,7 @@ impl<L: Link> Engine<L> {
 
     fn transaction_step(
         &mut self,
-        cyclic: Option<&mut Cyclic>,
+        mut cyclic: Option<&mut Cyclic>,
         fifo_pending: &mut bool,
         last_poll: &mut Instant,
     ) -> Result<bool, PortError> {
@@ -419,23 +442,27 @@ impl<L: Link> Engine<L> {
         if progress == Progress::Done {
             self.telemetry.transactions.fetch_add(1, Relaxed);
         }
-        let mut sent = self.port.stats().exchanges != exchanges;
-        if progress == Progress::Waiting
-            && cyclic.is_none()
-            && now.duration_since(*last_poll) > Duration::from_micros(200)
-        {
-            // No cyclic answers bring the status: poll it.
-            self.port.call(&InfoUpdate)?;
-            *last_poll = now;
-            sent = true;
-        }
+        let sent = self.port.stats().exchanges != exchanges;
         if sent && *fifo_pending {
-            if let (Some(c), Some(prev)) = (cyclic, self.port.previous()) {
+            if let (Some(c), Some(prev)) = (cyclic.as_deref_mut(), self.port.previous()) {
                 let h = prev.header;
                 let data = prev.data.to_vec();
                 Self::fifo_answer(c, &self.telemetry, &h, &data, now);
             }
             *fifo_pending = false;
+        }
+        if progress == Progress::Waiting && now.duration_since(*last_poll) >= POLL {
+            // The busy bit only changes in answers: fetch one now. With
+            // cyclic data running, a FIFO exchange is the poll (it reads
+            // inputs and tops up outputs anyway).
+            match cyclic {
+                Some(c) => self.fifo_exchange(c, now, fifo_pending)?,
+                None => {
+                    self.port.call(&InfoUpdate)?;
+                }
+            }
+            *last_poll = now;
+            return Ok(true);
         }
         Ok(sent && progress != Progress::Waiting)
     }

@@ -89,7 +89,15 @@ impl Link for SimLink {
             if now >= deadline {
                 return Ok(false);
             }
-            std::thread::sleep(ready_in.min(deadline - now).max(Duration::from_micros(1)));
+            // The chip is ready within a few hundred us: a short sleep can
+            // overshoot by milliseconds on a busy or virtual machine, so
+            // yield instead; sleep only through long waits (INT0 stuck).
+            let left = ready_in.min(deadline - now);
+            if left > Duration::from_millis(2) {
+                std::thread::sleep(left - Duration::from_millis(1));
+            } else {
+                std::thread::yield_now();
+            }
         }
     }
 
