@@ -178,3 +178,62 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     wait_running(&m, Duration::from_secs(20));
     assert!(sim.with_chip(|c| c.net.slaves.iter().all(|s| s.esm.state == ecmxf_sim::net::esm::AlState::Op)));
 }
+
+#[test]
+fn recovers_from_unplug_replug_and_bit_flips() {
+    let (m, sim, _serial) = start();
+    // Unplug the IO slave: working-counter errors, then a network of 2.
+    sim.control("unplug 2").unwrap();
+    let t = Instant::now();
+    while m.status().recoveries == 0 {
+        assert!(t.elapsed() < Duration::from_secs(5), "unplug not noticed");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    wait_running(&m, Duration::from_secs(20));
+    assert_eq!(m.layout().slaves.len(), 2);
+    // Plug it back: the slave count changes, the network is rebuilt.
+    let before = m.status().recoveries;
+    sim.control("replug 2").unwrap();
+    let t = Instant::now();
+    while m.status().recoveries == before || m.status().phase != Phase::Running || m.layout().slaves.len() != 3 {
+        assert!(t.elapsed() < Duration::from_secs(20), "replug not noticed: {:?}", m.status());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    assert!(sim.with_chip(|c| c.net.slaves[2].esm.state == ecmxf_sim::net::esm::AlState::Op));
+    // Bit flips both ways: SDO results stay right.
+    sim.control("seed 3").unwrap();
+    sim.control("flip mosi 0.0002").unwrap();
+    sim.control("flip miso 0.0002").unwrap();
+    rt().block_on(async {
+        for i in 0..100u32 {
+            let v = (i * 7919).to_le_bytes().to_vec();
+            m.sdo_write(1, 0x6083, 0, false, v.clone(), None).await.unwrap();
+            assert_eq!(m.sdo_read(1, 0x6083, 0, false, None).await.unwrap(), v);
+        }
+    });
+    sim.control("flip mosi 0").unwrap();
+    sim.control("flip miso 0").unwrap();
+    assert!(sim.with_chip(|c| c.stats.crc_failures) > 0, "the flips were real");
+}
+
+#[test]
+fn cancelling_every_transaction_type_leaves_the_slot_clean() {
+    let (m, _sim, _serial) = start();
+    let short = Some(Duration::from_micros(200));
+    rt().block_on(async {
+        for _ in 0..5 {
+            let _ = m.sdo_read(1, 0x1018, 2, false, short).await;
+            let _ = m.sdo_write(1, 0x6083, 0, false, vec![1, 2, 3, 4], short).await;
+            let _ = m.eeprom_read(1, 0x0A, short).await;
+            let _ = m.eeprom_write(2, 0x04, 0x0003, short).await;
+            let _ = m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, short).await;
+        }
+        // Every next caller gets its own fresh result.
+        assert_eq!(m.sdo_read(1, 0x1018, 2, false, None).await.unwrap(), 0x0402u32.to_le_bytes());
+        assert_eq!(m.eeprom_read(1, 0x0A, None).await.unwrap(), 0x0402u32.to_le_bytes());
+        m.sdo_write(1, 0x6083, 0, false, 777u32.to_le_bytes().to_vec(), None).await.unwrap();
+        assert_eq!(m.sdo_read(1, 0x6083, 0, false, None).await.unwrap(), 777u32.to_le_bytes());
+        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, None).await.unwrap();
+    });
+    assert_eq!(m.status().phase, Phase::Running);
+}

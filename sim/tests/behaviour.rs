@@ -211,3 +211,24 @@ fn eeprom_raw_datagrams_and_foe() {
     let (bytes, _) = h.send(&InfoUpdate);
     assert_eq!(h.decode(&bytes).unwrap().header.code, CommandCode::InfoUpdate);
 }
+
+#[test]
+fn an_unplugged_slave_cuts_off_the_ones_after_it() {
+    use ecmxf_wire::payload::slave_info::{SlaveCount, SlaveCountGet};
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 8);
+    h.chip.net.unplug(1);
+    assert_eq!(h.chip.net.reachable(), 1);
+    let n: SlaveCount = h.get(&SlaveCountGet);
+    assert_eq!(n.0, 1, "EtherCAT is a line: slave 2 is behind the gap");
+    // Configured slaves that stopped answering read as errors after a refresh.
+    h.blocking(&StateUpdate);
+    assert_eq!(h.call(&InfoUpdate).header.ecat_state, EcatState::Error);
+    h.chip.net.replug(1);
+    assert_eq!(h.chip.net.reachable(), 3);
+    assert_eq!(
+        h.chip.net.slaves[1].esm.state,
+        ecmxf_sim::net::esm::AlState::Init,
+        "a replugged slave powers up in INIT"
+    );
+}

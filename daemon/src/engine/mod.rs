@@ -27,6 +27,7 @@ use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::InfoUpdate;
 use ecmxf_wire::payload::fifo::FifoEnable;
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
+use ecmxf_wire::payload::slave_info::SlaveCountGet;
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
 use ecmxf_wire::{CommandCode, EcatState, ResponseHeader};
 use tracing::{debug, error, info, warn};
@@ -60,6 +61,9 @@ const WKC_QUIET: Duration = Duration::from_millis(20);
 /// not what the port thinks (e.g. the chip reset to its power-up packet
 /// size): recover, which resynchronises.
 const LOST_IN_A_ROW: u32 = 16;
+
+/// How often the engine counts the slaves while idle.
+const CENSUS: Duration = Duration::from_secs(1);
 
 /// How often a transaction waiting for the chip polls its status.
 const POLL: Duration = Duration::from_micros(100);
@@ -277,6 +281,8 @@ impl<L: Link> Engine<L> {
         let mut last_poll = Instant::now();
         let mut lost_before = self.port.stats().lost;
         let mut lost_run = 0u32;
+        let slaves = self.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
+        let mut last_census = Instant::now();
         let mut wkc_errors = self.port.status().wkc_errors;
         // (first WKC error of a streak, last one seen)
         let mut wkc_streak: Option<(Instant, Instant)> = None;
@@ -294,6 +300,27 @@ impl<L: Link> Engine<L> {
                 }
             }
             let now = Instant::now();
+            if self.active.is_none() && self.queue.is_empty() && now.duration_since(last_census) >= CENSUS {
+                // Slaves plugged in or out change the count the chip sees.
+                last_census = now;
+                match self.port.call(&SlaveCountGet) {
+                    Ok(a) if usize::from(a.header.return_value) != slaves => {
+                        let found = a.header.return_value;
+                        return Exit::Recover(format!("slave count changed from {slaves} to {found}"));
+                    }
+                    Ok(_) => {}
+                    Err(e) => return Exit::Recover(e.to_string()),
+                }
+                // Its first exchange carried the answer to the last FIFO
+                // packet: those inputs are published, not dropped.
+                if fifo_pending {
+                    if let (Some(c), Some(prev)) = (cyclic.as_mut(), self.port.previous()) {
+                        let (h, data) = (prev.header, prev.data.to_vec());
+                        Self::fifo_answer(c, &self.telemetry, &h, &data, now);
+                    }
+                    fifo_pending = false;
+                }
+            }
             let result = match cyclic.as_mut() {
                 Some(c) if self.fifo_due(c, now) => self.fifo_exchange(c, now, &mut fifo_pending).map(|()| true),
                 _ => self.transaction_step(cyclic.as_mut(), &mut fifo_pending, &mut last_poll),

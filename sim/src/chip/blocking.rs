@@ -166,14 +166,14 @@ pub enum FoeOp {
 
 impl Chip {
     fn slave_ok(&self, slave: usize) -> Result<usize, CommandError> {
-        if slave < self.net.slaves.len() { Ok(slave) } else { Err(CommandError) }
+        if slave < self.net.reachable() { Ok(slave) } else { Err(CommandError) }
     }
 
     /// Validates a blocking command and puts it in the slot.
     pub(super) fn start_blocking(&mut self, req: &AnyRequest<'_>) -> Result<(), CommandError> {
         use AnyRequest as A;
         let t = &self.config.timing;
-        let n = self.net.slaves.len() as u64;
+        let n = self.net.reachable() as u64;
         let (op, duration) = match *req {
             A::EcatInit(init) => {
                 let sync0 = init.dc.sync0_ns;
@@ -272,12 +272,17 @@ impl Chip {
         }
     }
 
+    /// Reads every configured slave's state; one that no longer answers
+    /// reads as an error.
     fn refresh_states(&mut self) {
+        let reachable = self.net.reachable();
         self.master.cached_states = self
             .net
             .slaves
             .iter()
-            .map(|s| if s.present { u8::try_from(s.esm.al_status_register()).unwrap_or(0x10) } else { 0x10 })
+            .take(self.master.configured)
+            .enumerate()
+            .map(|(i, s)| if i < reachable { u8::try_from(s.esm.al_status_register()).unwrap_or(0x10) } else { 0x10 })
             .collect();
     }
 
@@ -316,9 +321,10 @@ impl Chip {
             }
             BlockingOp::StateSet { target, state } => {
                 let mut ok = true;
-                for (i, s) in self.net.slaves.iter_mut().enumerate() {
+                let reachable = self.net.reachable();
+                for (i, s) in self.net.slaves.iter_mut().enumerate().take(self.master.configured.max(reachable)) {
                     if target == SlaveSelector::All || target == SlaveSelector::One(i as u8) {
-                        ok &= s.present && s.request_state(state);
+                        ok &= i < reachable && s.request_state(state);
                     }
                 }
                 self.refresh_states();
@@ -356,9 +362,11 @@ impl Chip {
     }
 
     fn ecat_init(&mut self, init: EcatInit) -> bool {
-        if !self.net.slaves.iter().any(|s| s.present) {
+        let reachable = self.net.reachable();
+        if reachable == 0 {
             return false;
         }
+        self.master.configured = reachable;
         self.master.dc = init.dc;
         self.master.lrw = !init.disable_lrw;
         self.master.cycle_ns =
@@ -370,13 +378,11 @@ impl Chip {
         self.master.wkc_streak = 0;
         // FIFO output stays off until enabled in OP (v049 ECAT_INIT data 1).
         self.fifo.enabled = false;
-        for (i, s) in self.net.slaves.iter_mut().enumerate() {
+        for (i, s) in self.net.slaves.iter_mut().enumerate().take(reachable) {
             s.station_address = 0x1001 + i as u16;
             s.dc_cycle_ns = if s.has_dc && init.dc.assign_activate != 0 { init.dc.sync0_ns } else { 0 };
-            if s.present {
-                s.request_state(AlState::Init.code());
-                s.request_state(AlState::PreOp.code());
-            }
+            s.request_state(AlState::Init.code());
+            s.request_state(AlState::PreOp.code());
             s.sync_registers();
         }
         self.master.inited = true;
@@ -390,7 +396,7 @@ impl Chip {
     pub(super) fn build_frames(&mut self) {
         let mut slots = Vec::new();
         let (mut rx, mut tx) = (0, 0);
-        for (i, s) in self.net.slaves.iter_mut().enumerate() {
+        for (i, s) in self.net.slaves.iter_mut().enumerate().take(self.master.configured) {
             s.relayout();
             let forced = self.direct_assign.iter().find(|e| usize::from(e.0) == i);
             let rx_len = forced.and_then(|e| e.2).map_or(s.rx.bytes(), usize::from);
@@ -461,9 +467,10 @@ impl Chip {
                 vec![usize::from(pos)]
             }
             DatagramCommand::Fprd | DatagramCommand::Fpwr | DatagramCommand::Frmw => {
-                self.net.slaves.iter().position(|s| s.station_address == head.adp).into_iter().collect()
+                let reachable = self.net.reachable();
+                self.net.slaves.iter().take(reachable).position(|s| s.station_address == head.adp).into_iter().collect()
             }
-            DatagramCommand::Brd | DatagramCommand::Bwr => (0..self.net.slaves.len()).collect(),
+            DatagramCommand::Brd | DatagramCommand::Bwr => (0..self.net.reachable()).collect(),
             DatagramCommand::Lrd | DatagramCommand::Lwr | DatagramCommand::Lrw => {
                 return self.logical_datagram(head, out);
             }
@@ -471,8 +478,9 @@ impl Chip {
         };
         let write = matches!(head.command, DatagramCommand::Apwr | DatagramCommand::Fpwr | DatagramCommand::Bwr);
         let rmw = matches!(head.command, DatagramCommand::Armw | DatagramCommand::Frmw);
-        for i in targets {
-            let Some(s) = self.net.slaves.get_mut(i).filter(|s| s.present) else { continue };
+        let reachable = self.net.reachable();
+        for i in targets.into_iter().filter(|i| *i < reachable) {
+            let Some(s) = self.net.slaves.get_mut(i) else { continue };
             if write {
                 s.write_registers(head.ado, &out);
             } else {
@@ -490,10 +498,10 @@ impl Chip {
         }
         if rmw {
             let addressed = wkc > 0;
-            for s in self.net.slaves.iter_mut().filter(|s| s.present) {
+            for s in self.net.slaves.iter_mut().take(reachable) {
                 s.write_registers(head.ado, &out);
             }
-            wkc = u16::from(addressed) + (self.net.present().count() as u16).saturating_sub(1);
+            wkc = u16::from(addressed) + (reachable as u16).saturating_sub(1);
         }
         self.refresh_states();
         self.results.raw = Some((head, wkc, out));

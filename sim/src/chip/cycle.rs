@@ -55,8 +55,9 @@ impl Chip {
         let mut wkc = 0u16;
         let mut inputs = std::mem::take(&mut self.master.inputs);
         let slots = self.master.slots.clone();
+        let reachable = self.net.reachable();
         let mut cycled = vec![false; self.net.slaves.len()];
-        for slot in &slots {
+        for slot in slots.iter().filter(|s| s.slave < reachable) {
             let Some(s) = self.net.slaves.get_mut(slot.slave) else { continue };
             cycled[slot.slave] = true;
             let out = self.master.outputs.get(slot.rx_offset..slot.rx_offset + slot.rx_len);

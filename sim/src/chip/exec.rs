@@ -137,7 +137,7 @@ impl Chip {
 
     fn slave_index(&self, slave: u8) -> Result<usize, CommandError> {
         let i = usize::from(slave);
-        if i < self.net.slaves.len() { Ok(i) } else { Err(CommandError) }
+        if i < self.net.reachable() { Ok(i) } else { Err(CommandError) }
     }
 
     /// Executes a non-blocking command.
@@ -177,7 +177,7 @@ impl Chip {
                 let i = self.slave_index(g.slave)?;
                 self.slave_info(i, g.item)
             }
-            A::SlaveCountGet(_) => reply(&SlaveCount(self.net.present().count() as u8)),
+            A::SlaveCountGet(_) => reply(&SlaveCount(self.net.reachable() as u8)),
             A::FifoEnable(e) => {
                 self.fifo.enabled = e.0;
                 value(0)

@@ -146,6 +146,8 @@ pub struct Master {
     pub mailbox_polling: Vec<u8>,
     /// Receive-mailbox bytes fetched by 143 param 0.
     pub mailbox: Vec<u8>,
+    /// Slaves configured by the last ECAT_INIT (the reachable ones then).
+    pub configured: usize,
     /// Emergencies not yet read through RECV_MAILBOX, by slave.
     pub unread_mailbox: Vec<(u8, crate::net::slave::Emergency)>,
 }
@@ -424,7 +426,7 @@ impl Chip {
         // level as it was two exchanges before it reads it.
         let (tx, rx) = self.fifo_history[1];
         let mut errors = self.errors;
-        errors.set(ErrorFlags::LINK_PIN, self.net.slaves.iter().any(|s| s.present));
+        errors.set(ErrorFlags::LINK_PIN, self.net.reachable() > 0);
         errors.set(ErrorFlags::PHY_LINK_AT_INIT, self.master.inited);
         ResponseHeader {
             crc_errors: self.crc_errors,

@@ -39,6 +39,12 @@ impl Network {
     pub fn present(&self) -> impl Iterator<Item = (usize, &Slave)> {
         self.slaves.iter().enumerate().filter(|(_, s)| s.present)
     }
+
+    /// How many slaves the master reaches: EtherCAT is a line, so an
+    /// unplugged slave cuts off every slave after it as well.
+    pub fn reachable(&self) -> usize {
+        self.slaves.iter().position(|s| !s.present).unwrap_or(self.slaves.len())
+    }
 }
 
 impl Network {
