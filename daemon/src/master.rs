@@ -294,6 +294,11 @@ impl Master {
         self.telemetry.snapshot()
     }
 
+    /// Why bring-up last failed or recovery last started.
+    pub fn last_error(&self) -> Option<String> {
+        self.telemetry.last_error()
+    }
+
     /// The network as bring-up found it.
     pub fn layout(&self) -> NetworkLayout {
         self.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()

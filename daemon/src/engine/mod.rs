@@ -148,6 +148,7 @@ impl<L: Link> Engine<L> {
                 Ok(l) => l,
                 Err(e) => {
                     error!(error = %e, "bring-up failed");
+                    self.telemetry.set_error(format!("bring-up: {e}"));
                     if !self.config.recovery.enabled || !self.pause(backoff) {
                         return self.stopped();
                     }
@@ -183,6 +184,7 @@ impl<L: Link> Engine<L> {
                 Exit::Stop => return self.stopped(),
                 Exit::Recover(why) => {
                     warn!(reason = %why, "recovering");
+                    self.telemetry.set_error(format!("recovery: {why}"));
                     // Phase first: no one may see "running" while recovering.
                     self.telemetry.set_phase(Phase::Recovering);
                     self.telemetry.recoveries.fetch_add(1, Relaxed);

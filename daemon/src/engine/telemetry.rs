@@ -2,6 +2,7 @@
 //! thread stores atomics, readers load them. Individual values are exact;
 //! a reader may see values from two neighbouring exchanges side by side.
 
+use std::sync::Mutex;
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering::Relaxed};
 
 use ecmxf_wire::{EcatState, ResponseHeader};
@@ -70,6 +71,9 @@ pub struct Telemetry {
     /// RxFIFO needs (a thread stalled by the OS or the hypervisor shows
     /// here).
     pub max_fifo_gap_us: AtomicU64,
+    /// The last bring-up or recovery reason; written only when something
+    /// fails, never on the cycle path.
+    last_error: Mutex<Option<String>>,
 }
 
 /// A consistent-enough copy for display.
@@ -125,6 +129,16 @@ impl Telemetry {
         self.wkc_errors.store(h.wkc_errors, Relaxed);
         self.rx_fifo.store(h.rx_fifo_count, Relaxed);
         self.tx_fifo.store(h.tx_fifo_count, Relaxed);
+    }
+
+    /// Records why bring-up failed or recovery started.
+    pub fn set_error(&self, e: String) {
+        *self.last_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
+    }
+
+    /// The last failure, if any.
+    pub fn last_error(&self) -> Option<String> {
+        self.last_error.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
     /// A copy.

@@ -1,0 +1,114 @@
+//! Bring-up driven by a configuration: expected identities, a PDO remap,
+//! start-up SDOs, the chip's CiA402 helper; and a network that differs from
+//! the configuration, reported naming the slave.
+
+use std::time::{Duration, Instant};
+
+use ecmxf_sim::Chip;
+use ecmxf_wire::payload::cia402::Cia402State;
+use ecmxfd::config::Config;
+use ecmxfd::engine::telemetry::Phase;
+use ecmxfd::link::sim::SimLink;
+use ecmxfd::master::Master;
+
+const CONFIG: &str = r#"
+version = 1
+[link]
+backend = "sim"
+[realtime]
+priority = 0
+lock_memory = false
+[cycle]
+sync0_us = 250
+fifo_rx_depth = 200
+fifo_tx_depth = 40
+fifo_low = 64
+fifo_high = 160
+
+[[slave]]
+name = "core"
+vendor_id = 0x89A
+product_code = 0x30000000
+  [[slave.sdo]]
+  index = 0x6083
+  value = 5555
+  size = 4
+
+[[slave]]
+name = "ti"
+vendor_id = 0x59D
+product_code = 0x402
+  # Axis 1 only: controlword, mode, target position (7 bytes).
+  [[slave.rx_pdos]]
+  index = 0x1600
+  entries = [[0x6040, 0, 16], [0x6060, 0, 8], [0x607A, 0, 32]]
+  [[slave.sdo]]
+  index = 0x6085
+  bytes = [0x10, 0x27, 0, 0]
+
+[[slave]]
+name = "io"
+vendor_id = 0x1337
+
+[[axis]]
+slave = 1
+controlword_offset = 0
+statusword_offset = 0
+"#;
+
+fn start(text: &str) -> Master {
+    let config = Config::parse(text, std::path::Path::new("test.toml")).unwrap();
+    let (link, _sim) = SimLink::new(Chip::new(ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()));
+    Master::start(link, config)
+}
+
+#[test]
+fn configured_mapping_sdos_and_helper_are_applied() {
+    let m = start(CONFIG);
+    let t = Instant::now();
+    while m.status().phase != Phase::Running {
+        assert!(t.elapsed() < Duration::from_secs(20), "not running: {:?} {:?}", m.status(), m.last_error());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let l = m.layout();
+    assert_eq!(l.slaves[1].rx_bytes, 7, "the remap took");
+    assert_eq!(l.rx_size, 13 + 7 + 1);
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        assert_eq!(m.sdo_read(0, 0x6083, 0, false, None).await.unwrap(), 5555u32.to_le_bytes());
+        assert_eq!(m.sdo_read(1, 0x6085, 0, false, None).await.unwrap(), 10_000u32.to_le_bytes());
+        // The helper walks TI axis 1 to operation enabled.
+        let mut inputs = m.subscribe();
+        let at = l.slaves[1].tx_offset;
+        let t = Instant::now();
+        loop {
+            let f = inputs.recv().await.unwrap();
+            let sw = u16::from_le_bytes([f.data[at], f.data[at + 1]]);
+            if Cia402State::from_statusword(sw) == Cia402State::OperationEnabled {
+                break;
+            }
+            assert!(t.elapsed() < Duration::from_secs(3), "axis not enabled: statusword {sw:#06x}");
+        }
+    });
+    m.stop();
+}
+
+#[test]
+fn a_different_network_is_named() {
+    let wrong = CONFIG.replace("product_code = 0x402", "product_code = 0x403");
+    let m = start(&wrong);
+    let t = Instant::now();
+    let e = loop {
+        if let Some(e) = m.last_error() {
+            break e;
+        }
+        assert!(t.elapsed() < Duration::from_secs(20), "no error reported");
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(
+        e.contains("slave 1") && e.contains("0x00000403") && e.contains("0x00000402") && e.contains("\"ti\""),
+        "{e}"
+    );
+    assert_ne!(m.status().phase, Phase::Running);
+    m.stop();
+}
