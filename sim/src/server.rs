@@ -29,6 +29,13 @@ pub const KIND_WAIT_READY: u8 = 0x03;
 /// Wait until INT1 is active: payload = timeout (u32 LE, us); reply payload
 /// = one byte, 1 when active.
 pub const KIND_WAIT_INT1: u8 = 0x04;
+/// Wait until INT0 is active, then transfer: payload = timeout (u32 LE,
+/// us) followed by MOSI; reply payload = MISO, flags = lines after the
+/// transfer, or flags bit7 and no payload when INT0 stayed inactive (nothing
+/// was clocked). One round trip per exchange instead of two.
+pub const KIND_TRANSFER_WHEN_READY: u8 = 0x05;
+/// Reply flag of [`KIND_TRANSFER_WHEN_READY`]: timed out, nothing clocked.
+pub const FLAG_TIMED_OUT: u8 = 0x80;
 /// A control command (UTF-8 text); reply flags 0 = ok, 1 = error, payload =
 /// the answer text.
 pub const KIND_CONTROL: u8 = 0x10;
@@ -50,9 +57,39 @@ fn write_msg(w: &mut impl Write, kind: u8, flags: u8, payload: &[u8]) -> io::Res
     w.write_all(payload)
 }
 
-fn read_msg(r: &mut impl Read) -> io::Result<(u8, u8, Vec<u8>)> {
+/// How long a reader polls before it blocks: a blocked thread's wake-up can
+/// take milliseconds on a busy or virtual machine, and a chip answers in
+/// microseconds.
+const SPIN: Duration = Duration::from_millis(2);
+
+/// Fills `buf` from the stream, polling (non-blocking, yielding) for up to
+/// [`SPIN`] before blocking.
+fn read_spinning(stream: &mut UnixStream, buf: &mut [u8]) -> io::Result<()> {
+    let mut got = 0;
+    let start = Instant::now();
+    stream.set_nonblocking(true)?;
+    while got < buf.len() && start.elapsed() < SPIN {
+        match stream.read(&mut buf[got..]) {
+            Ok(0) => {
+                stream.set_nonblocking(false)?;
+                return Err(io::ErrorKind::UnexpectedEof.into());
+            }
+            Ok(n) => got += n,
+            Err(e) if e.kind() == io::ErrorKind::WouldBlock => thread::yield_now(),
+            Err(e) if e.kind() == io::ErrorKind::Interrupted => {}
+            Err(e) => {
+                stream.set_nonblocking(false)?;
+                return Err(e);
+            }
+        }
+    }
+    stream.set_nonblocking(false)?;
+    stream.read_exact(&mut buf[got..])
+}
+
+fn read_msg(r: &mut UnixStream) -> io::Result<(u8, u8, Vec<u8>)> {
     let mut h = [0u8; 8];
-    r.read_exact(&mut h)?;
+    read_spinning(r, &mut h)?;
     let len = u32::from_le_bytes([h[4], h[5], h[6], h[7]]) as usize;
     if len > MAX_PAYLOAD {
         return Err(io::Error::new(
@@ -61,7 +98,7 @@ fn read_msg(r: &mut impl Read) -> io::Result<(u8, u8, Vec<u8>)> {
         ));
     }
     let mut payload = vec![0u8; len];
-    r.read_exact(&mut payload)?;
+    read_spinning(r, &mut payload)?;
     Ok((h[0], h[1], payload))
 }
 
@@ -165,6 +202,27 @@ impl Server {
                     };
                     write_msg(&mut stream, KIND_TRANSFER, lines, &miso)?;
                 }
+                KIND_TRANSFER_WHEN_READY => {
+                    let Some((t, mosi)) = payload.split_first_chunk::<4>() else {
+                        write_msg(&mut stream, KIND_ERROR, 0, b"transfer-when-ready needs a 4-byte timeout")?;
+                        continue;
+                    };
+                    let ready =
+                        self.wait(u32::from_le_bytes(*t), |c, now| c.ready(now) && c.faults.int0_stuck.is_none());
+                    if !ready {
+                        write_msg(&mut stream, KIND_TRANSFER_WHEN_READY, FLAG_TIMED_OUT, &[])?;
+                        continue;
+                    }
+                    let mut miso = vec![0u8; mosi.len()];
+                    let lines = {
+                        let mut c = self.chip();
+                        let now = self.now_ns();
+                        c.transfer(now, mosi, &mut miso);
+                        let after = self.now_ns().max(c.now_ns);
+                        Self::lines(&c, after)
+                    };
+                    write_msg(&mut stream, KIND_TRANSFER_WHEN_READY, lines, &miso)?;
+                }
                 KIND_LINES => {
                     let (lines, now, wait) = {
                         let c = self.chip();
@@ -252,6 +310,21 @@ impl SocketClient {
         let n = p.len().min(miso.len());
         miso[..n].copy_from_slice(&p[..n]);
         Ok(lines)
+    }
+
+    /// Waits up to `timeout` for INT0, then transfers; `Ok(None)` when INT0
+    /// stayed inactive (nothing clocked).
+    pub fn transfer_when_ready(&mut self, timeout: Duration, mosi: &[u8], miso: &mut [u8]) -> io::Result<Option<u8>> {
+        let us = timeout.as_micros().min(u128::from(u32::MAX)) as u32;
+        let mut p = us.to_le_bytes().to_vec();
+        p.extend_from_slice(mosi);
+        let (flags, back) = self.request(KIND_TRANSFER_WHEN_READY, &p)?;
+        if flags & FLAG_TIMED_OUT != 0 {
+            return Ok(None);
+        }
+        let n = back.len().min(miso.len());
+        miso[..n].copy_from_slice(&back[..n]);
+        Ok(Some(flags))
     }
 
     /// Lines byte, simulated time and ns until ready.

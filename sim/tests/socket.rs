@@ -76,6 +76,19 @@ fn a_host_talks_to_the_served_chip() {
     assert!(!c.wait_ready(Duration::from_millis(20)).unwrap());
     ctl.control("int0 stuck off").unwrap().unwrap();
     assert!(c.wait_ready(Duration::from_millis(20)).unwrap());
+
+    // Transfer-when-ready: one round trip; refused (nothing clocked) while INT0 is stuck.
+    let mut buf = [0u8; 144];
+    encode_request(&SlaveCountGet, CommandHeader::new(SlaveCountGet::CODE, 4), CheckType::Fixed, &mut buf).unwrap();
+    let mut miso = [0u8; 144];
+    ctl.control("int0 stuck low").unwrap().unwrap();
+    assert_eq!(c.transfer_when_ready(Duration::from_millis(20), &buf, &mut miso).unwrap(), None);
+    ctl.control("int0 stuck off").unwrap().unwrap();
+    assert!(c.transfer_when_ready(Duration::from_millis(100), &buf, &mut miso).unwrap().is_some());
+    let answer = decode_response(&miso, CheckType::Fixed).unwrap();
+    assert_eq!(answer.header.code, CommandCode::InfoUpdate, "the previous packet's answer");
+    let status = ctl.control("status").unwrap().unwrap();
+    assert!(status.contains("packets=4"), "the timed-out request clocked nothing: {status}");
 }
 
 #[test]

@@ -9,11 +9,14 @@ use ecmxf_sim::server::SocketClient;
 
 use super::{Link, LinkError};
 
-/// The link.
+/// The link. Waiting for INT0 and the transfer that follows go as one
+/// message (the server waits, then clocks), one round trip per exchange.
 #[derive(Debug)]
 pub struct SocketLink {
     client: SocketClient,
     path: PathBuf,
+    /// The INT0 wait to do before the next transfer.
+    pending_wait: Option<Duration>,
 }
 
 impl SocketLink {
@@ -21,7 +24,7 @@ impl SocketLink {
     pub fn connect(path: &Path) -> Result<Self, LinkError> {
         let client = SocketClient::connect(path)
             .map_err(|e| LinkError::io(format!("connect to simulator at {}", path.display()), e))?;
-        Ok(Self { client, path: path.into() })
+        Ok(Self { client, path: path.into(), pending_wait: None })
     }
 
     fn err(&self, what: &str, e: std::io::Error) -> LinkError {
@@ -35,17 +38,22 @@ impl SocketLink {
 
 impl Link for SocketLink {
     fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
-        match self.client.transfer(tx, rx) {
-            Ok(_) => Ok(()),
-            Err(e) => Err(self.err("transfer", e)),
-        }
+        let result = match self.pending_wait.take() {
+            Some(timeout) => match self.client.transfer_when_ready(timeout, tx, rx) {
+                Ok(Some(_)) => Ok(()),
+                Ok(None) => Err(std::io::Error::new(ErrorKind::TimedOut, format!("INT0 not ready within {timeout:?}"))),
+                Err(e) => Err(e),
+            },
+            None => self.client.transfer(tx, rx).map(|_| ()),
+        };
+        result.map_err(|e| self.err("transfer", e))
     }
 
+    /// Defers the wait to the server, which does it just before clocking
+    /// the next transfer.
     fn wait_ready(&mut self, timeout: Duration) -> Result<bool, LinkError> {
-        match self.client.wait_ready(timeout) {
-            Ok(r) => Ok(r),
-            Err(e) => Err(self.err("wait for INT0", e)),
-        }
+        self.pending_wait = Some(timeout);
+        Ok(true)
     }
 
     fn int1_active(&mut self) -> Result<bool, LinkError> {

@@ -1,0 +1,199 @@
+//! Benchmarks the daemon against the simulator served over its Unix socket
+//! (a separate `ecmxf-sim` process, so its CPU time is not counted):
+//!
+//! 1. raw exchange rate of the packet port, against the simulator's modelled
+//!    maximum (transfer time at its SPI clock + processing time);
+//! 2. SDO round trips through the engine, one at a time and from 16 tasks,
+//!    with cyclic data running at 125 us;
+//! 3. RxFIFO level seen in the headers (min/max) and the longest gap between
+//!    FIFO exchanges;
+//! 4. the daemon process's CPU time per second of wall time.
+//!
+//! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS]`
+
+use std::path::PathBuf;
+use std::process::{Child, Command};
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
+
+use ecmxf_wire::payload::control::InfoUpdate;
+use ecmxfd::config::{Config, LinkConfig};
+use ecmxfd::engine::telemetry::Phase;
+use ecmxfd::link::socket::SocketLink;
+use ecmxfd::master::Master;
+use ecmxfd::port::Port;
+
+struct Sim {
+    child: Child,
+    socket: PathBuf,
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let _ = std::fs::remove_file(&self.socket);
+    }
+}
+
+fn serve() -> Result<Sim, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    let bin = exe.with_file_name("ecmxf-sim");
+    if !bin.exists() {
+        return Err(format!("{} not found: build it first (cargo build --release -p ecmxf-sim)", bin.display()));
+    }
+    let socket = std::env::temp_dir().join(format!("ecmxfd-bench-{}.sock", std::process::id()));
+    let child = Command::new(&bin).arg("serve").arg("--socket").arg(&socket).spawn().map_err(|e| e.to_string())?;
+    let t = Instant::now();
+    while SocketLink::connect(&socket).is_err() {
+        if t.elapsed() > Duration::from_secs(10) {
+            return Err("the simulator did not start".into());
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(Sim { child, socket })
+}
+
+fn cpu_seconds() -> f64 {
+    let u = nix::sys::resource::getrusage(nix::sys::resource::UsageWho::RUSAGE_SELF);
+    u.map_or(0.0, |u| {
+        let t = |tv: nix::sys::time::TimeVal| tv.tv_sec() as f64 + tv.tv_usec() as f64 / 1e6;
+        t(u.user_time()) + t(u.system_time())
+    })
+}
+
+fn percentiles(mut v: Vec<Duration>) -> String {
+    if v.is_empty() {
+        return "no samples".into();
+    }
+    v.sort();
+    let p = |q: f64| v[((v.len() as f64 * q) as usize).min(v.len() - 1)];
+    format!("n={} p50={:?} p90={:?} p99={:?} max={:?}", v.len(), p(0.5), p(0.9), p(0.99), p(1.0))
+}
+
+fn main() -> Result<(), String> {
+    let secs: u64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(10);
+    let sim = serve()?;
+    let config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
+    let sim_config = ecmxf_sim::ChipConfig::default();
+    let data_size = config.chip.data_size;
+    let packet_bits = (data_size as u64 + 32) * 8;
+    let modelled_ns = packet_bits * 1_000_000_000 / sim_config.spi_hz + sim_config.processing_ns;
+    let modelled_rate = 1e9 / modelled_ns as f64;
+
+    // 1. Raw port rate: guarded INFO_UPDATEs back to back.
+    {
+        let mut port = Port::new(SocketLink::connect(&sim.socket).map_err(|e| e.to_string())?);
+        port.synchronize().map_err(|e| e.to_string())?;
+        port.resize(data_size).map_err(|e| e.to_string())?;
+        let before = port.stats().exchanges;
+        let t = Instant::now();
+        while t.elapsed() < Duration::from_secs(secs.min(5)) {
+            port.call(&InfoUpdate).map_err(|e| e.to_string())?;
+        }
+        let rate = (port.stats().exchanges - before) as f64 / t.elapsed().as_secs_f64();
+        println!(
+            "port exchange rate     : {rate:.0}/s of a modelled {modelled_rate:.0}/s ({:.1}%) at {data_size}-byte data, {} Hz SPI, {} us processing",
+            100.0 * rate / modelled_rate,
+            sim_config.spi_hz,
+            sim_config.processing_ns / 1000
+        );
+    }
+
+    // 2.-4. The engine with cyclic data.
+    let master = Arc::new(Master::start(SocketLink::connect(&sim.socket).map_err(|e| e.to_string())?, config));
+    let t = Instant::now();
+    while master.status().phase != Phase::Running {
+        if t.elapsed() > Duration::from_secs(30) {
+            return Err(format!("engine not running: {:?}", master.last_error()));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| e.to_string())?;
+    let levels = Arc::new(std::sync::Mutex::new((u8::MAX, 0u8)));
+    let sampling = Arc::new(AtomicBool::new(true));
+    let sampler = {
+        let (m, l, s) = (Arc::clone(&master), Arc::clone(&levels), Arc::clone(&sampling));
+        std::thread::spawn(move || {
+            while s.load(Ordering::Relaxed) {
+                let lvl = m.status().rx_fifo;
+                let mut g = l.lock().unwrap_or_else(|e| e.into_inner());
+                *g = (g.0.min(lvl), g.1.max(lvl));
+                drop(g);
+                std::thread::sleep(Duration::from_millis(1));
+            }
+        })
+    };
+    let cpu0 = cpu_seconds();
+    let wall0 = Instant::now();
+    let (single, loaded, exchanges) = rt.block_on(async {
+        let mut single = Vec::new();
+        let end = Instant::now() + Duration::from_secs(secs / 2);
+        while Instant::now() < end {
+            let t = Instant::now();
+            master.sdo_read(1, 0x1018, 1, false, None).await.map_err(|e| e.to_string())?;
+            single.push(t.elapsed());
+        }
+        let ex0 = master.status().exchanges;
+        let t0 = Instant::now();
+        let end = Instant::now() + Duration::from_secs(secs - secs / 2);
+        let mut tasks = Vec::new();
+        for n in 0..16u16 {
+            let m = Arc::clone(&master);
+            tasks.push(tokio::spawn(async move {
+                let mut v = Vec::new();
+                while Instant::now() < end {
+                    let t = Instant::now();
+                    m.sdo_read((n % 3) as u8, 0x1018, 1 + (n % 4) as u8, false, None)
+                        .await
+                        .map_err(|e| e.to_string())?;
+                    v.push(t.elapsed());
+                }
+                Ok::<_, String>(v)
+            }));
+        }
+        let mut loaded = Vec::new();
+        for t in tasks {
+            loaded.extend(t.await.map_err(|e| e.to_string())??);
+        }
+        let rate = (master.status().exchanges - ex0) as f64 / t0.elapsed().as_secs_f64();
+        Ok::<_, String>((single, loaded, rate))
+    })?;
+    let cpu = (cpu_seconds() - cpu0) / wall0.elapsed().as_secs_f64();
+    sampling.store(false, Ordering::Relaxed);
+    let _ = sampler.join();
+    let s = master.status();
+    let (lmin, lmax) = *levels.lock().unwrap_or_else(|e| e.into_inner());
+    println!("SDO read, one at a time: {}", percentiles(single));
+    println!("SDO read, 16 tasks     : {}", percentiles(loaded));
+    println!("engine exchange rate   : {exchanges:.0}/s under SDO load with cyclic data");
+    println!(
+        "RxFIFO level (header)  : min {lmin} max {lmax} frames (target {}..{}), longest FIFO gap {} us, fifo alarms {}",
+        master.layout().fifo_low,
+        master.layout().fifo_high,
+        s.max_fifo_gap_us,
+        s.fifo_alarms
+    );
+    println!(
+        "input frames           : {} ({} cycles of 125 us expected in {:.1} s)",
+        s.input_frames,
+        (wall0.elapsed().as_secs_f64() * 8000.0) as u64,
+        wall0.elapsed().as_secs_f64()
+    );
+    println!(
+        "daemon CPU time        : {cpu:.2} s per s (engine, input distributor, async runtime; simulator excluded)"
+    );
+    println!(
+        "recoveries             : {}{}",
+        s.recoveries,
+        master.last_error().map(|e| format!(" (last: {e})")).unwrap_or_default()
+    );
+    master.stop();
+    drop(sim);
+    Ok(())
+}
