@@ -13,6 +13,7 @@ use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::EcatState;
+use ecmxf_wire::payload::raw::{DatagramHead, RAW_MAX_DATA};
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxf_wire::payload::state::SlaveSelector;
 use tokio::sync::{broadcast, oneshot};
@@ -21,7 +22,7 @@ use crate::config::{Config, LinkConfig};
 use crate::engine::bringup::NetworkLayout;
 use crate::engine::cyclic::read_record;
 use crate::engine::error::EngineError;
-use crate::engine::job::{Job, OutputWrite, Request};
+use crate::engine::job::{Job, OutputWrite, Request, TransferProgress};
 use crate::engine::telemetry::{Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
 use crate::link::sim::{SimHandle, SimLink};
@@ -40,6 +41,15 @@ pub struct InputFrame {
     /// When the engine received it, ns since start.
     pub time_ns: u64,
     /// The frame.
+    pub data: Vec<u8>,
+}
+
+/// What a raw datagram brought back.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RawAnswer {
+    /// Working counter: how many slaves acted on it.
+    pub working_counter: u16,
+    /// The datagram's data as it returned.
     pub data: Vec<u8>,
 }
 
@@ -179,9 +189,18 @@ impl Master {
     }
 
     async fn request(&self, request: Request, timeout: Option<Duration>) -> Result<Vec<u8>, EngineError> {
+        self.request_with_progress(request, timeout, None).await
+    }
+
+    async fn request_with_progress(
+        &self,
+        request: Request,
+        timeout: Option<Duration>,
+        progress: Option<Arc<TransferProgress>>,
+    ) -> Result<Vec<u8>, EngineError> {
         let timeout = timeout.unwrap_or(self.default_timeout);
         let (reply, rx) = oneshot::channel();
-        let job = Job { request, deadline: Instant::now() + timeout, reply };
+        let job = Job { request, deadline: Instant::now() + timeout, reply, progress };
         match self.commands.try_send(Command::Job(job)) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),
@@ -260,6 +279,64 @@ impl Master {
         let d = self.request(Request::SlaveInfo { slave, item }, None).await?;
         SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("slave {slave} {item:?}: {e}")))?;
         Ok(d)
+    }
+
+    /// Sends one raw EtherCAT datagram and returns what came back. A reading
+    /// datagram sends `head.length` zero bytes; a writing one sends `data`,
+    /// which must be exactly `head.length` bytes.
+    pub async fn raw_datagram(
+        &self,
+        head: DatagramHead,
+        data: Vec<u8>,
+        timeout: Option<Duration>,
+    ) -> Result<RawAnswer, EngineError> {
+        if head.length > RAW_MAX_DATA {
+            let reason = format!("{} bytes; a datagram carries at most {RAW_MAX_DATA}", head.length);
+            return Err(EngineError::BadArgument { field: "length", reason });
+        }
+        if head.command.writes() && data.len() != usize::from(head.length) {
+            let reason = format!("{} bytes given for a {}-byte writing datagram", data.len(), head.length);
+            return Err(EngineError::BadArgument { field: "data", reason });
+        }
+        if !head.command.writes() && !data.is_empty() {
+            let reason = format!("{:?} is a reading datagram and sends no data", head.command);
+            return Err(EngineError::BadArgument { field: "data", reason });
+        }
+        let d = self.request(Request::Raw { head, data }, timeout).await?;
+        let Some((wkc, data)) = d.split_first_chunk::<2>() else {
+            return Err(EngineError::Failed("raw datagram: answer without a working counter".into()));
+        };
+        Ok(RawAnswer { working_counter: u16::from_le_bytes(*wkc), data: data.to_vec() })
+    }
+
+    /// Writes a file to a slave over FoE (the slave must be in PRE-OP or
+    /// above). `progress`, when given, follows the bytes staged.
+    pub async fn foe_write(
+        &self,
+        slave: u8,
+        name: &str,
+        password: u32,
+        data: Vec<u8>,
+        progress: Option<Arc<TransferProgress>>,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        let request = Request::FoeWrite { slave, name: name.to_owned(), password, data };
+        self.request_with_progress(request, timeout, progress).await.map(|_| ())
+    }
+
+    /// Reads a file of at most `max_len` bytes from a slave over FoE.
+    /// `progress`, when given, follows the bytes read back.
+    pub async fn foe_read(
+        &self,
+        slave: u8,
+        name: &str,
+        password: u32,
+        max_len: u32,
+        progress: Option<Arc<TransferProgress>>,
+        timeout: Option<Duration>,
+    ) -> Result<Vec<u8>, EngineError> {
+        let request = Request::FoeRead { slave, name: name.to_owned(), password, max_len };
+        self.request_with_progress(request, timeout, progress).await
     }
 
     /// Writes bytes into the output image at `offset` (of the whole output

@@ -237,3 +237,76 @@ fn cancelling_every_transaction_type_leaves_the_slot_clean() {
     });
     assert_eq!(m.status().phase, Phase::Running);
 }
+
+#[test]
+fn raw_datagrams_reach_the_slaves_registers() {
+    use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead};
+    let (m, _sim, _serial) = start();
+    let head = |command, length, adp, ado| DatagramHead { command, length, adp, ado, logical: 0, timeout_us: 10_000 };
+    rt().block_on(async {
+        // BRD of the AL status register: every slave answers, all in OP.
+        let a = m.raw_datagram(head(DatagramCommand::Brd, 2, 0, 0x0130), vec![], None).await.unwrap();
+        assert_eq!(a.working_counter, 3);
+        assert_eq!(a.data, [0x08, 0x00]);
+        // APRD of slave 1's station address, then FPRD by that address.
+        let a = m.raw_datagram(head(DatagramCommand::Aprd, 2, 0xFFFF, 0x0010), vec![], None).await.unwrap();
+        assert_eq!(a.working_counter, 1);
+        let station = u16::from_le_bytes([a.data[0], a.data[1]]);
+        let b = m.raw_datagram(head(DatagramCommand::Fprd, 2, station, 0x0010), vec![], None).await.unwrap();
+        assert_eq!((b.working_counter, b.data), (1, station.to_le_bytes().to_vec()));
+        // Nobody at that position.
+        let a = m.raw_datagram(head(DatagramCommand::Aprd, 2, 0xFFF0, 0x0010), vec![], None).await.unwrap();
+        assert_eq!(a.working_counter, 0);
+        // Bad arguments are refused before anything reaches the chip, naming the field.
+        let e = m.raw_datagram(head(DatagramCommand::Brd, 2, 0, 0x0130), vec![1, 2], None).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "data", .. }), "{e}");
+        let e = m.raw_datagram(head(DatagramCommand::Fpwr, 4, station, 0x0F00), vec![1], None).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "data", .. }), "{e}");
+        let e = m.raw_datagram(head(DatagramCommand::Brd, 300, 0, 0), vec![], None).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "length", .. }), "{e}");
+    });
+}
+
+#[test]
+fn foe_files_go_to_a_slave_and_come_back() {
+    use ecmxfd::engine::job::TransferProgress;
+    let (m, sim, _serial) = start();
+    // Larger than one chunk and not a multiple of it.
+    let file: Vec<u8> = (0..5000u32).map(|i| (i * 7 + i / 251) as u8).collect();
+    let long = Some(Duration::from_secs(30));
+    rt().block_on(async {
+        let progress = Arc::new(TransferProgress::default());
+        m.foe_write(1, "firmware.bin", 0, file.clone(), Some(progress.clone()), long).await.unwrap();
+        assert_eq!(progress.get(), (5000, 5000));
+        let stored = sim.with_chip(|c| c.net.slaves[1].files.get(&b"firmware.bin"[..]).cloned());
+        assert_eq!(stored.as_deref(), Some(&file[..]), "the slave holds exactly the file written");
+
+        let progress = Arc::new(TransferProgress::default());
+        let back = m.foe_read(1, "firmware.bin", 0, 65536, Some(progress.clone()), long).await.unwrap();
+        assert_eq!(back, file);
+        assert_eq!(progress.get(), (5000, 5000));
+        // A file larger than the caller allows is not silently cut.
+        let e = m.foe_read(1, "firmware.bin", 0, 100, None, long).await;
+        assert!(e.is_err_and(|e| matches!(e, EngineError::Failed(_))));
+
+        // Missing file and wrong password fail and name the transfer.
+        let e = m.foe_read(1, "nothing.bin", 0, 65536, None, long).await.unwrap_err();
+        assert!(e.to_string().contains("nothing.bin") && e.to_string().contains("slave 1"), "{e}");
+        sim.with_chip(|c| c.net.slaves[1].foe_password = 0x1234);
+        let e = m.foe_write(1, "x.bin", 0, vec![1, 2, 3], None, long).await.unwrap_err();
+        assert!(matches!(e, EngineError::Failed(_)), "{e}");
+        m.foe_write(1, "x.bin", 0x1234, vec![1, 2, 3], None, long).await.unwrap();
+        // Bad arguments.
+        let e = m.foe_write(1, "", 0, vec![1], None, long).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "name", .. }), "{e}");
+        let e = m.foe_write(1, "big", 0, vec![0; 0x40001], None, long).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "length", .. }), "{e}");
+
+        // Cancelled half-way: the next transaction still gets its own result.
+        let _ = m.foe_write(1, "firmware.bin", 0, vec![9; 20_000], None, Some(Duration::from_millis(30))).await;
+        assert_eq!(m.sdo_read(1, 0x1018, 2, false, None).await.unwrap(), 0x0402u32.to_le_bytes());
+        let back = m.foe_read(1, "x.bin", 0x1234, 16, None, long).await.unwrap();
+        assert_eq!(back, [1, 2, 3]);
+    });
+    assert_eq!(m.status().phase, Phase::Running);
+}

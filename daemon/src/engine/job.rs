@@ -2,9 +2,12 @@
 //! a one-shot reply. A caller that stops waiting drops its receiver; the
 //! engine sees that and never starts, or cleanly finishes, the work.
 
+use std::sync::Arc;
+use std::sync::atomic::{AtomicU32, Ordering};
 use std::time::Instant;
 
 use ecmxf_wire::EcatState;
+use ecmxf_wire::payload::raw::DatagramHead;
 use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::payload::state::SlaveSelector;
 use tokio::sync::oneshot;
@@ -68,6 +71,38 @@ pub enum Request {
         /// Item.
         item: SlaveInfoCode,
     },
+    /// One raw EtherCAT datagram (cmds 137/138). The result is the working
+    /// counter (u16, little-endian) followed by the returned data.
+    Raw {
+        /// Addressing and size.
+        head: DatagramHead,
+        /// Bytes a writing datagram sends (empty for reads).
+        data: Vec<u8>,
+    },
+    /// A file written to a slave over FoE: staged into the chip's flash in
+    /// chunks, then downloaded (cmd 139 ops 4 then 2).
+    FoeWrite {
+        /// Slave.
+        slave: u8,
+        /// File name.
+        name: String,
+        /// FoE password, 0 when none.
+        password: u32,
+        /// The file.
+        data: Vec<u8>,
+    },
+    /// A file read from a slave over FoE: uploaded into the chip's flash,
+    /// then read back in chunks (cmd 139 ops 1 then 3, cmd 140).
+    FoeRead {
+        /// Slave.
+        slave: u8,
+        /// File name.
+        name: String,
+        /// FoE password, 0 when none.
+        password: u32,
+        /// Largest file accepted.
+        max_len: u32,
+    },
 }
 
 impl Request {
@@ -86,6 +121,28 @@ pub struct Job {
     pub deadline: Instant,
     /// Where the result goes: data bytes (empty when there are none).
     pub reply: oneshot::Sender<Result<Vec<u8>, EngineError>>,
+    /// Where long transfers (FoE) report how far they are.
+    pub progress: Option<Arc<TransferProgress>>,
+}
+
+/// Bytes moved so far of a long transfer, readable at any time without a
+/// lock (the engine thread stores, anyone loads).
+#[derive(Debug, Default)]
+pub struct TransferProgress {
+    done: AtomicU32,
+    total: AtomicU32,
+}
+
+impl TransferProgress {
+    /// (bytes done, bytes in all; 0 while not yet known).
+    pub fn get(&self) -> (u32, u32) {
+        (self.done.load(Ordering::Relaxed), self.total.load(Ordering::Relaxed))
+    }
+
+    pub(crate) fn set(&self, done: u32, total: u32) {
+        self.total.store(total, Ordering::Relaxed);
+        self.done.store(done, Ordering::Relaxed);
+    }
 }
 
 /// A write into the host-side output image, applied before the next frames

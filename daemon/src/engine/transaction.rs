@@ -8,11 +8,16 @@
 //! abandoned with ASYNC_CMD_RESET when it overstays), and its result is never
 //! fetched: the slot is free and clean before the next transaction starts.
 
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset};
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
+use ecmxf_wire::payload::foe::{
+    FOE_FLASH_SIZE, FOE_HEADER_LEN, FOE_MAX_CHUNK, FoeGet, FoeReply, FoeRequest, FoeTransfer,
+};
+use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawReply, RawRequest};
 use ecmxf_wire::payload::sdo::{
     SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest,
 };
@@ -21,7 +26,7 @@ use ecmxf_wire::payload::state::StateCheck;
 use ecmxf_wire::{Reply, ReplyFields};
 
 use super::error::EngineError;
-use super::job::{Job, Request};
+use super::job::{Job, Request, TransferProgress};
 use crate::link::Link;
 use crate::port::{Answer, Port, PortError};
 
@@ -39,6 +44,14 @@ enum Step {
     Wait,
     /// An EEPROM write done; its read-back started.
     Verify,
+    /// FoE write: a chunk is being staged into the chip's flash.
+    FoeStage,
+    /// FoE write: the staged file is going to the slave.
+    FoeSend,
+    /// FoE read: the slave's file is coming into the chip's flash.
+    FoeUpload,
+    /// FoE read: a chunk of flash is being read.
+    FoeFetch,
 }
 
 type ReplyTo = tokio::sync::oneshot::Sender<Result<Vec<u8>, EngineError>>;
@@ -51,6 +64,18 @@ pub struct Active {
     /// Who waits for the result; `None` once they gave up (orphaned).
     reply: Option<ReplyTo>,
     step: Step,
+    progress: Option<Arc<TransferProgress>>,
+    /// FoE: bytes staged or read so far.
+    cursor: u32,
+    /// FoE: bytes in all.
+    total: u32,
+    /// FoE read: the file so far.
+    buffer: Vec<u8>,
+}
+
+/// Whether the chip refused the command (error bit7: bad parameter).
+fn refused(a: &Answer<'_>) -> bool {
+    a.header.errors.contains(ErrorFlags::COMMAND_ERROR)
 }
 
 fn fields(a: &Answer<'_>) -> ReplyFields {
@@ -74,7 +99,16 @@ impl Active {
         if job.reply.is_closed() {
             return None;
         }
-        Some(Self { request: job.request, deadline: job.deadline, reply: Some(job.reply), step: Step::Start })
+        Some(Self {
+            request: job.request,
+            deadline: job.deadline,
+            reply: Some(job.reply),
+            step: Step::Start,
+            progress: job.progress,
+            cursor: 0,
+            total: 0,
+            buffer: Vec::new(),
+        })
     }
 
     fn orphaned(&self) -> bool {
@@ -98,17 +132,17 @@ impl Active {
             }
         }
         match self.step {
-            Step::Start => self.start(port),
-            Step::Wait | Step::Verify => self.wait(port, now),
+            Step::Start => self.start(port, now),
+            _ => self.wait(port, now),
         }
     }
 
-    fn start<L: Link>(mut self, port: &mut Port<L>) -> Result<(Option<Self>, Progress), PortError> {
+    fn start<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
         if self.orphaned() {
             return Ok((None, Progress::Done));
         }
         let data_size = port.data_size();
-        let answer = match &self.request {
+        let answer = refused(&match &self.request {
             Request::SdoRead { slave, index, subindex, complete } => port.call(&SdoRequest {
                 slave: *slave,
                 index: *index,
@@ -143,6 +177,38 @@ impl Active {
                 timeout_us: 100_000,
             })?,
             Request::SetState { target, state } => port.call(&StateCheck { target: *target, state: *state })?,
+            Request::Raw { head, data } => {
+                if data.len() + RAW_HEADER_LEN > data_size {
+                    let reason = format!("{} bytes do not fit one {data_size}-byte data section", data.len());
+                    return Ok((None, self.finish(Err(EngineError::BadArgument { field: "data", reason }))));
+                }
+                port.call(&RawRequest { head: *head, data })?
+            }
+            Request::FoeWrite { name, data, .. } => {
+                if let Err(e) = check_foe(name, data.len(), data_size) {
+                    return Ok((None, self.finish(Err(e))));
+                }
+                self.total = data.len() as u32;
+                self.report();
+                return self.foe_stage_next(port, now);
+            }
+            Request::FoeRead { slave, name, password, max_len } => {
+                if let Err(e) = check_foe(name, *max_len as usize, data_size) {
+                    return Ok((None, self.finish(Err(e))));
+                }
+                let transfer = FoeTransfer {
+                    slave: *slave,
+                    password: *password,
+                    // One byte more than allowed, so that a longer file shows
+                    // as too long instead of arriving cut short.
+                    file_length: max_len.saturating_add(1).min(FOE_FLASH_SIZE),
+                    timeout_us: chip_timeout_us(self.deadline, now),
+                    flash_offset: 0,
+                    name: name.as_bytes(),
+                };
+                let refused = refused(&port.call(&FoeRequest::Upload(transfer))?);
+                return self.started(port, refused, Step::FoeUpload);
+            }
             Request::SlaveInfo { slave, item } => {
                 let a = port.call(&SlaveInfoGet { slave: *slave, item: *item })?;
                 let refused = a.header.errors.contains(ErrorFlags::COMMAND_ERROR);
@@ -156,14 +222,131 @@ impl Active {
                 }
                 return Ok((None, self.finish(Ok(data))));
             }
-        };
-        if answer.header.errors.contains(ErrorFlags::COMMAND_ERROR) {
+        });
+        self.started(port, answer, Step::Wait)
+    }
+
+    /// After a blocking command went out: refused (its answer has the command
+    /// error bit), or
+    /// now waiting in `next`.
+    fn started<L: Link>(
+        mut self,
+        port: &mut Port<L>,
+        refused: bool,
+        next: Step,
+    ) -> Result<(Option<Self>, Progress), PortError> {
+        if refused {
             port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-            let what = format!("{:?}", self.request);
+            let what = self.describe();
             return Ok((None, self.finish(Err(EngineError::Refused(what)))));
         }
-        self.step = Step::Wait;
+        self.step = next;
         Ok((Some(self), Progress::Sent))
+    }
+
+    /// The request in words, for errors.
+    fn describe(&self) -> String {
+        match &self.request {
+            Request::Raw { head, .. } => {
+                format!("{:?} datagram ADP {:#06x} ADO {:#06x}", head.command, head.adp, head.ado)
+            }
+            Request::FoeWrite { slave, name, .. } => format!("FoE write of {name:?} to slave {slave}"),
+            Request::FoeRead { slave, name, .. } => format!("FoE read of {name:?} from slave {slave}"),
+            other => format!("{other:?}"),
+        }
+    }
+
+    fn report(&self) {
+        if let Some(p) = &self.progress {
+            p.set(self.cursor, self.total);
+        }
+    }
+
+    /// FoE write: stages the next chunk, or sends the file once all of it is
+    /// staged.
+    fn foe_stage_next<L: Link>(self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
+        let Request::FoeWrite { slave, name, password, data } = &self.request else {
+            return Ok((None, Progress::Done));
+        };
+        let chunk = foe_chunk(port.data_size());
+        let at = self.cursor as usize;
+        if at < data.len() {
+            let end = (at + chunk).min(data.len());
+            let refused = refused(&port.call(&FoeRequest::WriteFlash { offset: self.cursor, data: &data[at..end] })?);
+            return self.started(port, refused, Step::FoeStage);
+        }
+        let transfer = FoeTransfer {
+            slave: *slave,
+            password: *password,
+            file_length: data.len() as u32,
+            timeout_us: chip_timeout_us(self.deadline, now),
+            flash_offset: 0,
+            name: name.as_bytes(),
+        };
+        let refused = refused(&port.call(&FoeRequest::Download(transfer))?);
+        self.started(port, refused, Step::FoeSend)
+    }
+
+    /// FoE read: reads the next chunk of staged flash, or finishes.
+    fn foe_fetch_next<L: Link>(mut self, port: &mut Port<L>) -> Result<(Option<Self>, Progress), PortError> {
+        if self.cursor >= self.total {
+            let file = std::mem::take(&mut self.buffer);
+            return Ok((None, self.finish(Ok(file))));
+        }
+        let length = (self.total - self.cursor).min(foe_chunk(port.data_size()) as u32) as u16;
+        let refused = refused(&port.call(&FoeRequest::ReadFlash { offset: self.cursor, length })?);
+        self.started(port, refused, Step::FoeFetch)
+    }
+
+    /// Continues a multi-step transfer once the chip finished a step.
+    fn foe_continue<L: Link>(
+        mut self,
+        port: &mut Port<L>,
+        now: Instant,
+    ) -> Result<(Option<Self>, Progress), PortError> {
+        match self.step {
+            Step::FoeStage => {
+                let chunk = foe_chunk(port.data_size()) as u32;
+                self.cursor = (self.cursor + chunk).min(self.total);
+                self.report();
+                self.foe_stage_next(port, now)
+            }
+            Step::FoeSend => Ok((None, self.finish(Ok(Vec::new())))),
+            Step::FoeUpload => {
+                let a = port.call(&FoeGet)?;
+                let stored = a.data.first_chunk::<4>().map(|b| u32::from_le_bytes(*b));
+                let max = match &self.request {
+                    Request::FoeRead { max_len, .. } => *max_len,
+                    _ => 0,
+                };
+                let Some(stored) = stored else {
+                    let what = format!("{}: the chip reports no file length", self.describe());
+                    return Ok((None, self.finish(Err(EngineError::Failed(what)))));
+                };
+                if stored > max {
+                    let what = format!("{}: the file is longer than the {max} bytes allowed", self.describe());
+                    return Ok((None, self.finish(Err(EngineError::Failed(what)))));
+                }
+                self.total = stored;
+                self.buffer = Vec::with_capacity(stored as usize);
+                self.report();
+                self.foe_fetch_next(port)
+            }
+            Step::FoeFetch => {
+                let want = ((self.total - self.cursor) as usize).min(foe_chunk(port.data_size()));
+                let a = port.call(&FoeGet)?;
+                let got = FoeReply::decode(&fields(&a), a.data).map(|r| r.0).unwrap_or_default();
+                if got.len() < want {
+                    let what = format!("{}: a flash read returned {} of {want} bytes", self.describe(), got.len());
+                    return Ok((None, self.finish(Err(EngineError::Failed(what)))));
+                }
+                self.buffer.extend_from_slice(&got[..want]);
+                self.cursor += want as u32;
+                self.report();
+                self.foe_fetch_next(port)
+            }
+            _ => Ok((None, Progress::Done)),
+        }
     }
 
     fn wait<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
@@ -183,6 +366,14 @@ impl Active {
         }
         if self.orphaned() {
             return Ok((None, Progress::Done));
+        }
+        let foe_step = matches!(self.step, Step::FoeStage | Step::FoeSend | Step::FoeUpload | Step::FoeFetch);
+        if foe_step {
+            if failed {
+                let what = self.describe();
+                return Ok((None, self.finish(Err(EngineError::Failed(what)))));
+            }
+            return self.foe_continue(port, now);
         }
         let request = self.request.clone();
         let result = match (&request, failed) {
@@ -240,7 +431,50 @@ impl Active {
             (Request::SetState { state, .. }, true) => Err(EngineError::WrongState(format!("a slave refused {state}"))),
             (Request::SetState { .. }, false) => Ok(Vec::new()),
             (Request::SlaveInfo { .. }, _) => Ok(Vec::new()),
+            (Request::Raw { .. }, true) => Err(EngineError::Failed(self.describe())),
+            (Request::Raw { .. }, false) => {
+                let a = port.call(&RawGet)?;
+                match RawReply::decode(&fields(&a), a.data) {
+                    Ok(r) => {
+                        let mut out = Vec::with_capacity(2 + r.data.len());
+                        out.extend_from_slice(&r.working_counter.to_le_bytes());
+                        out.extend_from_slice(r.data);
+                        Ok(out)
+                    }
+                    Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
+                }
+            }
+            // Handled above.
+            (Request::FoeWrite { .. } | Request::FoeRead { .. }, _) => Ok(Vec::new()),
         };
         Ok((None, self.finish(result)))
     }
+}
+
+/// FoE bytes per packet: a flash chunk, or what fits the data section.
+fn foe_chunk(data_size: usize) -> usize {
+    (FOE_MAX_CHUNK as usize).min(data_size.saturating_sub(FOE_HEADER_LEN)).max(1)
+}
+
+/// A FoE request's arguments, checked before anything goes to the chip.
+fn check_foe(name: &str, len: usize, data_size: usize) -> Result<(), EngineError> {
+    if name.is_empty() {
+        return Err(EngineError::BadArgument { field: "name", reason: "a FoE file needs a name".into() });
+    }
+    if name.len() + FOE_HEADER_LEN > data_size {
+        let reason = format!("{} bytes do not fit one {data_size}-byte data section", name.len());
+        return Err(EngineError::BadArgument { field: "name", reason });
+    }
+    if len > FOE_FLASH_SIZE as usize {
+        let reason = format!("{len} bytes exceed the chip's {FOE_FLASH_SIZE}-byte staging flash");
+        return Err(EngineError::BadArgument { field: "length", reason });
+    }
+    Ok(())
+}
+
+/// The timeout handed to the chip for a slave-side transfer: what is left of
+/// the caller's deadline, at least one second.
+fn chip_timeout_us(deadline: Instant, now: Instant) -> u32 {
+    let left = deadline.saturating_duration_since(now).max(Duration::from_secs(1));
+    left.as_micros().min(u128::from(u32::MAX)) as u32
 }
