@@ -12,7 +12,8 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::EcatState;
+use ecmxf_wire::{EcatState, Reply, ReplyFields};
+use ecmxf_wire::payload::pdo::{PdoConfig, PdoConfigReply, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 use ecmxf_wire::payload::raw::{DatagramHead, RAW_MAX_DATA};
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxf_wire::payload::state::SlaveSelector;
@@ -279,6 +280,25 @@ impl Master {
         let d = self.request(Request::SlaveInfo { slave, item }, None).await?;
         SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("slave {slave} {item:?}: {e}")))?;
         Ok(d)
+    }
+
+    /// A slave's PDO assignment (`assign_index` 0x1C12 for RxPDOs, 0x1C13
+    /// for TxPDOs) and the mapping of each assigned PDO, read from the slave.
+    pub async fn pdo_config_read(
+        &self,
+        slave: u8,
+        assign_index: u16,
+        timeout: Option<Duration>,
+    ) -> Result<PdoConfig, EngineError> {
+        if ![RX_PDO_ASSIGN, TX_PDO_ASSIGN].contains(&assign_index) {
+            let reason = format!("{assign_index:#06x}; use {RX_PDO_ASSIGN:#06x} or {TX_PDO_ASSIGN:#06x}");
+            return Err(EngineError::BadArgument { field: "assign_index", reason });
+        }
+        let d = self.request(Request::PdoConfigRead { slave, assign_index }, timeout).await?;
+        let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
+        PdoConfigReply::decode(&fields, &d)
+            .map(|r| r.0)
+            .map_err(|e| EngineError::Failed(format!("PDO assignment {assign_index:#06x} of slave {slave}: {e}")))
     }
 
     /// Sends one raw EtherCAT datagram and returns what came back. A reading

@@ -310,3 +310,30 @@ fn foe_files_go_to_a_slave_and_come_back() {
     });
     assert_eq!(m.status().phase, Phase::Running);
 }
+
+#[test]
+fn pdo_configuration_read_matches_the_object_dictionary() {
+    let (m, _sim, _serial) = start();
+    rt().block_on(async {
+        for (slave, assign) in [(0u8, 0x1C12u16), (1, 0x1C13), (2, 0x1C12)] {
+            let cfg = m.pdo_config_read(slave, assign, None).await.unwrap();
+            assert_eq!((cfg.slave, cfg.assign_index), (slave, assign));
+            let count = m.sdo_read(slave, assign, 0, false, None).await.unwrap()[0];
+            assert_eq!(cfg.pdo_count, count);
+            assert!(count > 0, "slave {slave} assigns PDOs in {assign:#06x}");
+            for (i, pdo) in cfg.used().iter().enumerate() {
+                let index = m.sdo_read(slave, assign, i as u8 + 1, false, None).await.unwrap();
+                assert_eq!(pdo.index.to_le_bytes(), index[..2]);
+                let entries = m.sdo_read(slave, pdo.index, 0, false, None).await.unwrap()[0];
+                assert_eq!(pdo.entry_count, u16::from(entries));
+                for (k, e) in pdo.entries.iter().take(entries.into()).enumerate() {
+                    let raw = m.sdo_read(slave, pdo.index, k as u8 + 1, false, None).await.unwrap();
+                    assert_eq!(e.to_u32().to_le_bytes(), raw[..4], "slave {slave} PDO {:#06x} entry {}", pdo.index, k + 1);
+                }
+            }
+        }
+        let e = m.pdo_config_read(0, 0x1600, None).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "assign_index", .. }), "{e}");
+        assert!(m.pdo_config_read(9, 0x1C12, None).await.is_err(), "no slave 9");
+    });
+}

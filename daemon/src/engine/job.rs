@@ -71,6 +71,14 @@ pub enum Request {
         /// Item.
         item: SlaveInfoCode,
     },
+    /// A slave's PDO assignment and mapping as the slave reports it
+    /// (cmds 8/9; at most 3 PDOs of 8 entries are carried).
+    PdoConfigRead {
+        /// Slave.
+        slave: u8,
+        /// 0x1C12 (RxPDO) or 0x1C13 (TxPDO).
+        assign_index: u16,
+    },
     /// One raw EtherCAT datagram (cmds 137/138). The result is the working
     /// counter (u16, little-endian) followed by the returned data.
     Raw {

@@ -17,6 +17,7 @@ use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRe
 use ecmxf_wire::payload::foe::{
     FOE_FLASH_SIZE, FOE_HEADER_LEN, FOE_MAX_CHUNK, FoeGet, FoeReply, FoeRequest, FoeTransfer,
 };
+use ecmxf_wire::payload::pdo::{PdoConfigGet, PdoConfigReq};
 use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawReply, RawRequest};
 use ecmxf_wire::payload::sdo::{
     SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest,
@@ -177,6 +178,9 @@ impl Active {
                 timeout_us: 100_000,
             })?,
             Request::SetState { target, state } => port.call(&StateCheck { target: *target, state: *state })?,
+            Request::PdoConfigRead { slave, assign_index } => {
+                port.call(&PdoConfigReq { slave: *slave, assign_index: *assign_index })?
+            }
             Request::Raw { head, data } => {
                 if data.len() + RAW_HEADER_LEN > data_size {
                     let reason = format!("{} bytes do not fit one {data_size}-byte data section", data.len());
@@ -431,6 +435,13 @@ impl Active {
             (Request::SetState { state, .. }, true) => Err(EngineError::WrongState(format!("a slave refused {state}"))),
             (Request::SetState { .. }, false) => Ok(Vec::new()),
             (Request::SlaveInfo { .. }, _) => Ok(Vec::new()),
+            (Request::PdoConfigRead { slave, assign_index }, true) => Err(EngineError::Failed(format!(
+                "PDO assignment {assign_index:#06x} of slave {slave} could not be read"
+            ))),
+            (Request::PdoConfigRead { .. }, false) => {
+                let a = port.call(&PdoConfigGet)?;
+                Ok(a.data.to_vec())
+            }
             (Request::Raw { .. }, true) => Err(EngineError::Failed(self.describe())),
             (Request::Raw { .. }, false) => {
                 let a = port.call(&RawGet)?;
