@@ -38,6 +38,33 @@ pub struct Config {
     /// Automatic recovery.
     #[serde(default)]
     pub recovery: RecoveryConfig,
+    /// What happens to the outputs when their writers go.
+    #[serde(default)]
+    pub outputs: OutputsConfig,
+}
+
+/// `[outputs]`.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct OutputsConfig {
+    /// What the daemon does when the last client that wrote outputs goes
+    /// away (disconnects, crashes) while the network runs.
+    pub on_last_writer_gone: WriterGoneAction,
+}
+
+/// `outputs.on_last_writer_gone`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum WriterGoneAction {
+    /// Keep sending the last outputs written (what the chip itself does
+    /// when its RxFIFO runs dry).
+    #[default]
+    HoldLast,
+    /// Set every output byte to zero.
+    Zero,
+    /// Quick-stop every `[[axis]]` through the chip's CiA402 helper, and
+    /// keep the other outputs as they are.
+    QuickStop,
 }
 
 /// `[link]`.
@@ -323,6 +350,7 @@ impl Config {
             slaves: Vec::new(),
             axes: Vec::new(),
             recovery: RecoveryConfig::default(),
+            outputs: OutputsConfig::default(),
         }
     }
 
@@ -375,6 +403,12 @@ impl Config {
                     "need fifo_low < fifo_high <= fifo_rx_depth, got {} < {} <= {}",
                     c.fifo_low, c.fifo_high, c.fifo_rx_depth
                 ),
+            );
+        }
+        if self.outputs.on_last_writer_gone == WriterGoneAction::QuickStop && self.axes.is_empty() {
+            return bad(
+                "outputs.on_last_writer_gone",
+                "quick-stop acts on [[axis]] entries, and none is configured".into(),
             );
         }
         if !matches!(c.target_state.as_str(), "preop" | "safeop" | "op") {

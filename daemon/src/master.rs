@@ -12,18 +12,18 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::{EcatState, Reply, ReplyFields};
 use ecmxf_wire::payload::pdo::{PdoConfig, PdoConfigReply, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 use ecmxf_wire::payload::raw::{DatagramHead, RAW_MAX_DATA};
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxf_wire::payload::state::SlaveSelector;
+use ecmxf_wire::{EcatState, Reply, ReplyFields};
 use tokio::sync::{broadcast, oneshot};
 
 use crate::config::{Config, LinkConfig};
 use crate::engine::bringup::NetworkLayout;
 use crate::engine::cyclic::read_record;
 use crate::engine::error::EngineError;
-use crate::engine::job::{Job, OutputWrite, Request, TransferProgress};
+use crate::engine::job::{Job, OutputWrite, Request, TransferProgress, Writers};
 use crate::engine::telemetry::{Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
 use crate::link::sim::{SimHandle, SimLink};
@@ -43,6 +43,53 @@ pub struct InputFrame {
     pub time_ns: u64,
     /// The frame.
     pub data: Vec<u8>,
+}
+
+/// A client's lease on the outputs (see [`Master::output_writer`]).
+#[derive(Debug)]
+pub struct OutputWriter {
+    outputs: SyncSender<OutputWrite>,
+    layout: Arc<Mutex<NetworkLayout>>,
+    writers: Arc<Writers>,
+}
+
+impl OutputWriter {
+    /// Writes bytes into the output image at `offset` (of the whole output
+    /// frame); they go out with the next frames pushed.
+    pub fn write(&self, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
+        let size = self.layout.lock().unwrap_or_else(|e| e.into_inner()).rx_size;
+        send_outputs(&self.outputs, size, offset, bytes)
+    }
+}
+
+impl Drop for OutputWriter {
+    fn drop(&mut self) {
+        self.writers.release();
+    }
+}
+
+fn send_outputs(
+    outputs: &SyncSender<OutputWrite>,
+    size: usize,
+    offset: usize,
+    bytes: &[u8],
+) -> Result<(), EngineError> {
+    if offset.saturating_add(bytes.len()) > size {
+        return Err(EngineError::BadArgument {
+            field: "offset",
+            reason: format!("{} bytes at {offset} exceed the {size}-byte output image", bytes.len()),
+        });
+    }
+    for (i, chunk) in bytes.chunks(32).enumerate() {
+        let mut data = [0u8; 32];
+        data[..chunk.len()].copy_from_slice(chunk);
+        let w = OutputWrite { offset: (offset + i * 32) as u32, len: chunk.len() as u8, data };
+        outputs.try_send(w).map_err(|e| match e {
+            TrySendError::Full(_) => EngineError::QueueFull,
+            TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+        })?;
+    }
+    Ok(())
 }
 
 /// What a raw datagram brought back.
@@ -84,6 +131,7 @@ pub struct Master {
     inputs: broadcast::Sender<Arc<InputFrame>>,
     threads: Mutex<Vec<JoinHandle<()>>>,
     stop_distributor: Arc<AtomicBool>,
+    writers: Arc<Writers>,
     /// Timeout for requests that give none.
     pub default_timeout: Duration,
 }
@@ -135,6 +183,7 @@ impl Master {
         let (outputs, output_rx) = sync_channel(1024);
         let telemetry = Arc::new(Telemetry::default());
         let layout = Arc::new(Mutex::new(NetworkLayout::default()));
+        let writers = Arc::new(Writers::default());
         let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
         let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
         let stop_distributor = Arc::new(AtomicBool::new(false));
@@ -162,6 +211,7 @@ impl Master {
             layout: Arc::clone(&layout),
             ring: producer,
             distributor: Some(distributor.thread().clone()),
+            writers: Arc::clone(&writers),
         };
         let rt = config.realtime.clone();
         let engine = std::thread::Builder::new()
@@ -179,6 +229,7 @@ impl Master {
             inputs,
             threads: Mutex::new(vec![engine, distributor]),
             stop_distributor,
+            writers,
             default_timeout: Duration::from_secs(3),
         }
     }
@@ -361,24 +412,27 @@ impl Master {
 
     /// Writes bytes into the output image at `offset` (of the whole output
     /// frame); they go out with the next frames pushed.
+    ///
+    /// Anonymous: it does not count as a writer for
+    /// `outputs.on_last_writer_gone`; clients use [`Master::output_writer`].
     pub fn write_outputs(&self, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
-        let size = self.layout().rx_size;
-        if offset + bytes.len() > size {
-            return Err(EngineError::BadArgument {
-                field: "offset",
-                reason: format!("{} bytes at {offset} exceed the {size}-byte output image", bytes.len()),
-            });
+        send_outputs(&self.outputs, self.layout().rx_size, offset, bytes)
+    }
+
+    /// A counted writer of outputs: when the last one is dropped, the
+    /// engine applies `outputs.on_last_writer_gone`.
+    pub fn output_writer(&self) -> OutputWriter {
+        self.writers.acquire();
+        OutputWriter {
+            outputs: self.outputs.clone(),
+            layout: Arc::clone(&self.layout),
+            writers: Arc::clone(&self.writers),
         }
-        for (i, chunk) in bytes.chunks(32).enumerate() {
-            let mut data = [0u8; 32];
-            data[..chunk.len()].copy_from_slice(chunk);
-            let w = OutputWrite { offset: (offset + i * 32) as u32, len: chunk.len() as u8, data };
-            self.outputs.try_send(w).map_err(|e| match e {
-                TrySendError::Full(_) => EngineError::QueueFull,
-                TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
-            })?;
-        }
-        Ok(())
+    }
+
+    /// Output writers now.
+    pub fn output_writers(&self) -> usize {
+        self.writers.count()
     }
 
     /// A new subscriber to input frames.

@@ -112,3 +112,111 @@ fn a_different_network_is_named() {
     assert_ne!(m.status().phase, Phase::Running);
     m.stop();
 }
+
+fn running(text: &str) -> Master {
+    let m = start(text);
+    let t = Instant::now();
+    while m.status().phase != Phase::Running {
+        assert!(t.elapsed() < Duration::from_secs(20), "not running: {:?} {:?}", m.status(), m.last_error());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    m
+}
+
+/// Waits until an input frame satisfies `pred`.
+async fn until(m: &Master, what: &str, mut pred: impl FnMut(&[u8]) -> bool) {
+    let mut inputs = m.subscribe();
+    let t = Instant::now();
+    loop {
+        let f = inputs.recv().await.unwrap();
+        if pred(&f.data) {
+            return;
+        }
+        assert!(t.elapsed() < Duration::from_secs(3), "never saw {what}");
+    }
+}
+
+#[test]
+fn outputs_are_zeroed_when_the_last_writer_goes() {
+    let m = running(&format!("{CONFIG}\n[outputs]\non_last_writer_gone = \"zero\"\n"));
+    let io = m.layout().slaves[2].clone();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let a = m.output_writer();
+        let b = m.output_writer();
+        a.write(io.rx_offset, &[0x5A]).unwrap();
+        until(&m, "the outputs looped back", |d| d[io.tx_offset] == 0x5A).await;
+        drop(a);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        until(&m, "outputs held while a writer remains", |d| d[io.tx_offset] == 0x5A).await;
+        assert_eq!(m.output_writers(), 1);
+        drop(b);
+        until(&m, "zeroed outputs", |d| d[io.tx_offset] == 0).await;
+        // A new writer starts over.
+        let c = m.output_writer();
+        c.write(io.rx_offset, &[0x11]).unwrap();
+        until(&m, "the new writer's outputs", |d| d[io.tx_offset] == 0x11).await;
+    });
+    m.stop();
+}
+
+#[test]
+fn axes_quick_stop_when_the_last_writer_goes() {
+    let config =
+        Config::parse(&format!("{CONFIG}\n[outputs]\non_last_writer_gone = \"quick-stop\"\n"), "t.toml".as_ref());
+    let (link, sim) = SimLink::new(Chip::new(ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()));
+    let m = Master::start(link, config.unwrap());
+    let t = Instant::now();
+    while m.status().phase != Phase::Running {
+        assert!(t.elapsed() < Duration::from_secs(20), "not running: {:?}", m.last_error());
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let l = m.layout();
+    let (at, cw_at) = (l.slaves[1].tx_offset, l.slaves[1].rx_offset);
+    let state = move |d: &[u8]| Cia402State::from_statusword(u16::from_le_bytes([d[at], d[at + 1]]));
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        until(&m, "operation enabled", |d| state(d) == Cia402State::OperationEnabled).await;
+        drop(m.output_writer());
+        until(&m, "the axis stopped and disabled", |d| state(d) == Cia402State::SwitchOnDisabled).await;
+        // It got there by the quick stop command, and stays there.
+        let cw = sim.with_chip(|c| u16::from_le_bytes([c.master.outputs[cw_at], c.master.outputs[cw_at + 1]]));
+        assert_eq!(cw & 0x0087, 0x0002, "controlword {cw:#06x} is quick stop");
+        let mut inputs = m.subscribe();
+        for _ in 0..200 {
+            assert_eq!(state(&inputs.recv().await.unwrap().data), Cia402State::SwitchOnDisabled);
+        }
+    });
+    m.stop();
+}
+
+#[test]
+fn holding_the_last_outputs_is_the_default() {
+    let m = running(CONFIG);
+    let io = m.layout().slaves[2].clone();
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        let w = m.output_writer();
+        w.write(io.rx_offset, &[0x3C]).unwrap();
+        until(&m, "the outputs looped back", |d| d[io.tx_offset] == 0x3C).await;
+        drop(w);
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        let mut inputs = m.subscribe();
+        for _ in 0..100 {
+            assert_eq!(inputs.recv().await.unwrap().data[io.tx_offset], 0x3C, "outputs held");
+        }
+    });
+    m.stop();
+}
+
+#[test]
+fn quick_stop_needs_an_axis() {
+    let text = CONFIG.replace("[[axis]]\nslave = 1\ncontrolword_offset = 0\nstatusword_offset = 0\n", "")
+        + "\n[outputs]\non_last_writer_gone = \"quick-stop\"\n";
+    let e = Config::parse(&text, std::path::Path::new("test.toml")).unwrap_err().to_string();
+    assert!(e.contains("outputs.on_last_writer_gone") && e.contains("axis"), "{e}");
+    let e = Config::parse(&format!("{CONFIG}\n[outputs]\non_last_writer_gone = \"drop\"\n"), "t.toml".as_ref())
+        .unwrap_err()
+        .to_string();
+    assert!(e.contains("drop") && e.contains("hold-last"), "{e}");
+}

@@ -328,7 +328,13 @@ fn pdo_configuration_read_matches_the_object_dictionary() {
                 assert_eq!(pdo.entry_count, u16::from(entries));
                 for (k, e) in pdo.entries.iter().take(entries.into()).enumerate() {
                     let raw = m.sdo_read(slave, pdo.index, k as u8 + 1, false, None).await.unwrap();
-                    assert_eq!(e.to_u32().to_le_bytes(), raw[..4], "slave {slave} PDO {:#06x} entry {}", pdo.index, k + 1);
+                    assert_eq!(
+                        e.to_u32().to_le_bytes(),
+                        raw[..4],
+                        "slave {slave} PDO {:#06x} entry {}",
+                        pdo.index,
+                        k + 1
+                    );
                 }
             }
         }

@@ -3,7 +3,7 @@
 //! engine sees that and never starts, or cleanly finishes, the work.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU32, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use ecmxf_wire::EcatState;
@@ -163,4 +163,60 @@ pub struct OutputWrite {
     pub len: u8,
     /// The bytes.
     pub data: [u8; 32],
+}
+
+/// Who writes the outputs: counted leases, and a flag the last one raises
+/// as it goes, so the engine can apply `outputs.on_last_writer_gone`
+/// without a lock or a message on the cycle path.
+#[derive(Debug, Default)]
+pub struct Writers {
+    count: AtomicUsize,
+    gone: AtomicBool,
+}
+
+impl Writers {
+    /// A writer arrives.
+    pub fn acquire(&self) {
+        self.count.fetch_add(1, Ordering::AcqRel);
+    }
+
+    /// A writer leaves; the last one raises the flag.
+    pub fn release(&self) {
+        if self.count.fetch_sub(1, Ordering::AcqRel) == 1 {
+            self.gone.store(true, Ordering::Release);
+        }
+    }
+
+    /// Writers now.
+    pub fn count(&self) -> usize {
+        self.count.load(Ordering::Acquire)
+    }
+
+    /// Whether the last writer left since the previous call, and no new one
+    /// came meanwhile.
+    pub fn take_gone(&self) -> bool {
+        self.gone.swap(false, Ordering::AcqRel) && self.count() == 0
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn only_the_last_writer_leaving_counts() {
+        let w = Writers::default();
+        assert!(!w.take_gone());
+        w.acquire();
+        w.acquire();
+        w.release();
+        assert!(!w.take_gone(), "one writer is left");
+        w.release();
+        assert!(w.take_gone());
+        assert!(!w.take_gone(), "reported once");
+        w.acquire();
+        w.release();
+        w.acquire();
+        assert!(!w.take_gone(), "a new writer came before the engine looked");
+    }
 }

@@ -32,13 +32,13 @@ use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
 use ecmxf_wire::{CommandCode, EcatState, ResponseHeader};
 use tracing::{debug, error, info, warn};
 
-use crate::config::Config;
+use crate::config::{Config, WriterGoneAction};
 use crate::link::Link;
 use crate::port::{Port, PortError};
 use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
-use job::{Job, OutputWrite};
+use job::{Job, OutputWrite, Writers};
 use telemetry::{Phase, Telemetry};
 use transaction::{Active, Progress};
 
@@ -84,6 +84,7 @@ pub struct Engine<L> {
     layout: Arc<Mutex<NetworkLayout>>,
     ring: Option<rtrb::Producer<u8>>,
     distributor: Option<Thread>,
+    writers: Arc<Writers>,
     queue: VecDeque<Job>,
     active: Option<Active>,
     epoch: Instant,
@@ -114,6 +115,8 @@ pub struct Parts<L> {
     pub ring: rtrb::Producer<u8>,
     /// Woken when input frames were published.
     pub distributor: Option<Thread>,
+    /// Output writer leases.
+    pub writers: Arc<Writers>,
 }
 
 impl<L: Link> Engine<L> {
@@ -130,6 +133,7 @@ impl<L: Link> Engine<L> {
             layout: p.layout,
             ring: Some(p.ring),
             distributor: p.distributor,
+            writers: p.writers,
             queue: VecDeque::with_capacity(64),
             active: None,
             epoch: Instant::now(),
@@ -300,6 +304,9 @@ impl<L: Link> Engine<L> {
                         dst.copy_from_slice(&w.data[..n]);
                     }
                 }
+            }
+            if self.writers.take_gone() {
+                self.last_writer_gone(cyclic.as_mut());
             }
             let now = Instant::now();
             if self.active.is_none() && self.queue.is_empty() && now.duration_since(last_census) >= CENSUS {
@@ -494,6 +501,28 @@ impl<L: Link> Engine<L> {
             return Ok(true);
         }
         Ok(sent && progress != Progress::Waiting)
+    }
+
+    /// The last output writer went away: `outputs.on_last_writer_gone`.
+    fn last_writer_gone(&mut self, cyclic: Option<&mut Cyclic>) {
+        match self.config.outputs.on_last_writer_gone {
+            WriterGoneAction::HoldLast => info!("last output writer gone: holding the last outputs"),
+            WriterGoneAction::Zero => {
+                if let Some(c) = cyclic {
+                    c.outputs.fill(0);
+                }
+                warn!("last output writer gone: outputs zeroed");
+            }
+            WriterGoneAction::QuickStop => {
+                for n in 0..self.config.axes.len() {
+                    let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
+                    if let Err(e) = r {
+                        warn!("quick stop of axis {n}: {e}");
+                    }
+                }
+                warn!("last output writer gone: {} axes quick-stopped", self.config.axes.len());
+            }
+        }
     }
 
     /// Safe stop: CiA402 axes disabled through the helper, slaves to SAFE-OP

@@ -16,6 +16,10 @@ fn helper_command(current: Cia402State, target: Cia402State) -> u16 {
     use Cia402State as S;
     match (current, target) {
         (_, S::SwitchOnDisabled) => 0x00,
+        // Quick stop is a command, not a place to walk to: issue it in every
+        // state (CiA402 transitions 7, 10, 11; in quick stop active the drive
+        // finishes its ramp and, for option codes 0-4, disables itself).
+        (_, S::QuickStopActive) => 0x02,
         (S::QuickStopActive, _) => 0x00,
         (S::SwitchOnDisabled, _) => 0x06,
         (S::ReadyToSwitchOn, S::ReadyToSwitchOn) => 0x06,
@@ -23,7 +27,6 @@ fn helper_command(current: Cia402State, target: Cia402State) -> u16 {
         (S::SwitchedOn, S::ReadyToSwitchOn) => 0x06,
         (S::SwitchedOn, S::OperationEnabled) => 0x0F,
         (S::SwitchedOn, _) => 0x07,
-        (S::OperationEnabled, S::QuickStopActive) => 0x02,
         (S::OperationEnabled, S::ReadyToSwitchOn) => 0x06,
         (S::OperationEnabled, S::SwitchedOn) => 0x07,
         (S::OperationEnabled, _) => 0x0F,
