@@ -301,6 +301,52 @@ impl Master {
         Ok(out)
     }
 
+    /// `count` SII words from `word` on. Each word pair is its own
+    /// transaction, so a long read shares the blocking slot fairly with
+    /// other callers; `timeout` applies to each.
+    pub async fn eeprom_read_words(
+        &self,
+        slave: u8,
+        word: u16,
+        count: u16,
+        timeout: Option<Duration>,
+    ) -> Result<Vec<u16>, EngineError> {
+        if u32::from(word) + u32::from(count) > 0x1_0000 {
+            let reason = format!("{count} words from {word:#06x} run past the 16-bit word address space");
+            return Err(EngineError::BadArgument { field: "count", reason });
+        }
+        let mut out = Vec::with_capacity(usize::from(count));
+        let mut at = word;
+        while out.len() < usize::from(count) {
+            let pair = self.eeprom_read(slave, at, timeout).await?;
+            out.push(u16::from_le_bytes([pair[0], pair[1]]));
+            if out.len() < usize::from(count) {
+                out.push(u16::from_le_bytes([pair[2], pair[3]]));
+            }
+            at = at.wrapping_add(2);
+        }
+        Ok(out)
+    }
+
+    /// Writes SII words from `word` on, each verified by reading it back;
+    /// stops at the first failure, which names the word.
+    pub async fn eeprom_write_words(
+        &self,
+        slave: u8,
+        word: u16,
+        values: &[u16],
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        if u32::from(word) + values.len() as u32 > 0x1_0000 {
+            let reason = format!("{} words from {word:#06x} run past the 16-bit word address space", values.len());
+            return Err(EngineError::BadArgument { field: "values", reason });
+        }
+        for (i, v) in values.iter().enumerate() {
+            self.eeprom_write(slave, word + i as u16, *v, timeout).await?;
+        }
+        Ok(())
+    }
+
     /// Writes one SII word and verifies it.
     pub async fn eeprom_write(
         &self,

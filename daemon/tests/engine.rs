@@ -132,6 +132,14 @@ fn sdo_read_write_abort_and_slave_info() {
         m.eeprom_write(2, 0x04, 0x0033, None).await.unwrap();
         assert_eq!(&m.eeprom_read(2, 0x04, None).await.unwrap()[..2], &[0x33, 0x00]);
         assert!(m.write_outputs(60, &[0]).is_err(), "beyond the output image");
+        // Ranges: vendor id, product code, revision (words 8..14), odd count.
+        let words = m.eeprom_read_words(1, 0x08, 5, None).await.unwrap();
+        assert_eq!(words, [0x059D, 0, 0x0402, 0, *words.get(4).unwrap()]);
+        assert_eq!(words[4], u16::from_le_bytes(m.eeprom_read(1, 0x0C, None).await.unwrap()[..2].try_into().unwrap()));
+        m.eeprom_write_words(2, 0x04, &[0x0044, 0x0000], None).await.unwrap();
+        assert_eq!(m.eeprom_read_words(2, 0x04, 2, None).await.unwrap(), [0x0044, 0x0000]);
+        let e = m.eeprom_read_words(1, 0xFFFF, 2, None).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "count", .. }), "{e}");
     });
 }
 
