@@ -71,8 +71,15 @@ async fn run(config: Config, status_every: u64) -> Result<(), String> {
     ticker.tick().await;
     let mut announced = false;
     let mut poll = tokio::time::interval(Duration::from_millis(50));
+    let mut events = master.events();
+    let mut events_open = true;
     loop {
         tokio::select! {
+            e = events.recv(), if events_open => match e {
+                Ok(e) => info!(t_ms = e.time_ns / 1_000_000, "event: {:?}", e.kind),
+                Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => info!("{n} events not logged"),
+                Err(tokio::sync::broadcast::error::RecvError::Closed) => events_open = false,
+            },
             _ = tokio::signal::ctrl_c() => { info!("SIGINT"); break; }
             _ = sigterm.recv() => { info!("SIGTERM"); break; }
             _ = ticker.tick(), if status_every > 0 => info!("{}", status_line(&master)),

@@ -23,6 +23,7 @@ use crate::config::{Config, LinkConfig};
 use crate::engine::bringup::NetworkLayout;
 use crate::engine::cyclic::read_record;
 use crate::engine::error::EngineError;
+use crate::engine::events::Event;
 use crate::engine::job::{Job, OutputWrite, Request, TransferProgress, Writers};
 use crate::engine::telemetry::{Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
@@ -33,6 +34,8 @@ use crate::link::{Link, LinkError};
 pub const QUEUE_DEPTH: usize = 256;
 /// Input frames a subscriber may fall behind by before losing some.
 pub const SUBSCRIBER_BACKLOG: usize = 4096;
+/// Events a subscriber may fall behind by before losing some.
+pub const EVENT_BACKLOG: usize = 1024;
 
 /// One input frame (one DC cycle's inputs).
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -129,6 +132,7 @@ pub struct Master {
     telemetry: Arc<Telemetry>,
     layout: Arc<Mutex<NetworkLayout>>,
     inputs: broadcast::Sender<Arc<InputFrame>>,
+    events: broadcast::Sender<Event>,
     threads: Mutex<Vec<JoinHandle<()>>>,
     stop_distributor: Arc<AtomicBool>,
     writers: Arc<Writers>,
@@ -186,6 +190,9 @@ impl Master {
         let writers = Arc::new(Writers::default());
         let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
         let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
+        let (events, _) = broadcast::channel(EVENT_BACKLOG);
+        let (event_producer, mut event_consumer) = rtrb::RingBuffer::new(crate::engine::events::RING);
+        let event_tx = events.clone();
         let stop_distributor = Arc::new(AtomicBool::new(false));
 
         let tx = inputs.clone();
@@ -197,6 +204,9 @@ impl Master {
                     while let Some(r) = read_record(&mut consumer) {
                         // No subscribers is fine: the frame is dropped.
                         let _ = tx.send(Arc::new(InputFrame { seq: r.seq, time_ns: r.time_ns, data: r.data }));
+                    }
+                    while let Ok(e) = event_consumer.pop() {
+                        let _ = event_tx.send(e);
                     }
                     std::thread::park_timeout(Duration::from_millis(5));
                 }
@@ -212,6 +222,7 @@ impl Master {
             ring: producer,
             distributor: Some(distributor.thread().clone()),
             writers: Arc::clone(&writers),
+            events: event_producer,
         };
         let rt = config.realtime.clone();
         let engine = std::thread::Builder::new()
@@ -227,6 +238,7 @@ impl Master {
             telemetry,
             layout,
             inputs,
+            events,
             threads: Mutex::new(vec![engine, distributor]),
             stop_distributor,
             writers,
@@ -479,6 +491,12 @@ impl Master {
     /// Output writers now.
     pub fn output_writers(&self) -> usize {
         self.writers.count()
+    }
+
+    /// A new subscriber to supervision events (state changes, link, DC,
+    /// error counters, underruns, recoveries) from now on.
+    pub fn events(&self) -> broadcast::Receiver<Event> {
+        self.events.subscribe()
     }
 
     /// A new subscriber to input frames.

@@ -10,6 +10,7 @@ use ecmxf_wire::payload::sdo::SdoAbortCode;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
 use ecmxfd::engine::error::EngineError;
+use ecmxfd::engine::events::EventKind;
 use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::{SimHandle, SimLink};
 use ecmxfd::master::Master;
@@ -177,6 +178,8 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
         assert_eq!(m.sdo_read(1, 0x1018, 1, false, None).await.unwrap(), 0x059Du32.to_le_bytes());
     });
     let before = m.status().recoveries;
+    let mut events = m.events();
+    let alarms_before = m.status().fifo_alarms;
     sim.control("al-error 2 0x001B").unwrap();
     let t = Instant::now();
     while m.status().recoveries == before {
@@ -185,6 +188,28 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     }
     wait_running(&m, Duration::from_secs(20));
     assert!(sim.with_chip(|c| c.net.slaves.iter().all(|s| s.esm.state == ecmxf_sim::net::esm::AlState::Op)));
+    // The story, as events: the state left OP, recovery started, running again.
+    let mut seen = Vec::new();
+    while let Ok(e) = events.try_recv() {
+        seen.push(e.kind);
+    }
+    let at = |pred: &dyn Fn(&EventKind) -> bool| seen.iter().position(pred);
+    let noticed = at(&|k| matches!(k, EventKind::WkcErrors { .. } | EventKind::EcatState { from: EcatState::Op, .. }));
+    let recovering = at(&|k| matches!(k, EventKind::Recovering(_)));
+    let running = at(&|k| *k == EventKind::Phase(Phase::Running));
+    assert!(noticed.is_some() && recovering.is_some() && running.is_some(), "{seen:?}");
+    assert!(noticed < recovering && recovering < running, "{seen:?}");
+    let alarms = seen.iter().filter(|k| **k == EventKind::FifoUnderrun).count() as u64;
+    assert_eq!(alarms, m.status().fifo_alarms - alarms_before, "one event per alarm counted");
+    // Fed again: no underrun once running.
+    let underruns = sim.with_chip(|c| c.fifo.underruns);
+    std::thread::sleep(Duration::from_millis(300));
+    let after = sim.with_chip(|c| c.fifo.underruns);
+    assert!(
+        after == underruns || m.status().max_fifo_gap_us > u64::from(m.layout().fifo_low) * 125,
+        "{} underruns after recovery without a stall",
+        after - underruns
+    );
 }
 
 #[test]

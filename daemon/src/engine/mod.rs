@@ -11,6 +11,7 @@
 pub mod bringup;
 pub mod cyclic;
 pub mod error;
+pub mod events;
 pub mod job;
 pub mod telemetry;
 mod transaction;
@@ -38,6 +39,7 @@ use crate::port::{Port, PortError};
 use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
+use events::{Event, EventKind, EventSink};
 use job::{Job, OutputWrite, Writers};
 use telemetry::{Phase, Telemetry};
 use transaction::{Active, Progress};
@@ -85,6 +87,7 @@ pub struct Engine<L> {
     ring: Option<rtrb::Producer<u8>>,
     distributor: Option<Thread>,
     writers: Arc<Writers>,
+    events: EventSink,
     queue: VecDeque<Job>,
     active: Option<Active>,
     epoch: Instant,
@@ -117,6 +120,8 @@ pub struct Parts<L> {
     pub distributor: Option<Thread>,
     /// Output writer leases.
     pub writers: Arc<Writers>,
+    /// Supervision events out.
+    pub events: rtrb::Producer<Event>,
 }
 
 impl<L: Link> Engine<L> {
@@ -124,6 +129,8 @@ impl<L: Link> Engine<L> {
     pub fn new(p: Parts<L>) -> Self {
         let mut port = Port::new(p.link);
         port.set_ready_timeout(p.config.ready_timeout());
+        let epoch = Instant::now();
+        let events = EventSink::new(p.events, epoch, p.distributor.clone());
         Self {
             port,
             config: p.config,
@@ -134,9 +141,10 @@ impl<L: Link> Engine<L> {
             ring: Some(p.ring),
             distributor: p.distributor,
             writers: p.writers,
+            events,
             queue: VecDeque::with_capacity(64),
             active: None,
-            epoch: Instant::now(),
+            epoch,
         }
     }
 
@@ -145,7 +153,8 @@ impl<L: Link> Engine<L> {
         let mut backoff = Duration::from_millis(self.config.recovery.backoff_ms);
         let mut first = true;
         loop {
-            self.telemetry.set_phase(if first { Phase::BringUp } else { Phase::Recovering });
+            self.set_phase(if first { Phase::BringUp } else { Phase::Recovering });
+            self.events.rebase();
             let result = bring_up(&mut self.port, &self.config);
             self.publish_status();
             let layout = match result {
@@ -153,12 +162,13 @@ impl<L: Link> Engine<L> {
                 Err(e) => {
                     error!(error = %e, "bring-up failed");
                     self.telemetry.set_error(format!("bring-up: {e}"));
+                    self.events.emit(EventKind::BringUpFailed(e.to_string()));
                     if !self.config.recovery.enabled || !self.pause(backoff) {
                         return self.stopped();
                     }
                     backoff = (backoff * 2).min(Duration::from_millis(self.config.recovery.max_backoff_ms));
                     first = false;
-                    self.telemetry.set_phase(Phase::Recovering);
+                    self.set_phase(Phase::Recovering);
                     self.telemetry.recoveries.fetch_add(1, Relaxed);
                     continue;
                 }
@@ -183,14 +193,15 @@ impl<L: Link> Engine<L> {
                 Cyclic::new(plan, self.port.data_size(), ring, self.epoch)
             });
             *self.layout.lock().unwrap_or_else(|e| e.into_inner()) = layout;
-            self.telemetry.set_phase(Phase::Running);
+            self.set_phase(Phase::Running);
             match self.running(cyclic) {
                 Exit::Stop => return self.stopped(),
                 Exit::Recover(why) => {
                     warn!(reason = %why, "recovering");
                     self.telemetry.set_error(format!("recovery: {why}"));
                     // Phase first: no one may see "running" while recovering.
-                    self.telemetry.set_phase(Phase::Recovering);
+                    self.set_phase(Phase::Recovering);
+                    self.events.emit(EventKind::Recovering(why.clone()));
                     self.telemetry.recoveries.fetch_add(1, Relaxed);
                     self.fail_all(EngineError::Unavailable(format!("recovering: {why}")));
                     if !self.config.recovery.enabled || !self.pause(backoff) {
@@ -201,9 +212,17 @@ impl<L: Link> Engine<L> {
         }
     }
 
+    /// Publishes a phase change, to the status snapshot and as an event.
+    fn set_phase(&mut self, p: Phase) {
+        if self.telemetry.phase() != p || p == Phase::BringUp {
+            self.events.emit(EventKind::Phase(p));
+        }
+        self.telemetry.set_phase(p);
+    }
+
     fn stopped(mut self) {
         self.fail_all(EngineError::Unavailable("stopped".into()));
-        self.telemetry.set_phase(Phase::Stopped);
+        self.set_phase(Phase::Stopped);
         info!("engine stopped");
     }
 
@@ -236,9 +255,10 @@ impl<L: Link> Engine<L> {
         }
     }
 
-    fn publish_status(&self) {
+    fn publish_status(&mut self) {
         let s = self.port.stats();
         self.telemetry.header(self.port.status());
+        self.events.header(self.port.status(), Instant::now());
         self.telemetry.exchanges.store(s.exchanges, Relaxed);
         self.telemetry.corrupt.store(s.corrupt, Relaxed);
         self.telemetry.not_ready.store(s.not_ready, Relaxed);
@@ -292,6 +312,10 @@ impl<L: Link> Engine<L> {
         let mut wkc_errors = self.port.status().wkc_errors;
         // (first WKC error of a streak, last one seen)
         let mut wkc_streak: Option<(Instant, Instant)> = None;
+        // A FIFO error bit left from before this run (a fault, the bring-up)
+        // is cleared, not reported.
+        let mut fifo_dry = true;
+        self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
         loop {
             if !self.take_commands() {
                 return self.safe_stop(cyclic.as_mut());
@@ -366,11 +390,18 @@ impl<L: Link> Engine<L> {
             if cyclic.is_some() && !h.status.flags.contains(StatusFlags::PDO_CONFIGURED) {
                 return Exit::Recover("process-data exchange stopped (working-counter limit)".into());
             }
-            if h.errors.contains(ErrorFlags::FIFO_ERROR) {
+            // The FIFO error bit stays set until cleared, and headers lag the
+            // clear: one alarm per rising edge, not one per header showing it.
+            let dry = h.errors.contains(ErrorFlags::FIFO_ERROR);
+            if dry && !fifo_dry {
                 self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
+                self.events.emit(EventKind::FifoUnderrun);
                 warn!("RxFIFO ran dry: outputs repeated");
+            }
+            if dry {
                 self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
             }
+            fifo_dry = dry;
             if !progressed {
                 let now = Instant::now();
                 let wake = match cyclic.as_ref() {
@@ -505,6 +536,7 @@ impl<L: Link> Engine<L> {
 
     /// The last output writer went away: `outputs.on_last_writer_gone`.
     fn last_writer_gone(&mut self, cyclic: Option<&mut Cyclic>) {
+        self.events.emit(EventKind::LastWriterGone(self.config.outputs.on_last_writer_gone));
         match self.config.outputs.on_last_writer_gone {
             WriterGoneAction::HoldLast => info!("last output writer gone: holding the last outputs"),
             WriterGoneAction::Zero => {
@@ -528,7 +560,7 @@ impl<L: Link> Engine<L> {
     /// Safe stop: CiA402 axes disabled through the helper, slaves to SAFE-OP
     /// then INIT.
     fn safe_stop(&mut self, cyclic: Option<&mut Cyclic>) -> Exit {
-        self.telemetry.set_phase(Phase::Stopping);
+        self.set_phase(Phase::Stopping);
         info!("safe stop");
         let mut fifo_pending = false;
         for n in 0..self.config.axes.len() {

@@ -1,0 +1,247 @@
+//! Supervision events: what changed on the chip or the network, for
+//! diagnostics clients and logs. The engine thread only compares each
+//! answer's header with the previous one and pushes into a wait-free ring
+//! (no lock shared with async code); the distributor thread forwards to
+//! subscribers.
+//!
+//! Counters that can rise every cycle during a fault (CRC errors, WKC
+//! errors) are reported at most every [`COUNTER_QUIET`], with the total, so
+//! a fault cannot flood the ring. Events that do not fit are counted and
+//! reported as [`EventKind::Lost`] once there is room.
+
+use std::thread::Thread;
+use std::time::{Duration, Instant};
+
+use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
+use ecmxf_wire::{EcatState, ResponseHeader};
+
+use super::telemetry::Phase;
+use crate::config::WriterGoneAction;
+
+/// Shortest interval between two reports of the same counter.
+pub const COUNTER_QUIET: Duration = Duration::from_millis(100);
+/// Events the ring holds before the oldest unread are lost.
+pub const RING: usize = 256;
+
+/// One event.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Event {
+    /// When, ns since the engine started.
+    pub time_ns: u64,
+    /// What.
+    pub kind: EventKind,
+}
+
+/// What happened.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum EventKind {
+    /// The engine entered a phase (bring-up, running, recovering...).
+    Phase(Phase),
+    /// The network's EtherCAT state as the chip reports it changed.
+    EcatState {
+        /// Before.
+        from: EcatState,
+        /// Now.
+        to: EcatState,
+    },
+    /// The chip's LINK pin changed (error byte bit0; its polarity depends on
+    /// the board).
+    LinkPin(bool),
+    /// The DC cycle became stable (true) or lost stability (status bit2).
+    DcStable(bool),
+    /// The chip counted packets with bad check words; `total` is its counter.
+    CrcErrors {
+        /// The chip's counter now.
+        total: u8,
+    },
+    /// The chip counted cycles with a wrong working counter.
+    WkcErrors {
+        /// The chip's counter now.
+        total: u8,
+    },
+    /// The RxFIFO ran dry: the slaves got repeated outputs.
+    FifoUnderrun,
+    /// Bring-up failed; the reason.
+    BringUpFailed(String),
+    /// A fault was seen; recovery starts. The reason.
+    Recovering(String),
+    /// The last output writer went away and this was done.
+    LastWriterGone(WriterGoneAction),
+    /// Events dropped because no one read them in time.
+    Lost(u64),
+}
+
+/// The engine side: detects changes and pushes events.
+#[derive(Debug)]
+pub struct EventSink {
+    ring: rtrb::Producer<Event>,
+    epoch: Instant,
+    waker: Option<Thread>,
+    seen: Option<Seen>,
+    crc_reported: Option<Instant>,
+    wkc_reported: Option<Instant>,
+    /// Counter values last reported.
+    crc_told: u8,
+    wkc_told: u8,
+    lost: u64,
+}
+
+/// What the previous header said.
+#[derive(Clone, Copy, Debug)]
+struct Seen {
+    state: EcatState,
+    link: bool,
+    dc_stable: bool,
+    crc_errors: u8,
+    wkc_errors: u8,
+}
+
+impl Seen {
+    fn of(h: &ResponseHeader) -> Self {
+        Self {
+            state: h.ecat_state,
+            link: h.errors.contains(ErrorFlags::LINK_PIN),
+            dc_stable: h.status.flags.contains(StatusFlags::DC_STABLE),
+            crc_errors: h.crc_errors,
+            wkc_errors: h.wkc_errors,
+        }
+    }
+}
+
+impl EventSink {
+    /// A sink into `ring`; `waker` is unparked after each push.
+    pub fn new(ring: rtrb::Producer<Event>, epoch: Instant, waker: Option<Thread>) -> Self {
+        Self {
+            ring,
+            epoch,
+            waker,
+            seen: None,
+            crc_reported: None,
+            wkc_reported: None,
+            crc_told: 0,
+            wkc_told: 0,
+            lost: 0,
+        }
+    }
+
+    /// Pushes an event (counted as lost when the ring is full).
+    pub fn emit(&mut self, kind: EventKind) {
+        let time_ns = self.epoch.elapsed().as_nanos() as u64;
+        if self.lost > 0 && self.ring.slots() >= 2 {
+            let lost = std::mem::take(&mut self.lost);
+            let _ = self.ring.push(Event { time_ns, kind: EventKind::Lost(lost) });
+        }
+        if self.ring.push(Event { time_ns, kind }).is_err() {
+            self.lost += 1;
+        }
+        if let Some(w) = &self.waker {
+            w.unpark();
+        }
+    }
+
+    /// Compares an answer's header with the previous one. A chip that
+    /// answers NOP (just reset) has no meaningful state and is skipped.
+    pub fn header(&mut self, h: &ResponseHeader, now: Instant) {
+        if h.is_nop() {
+            return;
+        }
+        let new = Seen::of(h);
+        let Some(old) = self.seen.replace(new) else {
+            (self.crc_told, self.wkc_told) = (new.crc_errors, new.wkc_errors);
+            return;
+        };
+        if new.state != old.state {
+            self.emit(EventKind::EcatState { from: old.state, to: new.state });
+        }
+        if new.link != old.link {
+            self.emit(EventKind::LinkPin(new.link));
+        }
+        if new.dc_stable != old.dc_stable {
+            self.emit(EventKind::DcStable(new.dc_stable));
+        }
+        // The counters are u8 and wrap; any change from what was last
+        // reported is news, told at most every COUNTER_QUIET.
+        if new.crc_errors != self.crc_told && quiet(&mut self.crc_reported, now) {
+            self.crc_told = new.crc_errors;
+            self.emit(EventKind::CrcErrors { total: new.crc_errors });
+        }
+        if new.wkc_errors != self.wkc_told && quiet(&mut self.wkc_reported, now) {
+            self.wkc_told = new.wkc_errors;
+            self.emit(EventKind::WkcErrors { total: new.wkc_errors });
+        }
+    }
+
+    /// Forgets the previous header (after a chip reset or re-init, the
+    /// first header is a new baseline).
+    pub fn rebase(&mut self) {
+        self.seen = None;
+    }
+}
+
+/// Whether a counter may be reported now; notes the report.
+fn quiet(last: &mut Option<Instant>, now: Instant) -> bool {
+    if last.is_some_and(|t| now.duration_since(t) < COUNTER_QUIET) {
+        return false;
+    }
+    *last = Some(now);
+    true
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ecmxf_wire::CommandCode;
+
+    fn header(state: EcatState, crc: u8, link: bool) -> ResponseHeader {
+        let mut h =
+            ResponseHeader { code: CommandCode::InfoUpdate, ecat_state: state, crc_errors: crc, ..Default::default() };
+        h.status.flags = StatusFlags::ETHERNET_READY;
+        h.errors.set(ErrorFlags::LINK_PIN, link);
+        h
+    }
+
+    fn drain(c: &mut rtrb::Consumer<Event>) -> Vec<EventKind> {
+        std::iter::from_fn(|| c.pop().ok()).map(|e| e.kind).collect()
+    }
+
+    #[test]
+    fn changes_become_events_and_repeats_do_not() {
+        let (p, mut c) = rtrb::RingBuffer::new(RING);
+        let mut s = EventSink::new(p, Instant::now(), None);
+        let t = Instant::now();
+        s.header(&header(EcatState::PreOp, 0, true), t);
+        s.header(&header(EcatState::PreOp, 0, true), t);
+        assert!(drain(&mut c).is_empty(), "the first header is the baseline");
+        s.header(&header(EcatState::Op, 0, false), t);
+        assert_eq!(
+            drain(&mut c),
+            [EventKind::EcatState { from: EcatState::PreOp, to: EcatState::Op }, EventKind::LinkPin(false)]
+        );
+    }
+
+    #[test]
+    fn counters_are_reported_at_most_every_quiet_interval() {
+        let (p, mut c) = rtrb::RingBuffer::new(RING);
+        let mut s = EventSink::new(p, Instant::now(), None);
+        let t = Instant::now();
+        s.header(&header(EcatState::Op, 0, true), t);
+        for n in 1..=50u8 {
+            s.header(&header(EcatState::Op, n, true), t + Duration::from_millis(u64::from(n)));
+        }
+        assert_eq!(drain(&mut c), [EventKind::CrcErrors { total: 1 }]);
+        s.header(&header(EcatState::Op, 50, true), t + Duration::from_millis(200));
+        assert_eq!(drain(&mut c), [EventKind::CrcErrors { total: 50 }], "the rise is not forgotten");
+    }
+
+    #[test]
+    fn a_full_ring_counts_what_it_lost() {
+        let (p, mut c) = rtrb::RingBuffer::new(4);
+        let mut s = EventSink::new(p, Instant::now(), None);
+        for _ in 0..10 {
+            s.emit(EventKind::FifoUnderrun);
+        }
+        assert_eq!(drain(&mut c).len(), 4);
+        s.emit(EventKind::Phase(Phase::Running));
+        assert_eq!(drain(&mut c), [EventKind::Lost(6), EventKind::Phase(Phase::Running)]);
+    }
+}
