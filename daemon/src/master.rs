@@ -24,8 +24,8 @@ use crate::engine::bringup::NetworkLayout;
 use crate::engine::cyclic::read_record;
 use crate::engine::error::EngineError;
 use crate::engine::events::Event;
-use crate::engine::job::{Job, OutputWrite, Request, TransferProgress, Writers};
-use crate::engine::telemetry::{Snapshot, Telemetry};
+use crate::engine::job::{Job, NetworkAction, OutputWrite, PendingAction, Request, TransferProgress, Writers};
+use crate::engine::telemetry::{Phase, Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
 use crate::link::sim::{SimHandle, SimLink};
 use crate::link::{Link, LinkError};
@@ -136,6 +136,7 @@ pub struct Master {
     threads: Mutex<Vec<JoinHandle<()>>>,
     stop_distributor: Arc<AtomicBool>,
     writers: Arc<Writers>,
+    action: Arc<PendingAction>,
     /// Timeout for requests that give none.
     pub default_timeout: Duration,
 }
@@ -188,6 +189,7 @@ impl Master {
         let telemetry = Arc::new(Telemetry::default());
         let layout = Arc::new(Mutex::new(NetworkLayout::default()));
         let writers = Arc::new(Writers::default());
+        let action = Arc::new(PendingAction::default());
         let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
         let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
         let (events, _) = broadcast::channel(EVENT_BACKLOG);
@@ -223,6 +225,7 @@ impl Master {
             distributor: Some(distributor.thread().clone()),
             writers: Arc::clone(&writers),
             events: event_producer,
+            action: Arc::clone(&action),
         };
         let rt = config.realtime.clone();
         let engine = std::thread::Builder::new()
@@ -242,6 +245,7 @@ impl Master {
             threads: Mutex::new(vec![engine, distributor]),
             stop_distributor,
             writers,
+            action,
             default_timeout: Duration::from_secs(3),
         }
     }
@@ -383,6 +387,13 @@ impl Master {
         self.request(Request::SetState { target, state }, timeout).await.map(|_| ())
     }
 
+    /// The state a slave (or, for `All`, the network) is in now, freshly
+    /// read from the slaves.
+    pub async fn get_state(&self, target: SlaveSelector, timeout: Option<Duration>) -> Result<EcatState, EngineError> {
+        let d = self.request(Request::GetState { target }, timeout).await?;
+        Ok(EcatState::from_u8(d.first().copied().unwrap_or(0)))
+    }
+
     /// One item of slave information, as the chip answers it; decode with
     /// [`SlaveInfo::decode`] for `item`.
     pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
@@ -491,6 +502,42 @@ impl Master {
     /// Output writers now.
     pub fn output_writers(&self) -> usize {
         self.writers.count()
+    }
+
+    /// Scans the network again and redoes the whole bring-up from the
+    /// configuration (mapping, start-up SDOs, states); returns once the
+    /// network runs again. Requests in flight fail with `Unavailable`.
+    pub async fn reinit(&self, timeout: Option<Duration>) -> Result<(), EngineError> {
+        self.network_action(NetworkAction::Reinit, timeout).await
+    }
+
+    /// Warm-resets the chip (cmd 127), then redoes the bring-up; returns once
+    /// the network runs again.
+    pub async fn warm_reset(&self, timeout: Option<Duration>) -> Result<(), EngineError> {
+        self.network_action(NetworkAction::WarmReset, timeout).await
+    }
+
+    async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
+        if self.status().phase != Phase::Running {
+            let why = self.last_error().unwrap_or_else(|| format!("{:?}", self.status().phase));
+            return Err(EngineError::Unavailable(format!("the network is not running: {why}")));
+        }
+        let deadline = Instant::now() + timeout.unwrap_or(Duration::from_secs(30));
+        let before = self.status().recoveries;
+        self.action.request(action);
+        loop {
+            let s = self.status();
+            if s.recoveries > before && s.phase == Phase::Running {
+                return Ok(());
+            }
+            if s.phase == Phase::Stopped {
+                return Err(EngineError::Unavailable("engine stopped".into()));
+            }
+            if Instant::now() >= deadline {
+                return Err(EngineError::Timeout);
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
     }
 
     /// A new subscriber to supervision events (state changes, link, DC,

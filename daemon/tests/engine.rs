@@ -133,6 +133,13 @@ fn sdo_read_write_abort_and_slave_info() {
         m.eeprom_write(2, 0x04, 0x0033, None).await.unwrap();
         assert_eq!(&m.eeprom_read(2, 0x04, None).await.unwrap()[..2], &[0x33, 0x00]);
         assert!(m.write_outputs(60, &[0]).is_err(), "beyond the output image");
+        // States, freshly read.
+        use ecmxf_wire::payload::state::SlaveSelector;
+        for target in [SlaveSelector::All, SlaveSelector::One(0), SlaveSelector::One(2)] {
+            assert_eq!(m.get_state(target, None).await.unwrap(), EcatState::Op, "{target:?}");
+        }
+        let e = m.get_state(SlaveSelector::One(9), None).await.unwrap_err();
+        assert!(matches!(e, EngineError::BadArgument { field: "slave", .. }), "{e}");
         // Ranges: vendor id, product code, revision (words 8..14), odd count.
         let words = m.eeprom_read_words(1, 0x08, 5, None).await.unwrap();
         assert_eq!(words, [0x059D, 0, 0x0402, 0, *words.get(4).unwrap()]);
@@ -374,5 +381,33 @@ fn pdo_configuration_read_matches_the_object_dictionary() {
         let e = m.pdo_config_read(0, 0x1600, None).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "assign_index", .. }), "{e}");
         assert!(m.pdo_config_read(9, 0x1C12, None).await.is_err(), "no slave 9");
+    });
+}
+
+#[test]
+fn clients_can_reinit_and_warm_reset_the_network() {
+    let (m, sim, _serial) = start();
+    rt().block_on(async {
+        let mut events = m.events();
+        m.sdo_write(0, 0x6083, 0, false, 4242u32.to_le_bytes().to_vec(), None).await.unwrap();
+        m.reinit(None).await.unwrap();
+        assert_eq!(m.status().phase, Phase::Running);
+        assert_eq!(m.layout().slaves.len(), 3);
+        // The chip's staging flash survives a re-init, not a warm reset.
+        m.foe_write(1, "f", 0, vec![1, 2, 3], None, None).await.unwrap();
+        assert_eq!(sim.with_chip(|c| c.flash[..3].to_vec()), [1, 2, 3]);
+        m.warm_reset(None).await.unwrap();
+        assert_eq!(m.status().recoveries, 2);
+        assert_eq!(sim.with_chip(|c| c.flash[..3].to_vec()), [0xFF; 3], "the chip was reset");
+        let mut reasons = Vec::new();
+        while let Ok(e) = events.try_recv() {
+            if let EventKind::Recovering(r) = e.kind {
+                reasons.push(r);
+            }
+        }
+        assert_eq!(reasons.len(), 2, "{reasons:?}");
+        assert!(reasons[0].contains("re-init") && reasons[1].contains("warm reset"), "{reasons:?}");
+        // Everything works after both.
+        assert_eq!(m.sdo_read(1, 0x1018, 1, false, None).await.unwrap(), 0x059Du32.to_le_bytes());
     });
 }

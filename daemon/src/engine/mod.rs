@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags, StatusFlags};
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
-use ecmxf_wire::payload::control::InfoUpdate;
+use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::fifo::FifoEnable;
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
 use ecmxf_wire::payload::slave_info::SlaveCountGet;
@@ -40,7 +40,7 @@ use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
 use events::{Event, EventKind, EventSink};
-use job::{Job, OutputWrite, Writers};
+use job::{Job, NetworkAction, OutputWrite, PendingAction, Writers};
 use telemetry::{Phase, Telemetry};
 use transaction::{Active, Progress};
 
@@ -88,6 +88,7 @@ pub struct Engine<L> {
     distributor: Option<Thread>,
     writers: Arc<Writers>,
     events: EventSink,
+    action: Arc<PendingAction>,
     queue: VecDeque<Job>,
     active: Option<Active>,
     epoch: Instant,
@@ -122,6 +123,8 @@ pub struct Parts<L> {
     pub writers: Arc<Writers>,
     /// Supervision events out.
     pub events: rtrb::Producer<Event>,
+    /// Re-init or warm reset asked for by a client.
+    pub action: Arc<PendingAction>,
 }
 
 impl<L: Link> Engine<L> {
@@ -141,6 +144,7 @@ impl<L: Link> Engine<L> {
             ring: Some(p.ring),
             distributor: p.distributor,
             writers: p.writers,
+            action: p.action,
             events,
             queue: VecDeque::with_capacity(64),
             active: None,
@@ -331,6 +335,15 @@ impl<L: Link> Engine<L> {
             }
             if self.writers.take_gone() {
                 self.last_writer_gone(cyclic.as_mut());
+            }
+            match self.action.take() {
+                Some(NetworkAction::Reinit) => return Exit::Recover("re-init requested by a client".into()),
+                Some(NetworkAction::WarmReset) => {
+                    // The chip resets at once; its answer may never come.
+                    let _ = self.port.call(&WarmReset);
+                    return Exit::Recover("warm reset requested by a client".into());
+                }
+                None => {}
             }
             let now = Instant::now();
             if self.active.is_none() && self.queue.is_empty() && now.duration_since(last_census) >= CENSUS {

@@ -13,6 +13,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset};
+use ecmxf_wire::payload::ecat_init::StateUpdate;
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
 use ecmxf_wire::payload::foe::{
     FOE_FLASH_SIZE, FOE_HEADER_LEN, FOE_MAX_CHUNK, FoeGet, FoeReply, FoeRequest, FoeTransfer,
@@ -23,7 +24,7 @@ use ecmxf_wire::payload::sdo::{
     SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest,
 };
 use ecmxf_wire::payload::slave_info::SlaveInfoGet;
-use ecmxf_wire::payload::state::StateCheck;
+use ecmxf_wire::payload::state::{StateCheck, StateGet};
 use ecmxf_wire::{Reply, ReplyFields};
 
 use super::error::EngineError;
@@ -178,6 +179,7 @@ impl Active {
                 timeout_us: 100_000,
             })?,
             Request::SetState { target, state } => port.call(&StateCheck { target: *target, state: *state })?,
+            Request::GetState { .. } => port.call(&StateUpdate)?,
             Request::PdoConfigRead { slave, assign_index } => {
                 port.call(&PdoConfigReq { slave: *slave, assign_index: *assign_index })?
             }
@@ -434,6 +436,18 @@ impl Active {
             }
             (Request::SetState { state, .. }, true) => Err(EngineError::WrongState(format!("a slave refused {state}"))),
             (Request::SetState { .. }, false) => Ok(Vec::new()),
+            (Request::GetState { .. }, true) => {
+                Err(EngineError::Failed("the slaves' states could not be refreshed".into()))
+            }
+            (Request::GetState { target }, false) => {
+                let a = port.call(&StateGet(*target))?;
+                if refused(&a) {
+                    port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+                    Err(EngineError::BadArgument { field: "slave", reason: format!("no such slave: {target:?}") })
+                } else {
+                    Ok(vec![a.header.return_value])
+                }
+            }
             (Request::SlaveInfo { .. }, _) => Ok(Vec::new()),
             (Request::PdoConfigRead { slave, assign_index }, true) => Err(EngineError::Failed(format!(
                 "PDO assignment {assign_index:#06x} of slave {slave} could not be read"
