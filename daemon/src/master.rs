@@ -6,7 +6,7 @@
 //! broadcast channel: a subscriber that falls behind is told how many frames
 //! it missed and slows no one.
 
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -137,6 +137,9 @@ pub struct Master {
     stop_distributor: Arc<AtomicBool>,
     writers: Arc<Writers>,
     action: Arc<PendingAction>,
+    reconfigure: SyncSender<(u64, Config)>,
+    config: Mutex<Config>,
+    config_generation: AtomicU64,
     /// Timeout for requests that give none.
     pub default_timeout: Duration,
 }
@@ -190,6 +193,7 @@ impl Master {
         let layout = Arc::new(Mutex::new(NetworkLayout::default()));
         let writers = Arc::new(Writers::default());
         let action = Arc::new(PendingAction::default());
+        let (reconfigure, reconfigure_rx) = sync_channel(1);
         let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
         let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
         let (events, _) = broadcast::channel(EVENT_BACKLOG);
@@ -226,6 +230,7 @@ impl Master {
             writers: Arc::clone(&writers),
             events: event_producer,
             action: Arc::clone(&action),
+            reconfigure: reconfigure_rx,
         };
         let rt = config.realtime.clone();
         let engine = std::thread::Builder::new()
@@ -246,6 +251,9 @@ impl Master {
             stop_distributor,
             writers,
             action,
+            reconfigure,
+            config: Mutex::new(config),
+            config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
         }
     }
@@ -517,24 +525,78 @@ impl Master {
         self.network_action(NetworkAction::WarmReset, timeout).await
     }
 
-    async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
+    /// Brings the network up again with `config`: expected slaves, PDO
+    /// mappings, start-up SDOs, axes, DC cycle, FIFO sizes, target state,
+    /// recovery and output policy all take effect (ECAT_INIT, PDO_CONFIG_SET,
+    /// FIFO_INIT... as at start). The link and the real-time settings belong
+    /// to the running process and cannot change. Returns once the network
+    /// runs with it; on a bring-up failure the engine keeps retrying the new
+    /// configuration, and [`Master::last_error`] says why.
+    pub async fn apply_config(&self, config: Config, timeout: Option<Duration>) -> Result<(), EngineError> {
+        config
+            .validate(std::path::Path::new("(applied)"))
+            .map_err(|e| EngineError::BadArgument { field: "config", reason: e.to_string() })?;
+        {
+            let current = self.config.lock().unwrap_or_else(|e| e.into_inner());
+            if config.link != current.link {
+                let reason = "the link cannot change while the daemon runs; restart it".to_string();
+                return Err(EngineError::BadArgument { field: "link", reason });
+            }
+            if config.realtime != current.realtime {
+                let reason = "real-time settings apply at start; restart the daemon".to_string();
+                return Err(EngineError::BadArgument { field: "realtime", reason });
+            }
+        }
+        if matches!(self.status().phase, Phase::Stopping | Phase::Stopped) {
+            return Err(EngineError::Unavailable("engine stopped".into()));
+        }
+        let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
+        self.reconfigure.try_send((generation, config.clone())).map_err(|e| match e {
+            TrySendError::Full(_) => EngineError::QueueFull,
+            TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+        })?;
+        *self.config.lock().unwrap_or_else(|e| e.into_inner()) = config;
+        self.until(timeout, |s| s.config_generation >= generation && s.phase == Phase::Running).await
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> Config {
+        self.config.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    fn running_or_unavailable(&self) -> Result<(), EngineError> {
         if self.status().phase != Phase::Running {
             let why = self.last_error().unwrap_or_else(|| format!("{:?}", self.status().phase));
             return Err(EngineError::Unavailable(format!("the network is not running: {why}")));
         }
-        let deadline = Instant::now() + timeout.unwrap_or(Duration::from_secs(30));
+        Ok(())
+    }
+
+    async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
+        self.running_or_unavailable()?;
         let before = self.status().recoveries;
         self.action.request(action);
+        self.until(timeout, |s| s.recoveries > before && s.phase == Phase::Running).await
+    }
+
+    /// Waits until the status satisfies `done` (default limit 30 s).
+    async fn until(&self, timeout: Option<Duration>, done: impl Fn(&Snapshot) -> bool) -> Result<(), EngineError> {
+        let deadline = Instant::now() + timeout.unwrap_or(Duration::from_secs(30));
         loop {
             let s = self.status();
-            if s.recoveries > before && s.phase == Phase::Running {
+            if done(&s) {
                 return Ok(());
             }
             if s.phase == Phase::Stopped {
                 return Err(EngineError::Unavailable("engine stopped".into()));
             }
             if Instant::now() >= deadline {
-                return Err(EngineError::Timeout);
+                return Err(match self.last_error() {
+                    Some(why) if s.phase != Phase::Running => {
+                        EngineError::Failed(format!("the network is not back up yet: {why}"))
+                    }
+                    _ => EngineError::Timeout,
+                });
             }
             tokio::time::sleep(Duration::from_millis(10)).await;
         }

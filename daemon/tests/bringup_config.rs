@@ -220,3 +220,41 @@ fn quick_stop_needs_an_axis() {
         .to_string();
     assert!(e.contains("drop") && e.contains("hold-last"), "{e}");
 }
+
+#[test]
+fn a_new_configuration_is_applied_while_running() {
+    let m = running(CONFIG);
+    assert_eq!(m.layout().slaves[1].rx_bytes, 7);
+    let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
+    rt.block_on(async {
+        // The TI drive remapped (no mode byte), another start-up value.
+        let text = CONFIG
+            .replace("[[0x6040, 0, 16], [0x6060, 0, 8], [0x607A, 0, 32]]", "[[0x6040, 0, 16], [0x607A, 0, 32]]")
+            .replace("value = 5555", "value = 6666");
+        let new = Config::parse(&text, "t.toml".as_ref()).unwrap();
+        m.apply_config(new.clone(), Some(Duration::from_secs(20))).await.unwrap();
+        assert_eq!(m.layout().slaves[1].rx_bytes, 6, "the new mapping took");
+        assert_eq!(m.sdo_read(0, 0x6083, 0, false, None).await.unwrap(), 6666u32.to_le_bytes());
+        assert_eq!(m.config(), new);
+
+        // What cannot change names itself, and nothing happens.
+        let mut other = new.clone();
+        other.link = ecmxfd::config::LinkConfig::SimSocket { socket: "/tmp/x.sock".into() };
+        let e = m.apply_config(other, None).await.unwrap_err();
+        assert!(matches!(e, ecmxfd::engine::error::EngineError::BadArgument { field: "link", .. }), "{e}");
+        let mut other = new.clone();
+        other.cycle.sync0_us = 100;
+        let e = m.apply_config(other, None).await.unwrap_err();
+        assert!(e.to_string().contains("sync0_us"), "{e}");
+        assert_eq!(m.status().recoveries, 1);
+
+        // A configuration the network does not match: the error names the
+        // slave; a good one brings it back.
+        let wrong = Config::parse(&text.replace("product_code = 0x402", "product_code = 0x403"), "t.toml".as_ref());
+        let e = m.apply_config(wrong.unwrap(), Some(Duration::from_secs(2))).await.unwrap_err();
+        assert!(e.to_string().contains("slave 1"), "{e}");
+        m.apply_config(new, Some(Duration::from_secs(30))).await.unwrap_or_else(|e| panic!("{e}"));
+        assert_eq!(m.status().phase, Phase::Running);
+    });
+    m.stop();
+}

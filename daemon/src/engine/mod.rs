@@ -89,6 +89,7 @@ pub struct Engine<L> {
     writers: Arc<Writers>,
     events: EventSink,
     action: Arc<PendingAction>,
+    reconfigure: Receiver<(u64, Config)>,
     queue: VecDeque<Job>,
     active: Option<Active>,
     epoch: Instant,
@@ -125,6 +126,9 @@ pub struct Parts<L> {
     pub events: rtrb::Producer<Event>,
     /// Re-init or warm reset asked for by a client.
     pub action: Arc<PendingAction>,
+    /// A new configuration to bring the network up with, and its number
+    /// (published in the telemetry once taken).
+    pub reconfigure: Receiver<(u64, Config)>,
 }
 
 impl<L: Link> Engine<L> {
@@ -145,6 +149,7 @@ impl<L: Link> Engine<L> {
             distributor: p.distributor,
             writers: p.writers,
             action: p.action,
+            reconfigure: p.reconfigure,
             events,
             queue: VecDeque::with_capacity(64),
             active: None,
@@ -231,10 +236,29 @@ impl<L: Link> Engine<L> {
     }
 
     /// Waits `d` while refusing requests; false when told to stop.
+    /// Takes a configuration a client sent, if any. Only what bring-up
+    /// applies changes; the link and the thread stay as they are.
+    fn take_new_config(&mut self) -> bool {
+        let Ok((generation, config)) = self.reconfigure.try_recv() else {
+            return false;
+        };
+        // Phase first: a caller waiting for "running with my configuration"
+        // must not mistake the old run for the new one.
+        self.set_phase(Phase::Recovering);
+        self.config = config;
+        self.telemetry.config_generation.store(generation, Relaxed);
+        true
+    }
+
+    /// Waits `d` while refusing requests; false when told to stop. A new
+    /// configuration ends the wait: it is tried at once.
     fn pause(&mut self, d: Duration) -> bool {
         let until = Instant::now() + d;
         while let Some(left) = until.checked_duration_since(Instant::now()) {
-            match self.commands.recv_timeout(left) {
+            if self.take_new_config() {
+                return true;
+            }
+            match self.commands.recv_timeout(left.min(Duration::from_millis(20))) {
                 Ok(Command::Job(j)) => {
                     let _ = j.reply.send(Err(EngineError::Unavailable("bringing the network up".into())));
                 }
@@ -335,6 +359,9 @@ impl<L: Link> Engine<L> {
             }
             if self.writers.take_gone() {
                 self.last_writer_gone(cyclic.as_mut());
+            }
+            if self.take_new_config() {
+                return Exit::Recover("new configuration from a client".into());
             }
             match self.action.take() {
                 Some(NetworkAction::Reinit) => return Exit::Recover("re-init requested by a client".into()),

@@ -71,6 +71,9 @@ pub struct Telemetry {
     /// RxFIFO needs (a thread stalled by the OS or the hypervisor shows
     /// here).
     pub max_fifo_gap_us: AtomicU64,
+    /// The number of the last configuration a client applied that the
+    /// engine has taken (0: the one it started with).
+    pub config_generation: AtomicU64,
     /// The last bring-up or recovery reason; written only when something
     /// fails, never on the cycle path.
     last_error: Mutex<Option<String>>,
@@ -107,6 +110,8 @@ pub struct Snapshot {
     pub recoveries: u64,
     /// Longest gap between FIFO exchanges, us.
     pub max_fifo_gap_us: u64,
+    /// The last applied configuration the engine has taken (0: the first).
+    pub config_generation: u64,
 }
 
 impl Telemetry {
@@ -158,6 +163,7 @@ impl Telemetry {
             fifo_alarms: self.fifo_alarms.load(Relaxed),
             recoveries: self.recoveries.load(Relaxed),
             max_fifo_gap_us: self.max_fifo_gap_us.load(Relaxed),
+            config_generation: self.config_generation.load(Relaxed),
         }
     }
 }
