@@ -6,7 +6,7 @@
 //! broadcast channel: a subscriber that falls behind is told how many frames
 //! it missed and slows no one.
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU32, AtomicU64, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
 use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
@@ -24,7 +24,9 @@ use crate::engine::bringup::NetworkLayout;
 use crate::engine::cyclic::read_record;
 use crate::engine::error::EngineError;
 use crate::engine::events::Event;
-use crate::engine::job::{Job, NetworkAction, OutputWrite, PendingAction, Request, TransferProgress, Writers};
+use crate::engine::job::{
+    Job, NetworkAction, OUTPUT_CHUNK, OutputWrite, PendingAction, Request, TransferProgress, Writers,
+};
 use crate::engine::telemetry::{Phase, Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
 use crate::link::sim::{SimHandle, SimLink};
@@ -51,17 +53,17 @@ pub struct InputFrame {
 /// A client's lease on the outputs (see [`Master::output_writer`]).
 #[derive(Debug)]
 pub struct OutputWriter {
-    outputs: SyncSender<OutputWrite>,
+    outputs: Arc<OutputSender>,
     layout: Arc<Mutex<NetworkLayout>>,
     writers: Arc<Writers>,
 }
 
 impl OutputWriter {
     /// Writes bytes into the output image at `offset` (of the whole output
-    /// frame); they go out with the next frames pushed.
+    /// frame); they go out together with the next frames pushed.
     pub fn write(&self, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
         let size = self.layout.lock().unwrap_or_else(|e| e.into_inner()).rx_size;
-        send_outputs(&self.outputs, size, offset, bytes)
+        self.outputs.send(size, offset, bytes)
     }
 }
 
@@ -71,28 +73,48 @@ impl Drop for OutputWriter {
     }
 }
 
-fn send_outputs(
-    outputs: &SyncSender<OutputWrite>,
-    size: usize,
-    offset: usize,
-    bytes: &[u8],
-) -> Result<(), EngineError> {
-    if offset.saturating_add(bytes.len()) > size {
-        return Err(EngineError::BadArgument {
-            field: "offset",
-            reason: format!("{} bytes at {offset} exceed the {size}-byte output image", bytes.len()),
-        });
+/// The async side of the output queue: cuts writes into chunks that stay
+/// together (one lock, held only while queuing and never touched by the
+/// engine thread) under one batch number.
+#[derive(Debug)]
+struct OutputSender {
+    tx: SyncSender<OutputWrite>,
+    queuing: Mutex<()>,
+    next_batch: AtomicU32,
+}
+
+impl OutputSender {
+    fn send(&self, size: usize, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
+        if offset.saturating_add(bytes.len()) > size {
+            return Err(EngineError::BadArgument {
+                field: "offset",
+                reason: format!("{} bytes at {offset} exceed the {size}-byte output image", bytes.len()),
+            });
+        }
+        if bytes.is_empty() {
+            return Ok(());
+        }
+        let _queuing = self.queuing.lock().unwrap_or_else(|e| e.into_inner());
+        let batch = self.next_batch.fetch_add(1, Ordering::Relaxed);
+        let chunks = bytes.len().div_ceil(OUTPUT_CHUNK);
+        for (i, chunk) in bytes.chunks(OUTPUT_CHUNK).enumerate() {
+            let mut data = [0u8; OUTPUT_CHUNK];
+            data[..chunk.len()].copy_from_slice(chunk);
+            let w = OutputWrite {
+                batch,
+                last: i + 1 == chunks,
+                offset: (offset + i * OUTPUT_CHUNK) as u32,
+                len: chunk.len() as u8,
+                data,
+            };
+            // A write cut short here is dropped whole by the engine.
+            self.tx.try_send(w).map_err(|e| match e {
+                TrySendError::Full(_) => EngineError::QueueFull,
+                TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+            })?;
+        }
+        Ok(())
     }
-    for (i, chunk) in bytes.chunks(32).enumerate() {
-        let mut data = [0u8; 32];
-        data[..chunk.len()].copy_from_slice(chunk);
-        let w = OutputWrite { offset: (offset + i * 32) as u32, len: chunk.len() as u8, data };
-        outputs.try_send(w).map_err(|e| match e {
-            TrySendError::Full(_) => EngineError::QueueFull,
-            TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
-        })?;
-    }
-    Ok(())
 }
 
 /// What a raw datagram brought back.
@@ -128,7 +150,7 @@ impl std::error::Error for StartError {}
 #[derive(Debug)]
 pub struct Master {
     commands: SyncSender<Command>,
-    outputs: SyncSender<OutputWrite>,
+    outputs: Arc<OutputSender>,
     telemetry: Arc<Telemetry>,
     layout: Arc<Mutex<NetworkLayout>>,
     inputs: broadcast::Sender<Arc<InputFrame>>,
@@ -188,7 +210,8 @@ impl Master {
     /// the input distributor.
     pub fn start<L: Link + 'static>(link: L, config: Config) -> Self {
         let (commands, command_rx) = sync_channel(QUEUE_DEPTH);
-        let (outputs, output_rx) = sync_channel(1024);
+        let (output_tx, output_rx) = sync_channel(1024);
+        let outputs = Arc::new(OutputSender { tx: output_tx, queuing: Mutex::new(()), next_batch: AtomicU32::new(0) });
         let telemetry = Arc::new(Telemetry::default());
         let layout = Arc::new(Mutex::new(NetworkLayout::default()));
         let writers = Arc::new(Writers::default());
@@ -493,7 +516,7 @@ impl Master {
     /// Anonymous: it does not count as a writer for
     /// `outputs.on_last_writer_gone`; clients use [`Master::output_writer`].
     pub fn write_outputs(&self, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
-        send_outputs(&self.outputs, self.layout().rx_size, offset, bytes)
+        self.outputs.send(self.layout().rx_size, offset, bytes)
     }
 
     /// A counted writer of outputs: when the last one is dropped, the
@@ -501,7 +524,7 @@ impl Master {
     pub fn output_writer(&self) -> OutputWriter {
         self.writers.acquire();
         OutputWriter {
-            outputs: self.outputs.clone(),
+            outputs: Arc::clone(&self.outputs),
             layout: Arc::clone(&self.layout),
             writers: Arc::clone(&self.writers),
         }

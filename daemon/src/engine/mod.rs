@@ -40,7 +40,7 @@ use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
 use events::{Event, EventKind, EventSink};
-use job::{Job, NetworkAction, OutputWrite, PendingAction, Writers};
+use job::{Job, NetworkAction, OutputAssembler, OutputWrite, PendingAction, Writers};
 use telemetry::{Phase, Telemetry};
 use transaction::{Active, Progress};
 
@@ -90,6 +90,7 @@ pub struct Engine<L> {
     events: EventSink,
     action: Arc<PendingAction>,
     reconfigure: Receiver<(u64, Config)>,
+    assembler: OutputAssembler,
     queue: VecDeque<Job>,
     active: Option<Active>,
     epoch: Instant,
@@ -150,6 +151,7 @@ impl<L: Link> Engine<L> {
             writers: p.writers,
             action: p.action,
             reconfigure: p.reconfigure,
+            assembler: OutputAssembler::default(),
             events,
             queue: VecDeque::with_capacity(64),
             active: None,
@@ -349,13 +351,7 @@ impl<L: Link> Engine<L> {
                 return self.safe_stop(cyclic.as_mut());
             }
             while let Ok(w) = self.outputs.try_recv() {
-                if let Some(c) = cyclic.as_mut() {
-                    let at = w.offset as usize;
-                    let n = usize::from(w.len).min(32);
-                    if let Some(dst) = c.outputs.get_mut(at..at + n) {
-                        dst.copy_from_slice(&w.data[..n]);
-                    }
-                }
+                self.assembler.push(w, cyclic.as_mut().map(|c| c.outputs.as_mut_slice()));
             }
             if self.writers.take_gone() {
                 self.last_writer_gone(cyclic.as_mut());
