@@ -50,6 +50,19 @@ pub struct InputFrame {
     pub data: Vec<u8>,
 }
 
+tokio::task_local! {
+    /// The client the current task works for (see [`as_client`]).
+    static CLIENT: u64;
+}
+
+/// Runs `work` on behalf of client `id` (non-zero: a connection, a peer):
+/// its requests to the chip's blocking slot take turns with other clients'
+/// instead of queuing behind them. Requests made outside any client share
+/// one turn.
+pub async fn as_client<F: std::future::Future>(id: u64, work: F) -> F::Output {
+    CLIENT.scope(id, work).await
+}
+
 /// A client's lease on the outputs (see [`Master::output_writer`]).
 #[derive(Debug)]
 pub struct OutputWriter {
@@ -299,7 +312,8 @@ impl Master {
     ) -> Result<Vec<u8>, EngineError> {
         let timeout = timeout.unwrap_or(self.default_timeout);
         let (reply, rx) = oneshot::channel();
-        let job = Job { request, deadline: Instant::now() + timeout, reply, progress };
+        let client = CLIENT.try_with(|c| *c).unwrap_or(0);
+        let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client };
         match self.commands.try_send(Command::Job(job)) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),

@@ -411,3 +411,33 @@ fn clients_can_reinit_and_warm_reset_the_network() {
         assert_eq!(m.sdo_read(1, 0x1018, 1, false, None).await.unwrap(), 0x059Du32.to_le_bytes());
     });
 }
+
+#[test]
+fn a_busy_client_does_not_starve_another() {
+    use ecmxfd::master::as_client;
+    use std::sync::atomic::{AtomicU64, Ordering};
+    let (m, _sim, _serial) = start();
+    let done = Arc::new(AtomicU64::new(0));
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().unwrap();
+    rt.block_on(async {
+        let mut busy = Vec::new();
+        for _ in 0..100 {
+            let (m, done) = (Arc::clone(&m), Arc::clone(&done));
+            busy.push(tokio::spawn(as_client(1, async move {
+                m.sdo_read(1, 0x1018, 1, false, Some(Duration::from_secs(30))).await.unwrap();
+                done.fetch_add(1, Ordering::Relaxed);
+            })));
+        }
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        let before = done.load(Ordering::Relaxed);
+        let v = as_client(2, m.sdo_read(1, 0x1018, 2, false, None)).await.unwrap();
+        let after = done.load(Ordering::Relaxed);
+        assert_eq!(v, 0x0402u32.to_le_bytes());
+        assert!(before < 90, "the busy client's requests were still queued ({before} done)");
+        assert!(after - before <= 3, "client 2 waited for {} of client 1's requests", after - before);
+        for t in busy {
+            t.await.unwrap();
+        }
+    });
+    assert_eq!(done.load(std::sync::atomic::Ordering::Relaxed), 100);
+}

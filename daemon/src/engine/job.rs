@@ -137,6 +137,8 @@ pub struct Job {
     pub reply: oneshot::Sender<Result<Vec<u8>, EngineError>>,
     /// Where long transfers (FoE) report how far they are.
     pub progress: Option<Arc<TransferProgress>>,
+    /// Who asked (0: no client), for fair turns on the blocking slot.
+    pub client: u64,
 }
 
 /// Bytes moved so far of a long transfer, readable at any time without a

@@ -12,11 +12,11 @@ pub mod bringup;
 pub mod cyclic;
 pub mod error;
 pub mod events;
+mod fair;
 pub mod job;
 pub mod telemetry;
 mod transaction;
 
-use std::collections::VecDeque;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, TryRecvError};
 use std::sync::{Arc, Mutex};
@@ -40,6 +40,7 @@ use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
 use events::{Event, EventKind, EventSink};
+use fair::FairQueue;
 use job::{Job, NetworkAction, OutputAssembler, OutputWrite, PendingAction, Writers};
 use telemetry::{Phase, Telemetry};
 use transaction::{Active, Progress};
@@ -91,7 +92,7 @@ pub struct Engine<L> {
     action: Arc<PendingAction>,
     reconfigure: Receiver<(u64, Config)>,
     assembler: OutputAssembler,
-    queue: VecDeque<Job>,
+    queue: FairQueue,
     active: Option<Active>,
     epoch: Instant,
 }
@@ -153,7 +154,7 @@ impl<L: Link> Engine<L> {
             reconfigure: p.reconfigure,
             assembler: OutputAssembler::default(),
             events,
-            queue: VecDeque::with_capacity(64),
+            queue: FairQueue::default(),
             active: None,
             epoch,
         }
@@ -275,7 +276,7 @@ impl<L: Link> Engine<L> {
         if let Some(a) = self.active.take() {
             drop(a);
         }
-        for j in self.queue.drain(..) {
+        for j in self.queue.drain() {
             let _ = j.reply.send(Err(e.clone()));
         }
         while let Ok(c) = self.commands.try_recv() {
@@ -299,7 +300,7 @@ impl<L: Link> Engine<L> {
     fn take_commands(&mut self) -> bool {
         loop {
             match self.commands.try_recv() {
-                Ok(Command::Job(j)) => self.queue.push_back(j),
+                Ok(Command::Job(j)) => self.queue.push(j),
                 Ok(Command::Stop) | Err(TryRecvError::Disconnected) => return false,
                 Err(TryRecvError::Empty) => return true,
             }
@@ -446,7 +447,7 @@ impl<L: Link> Engine<L> {
                 };
                 let until = if self.active.is_some() { now + POLL } else { wake };
                 match self.idle_until(until) {
-                    Some(Command::Job(j)) => self.queue.push_back(j),
+                    Some(Command::Job(j)) => self.queue.push(j),
                     Some(Command::Stop) => return self.safe_stop(cyclic.as_mut()),
                     None => {}
                 }
@@ -529,7 +530,7 @@ impl<L: Link> Engine<L> {
     ) -> Result<bool, PortError> {
         let now = Instant::now();
         if self.active.is_none() {
-            while let Some(j) = self.queue.pop_front() {
+            while let Some(j) = self.queue.pop() {
                 if let Some(a) = Active::new(j) {
                     self.active = Some(a);
                     break;
