@@ -217,6 +217,13 @@ pub struct SlaveConfig {
     /// SDOs written in PRE-OP, in order (like ENI init commands).
     #[serde(default, rename = "sdo")]
     pub sdos: Vec<StartupSdo>,
+    /// This slave's DC AssignActivate word when it differs from
+    /// `cycle.dc_assign_activate` (0: no DC for this slave, e.g. an IO
+    /// coupler in a network of DC drives). Applied with DCSYNC (cmd 50)
+    /// and ECAT_INIT_DC (cmd 3).
+    pub dc_assign_activate: Option<u16>,
+    /// This slave's SYNC0 shift in ns when it differs from `cycle.shift_ns`.
+    pub dc_shift_ns: Option<i32>,
 }
 
 /// One PDO of an assignment.

@@ -6,6 +6,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_sim::Chip;
 use ecmxf_wire::payload::cia402::Cia402State;
+use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
 use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::SimLink;
@@ -29,6 +30,7 @@ fifo_high = 160
 name = "core"
 vendor_id = 0x89A
 product_code = 0x30000000
+dc_assign_activate = 0   # free-running: DCSYNC + ECAT_INIT_DC for this slave only
   [[slave.sdo]]
   index = 0x6083
   value = 5555
@@ -56,6 +58,10 @@ controlword_offset = 0
 statusword_offset = 0
 "#;
 
+fn rt_block<F: std::future::Future>(f: F) -> F::Output {
+    tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap().block_on(f)
+}
+
 fn start(text: &str) -> Master {
     let config = Config::parse(text, std::path::Path::new("test.toml")).unwrap();
     let (link, _sim) = SimLink::new(Chip::new(ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()));
@@ -72,6 +78,16 @@ fn configured_mapping_sdos_and_helper_are_applied() {
     }
     let l = m.layout();
     assert_eq!(l.slaves[1].rx_bytes, 7, "the remap took");
+    // Per-slave DC: the first drive free-runs, the second follows the cycle
+    // (the IO slave has no DC unit).
+    let dc = |slave| {
+        let d = rt_block(m.slave_info(slave, SlaveInfoCode::DcCycle)).unwrap();
+        match SlaveInfo::decode(SlaveInfoCode::DcCycle, &d).unwrap() {
+            SlaveInfo::DcCycle(ns) => ns,
+            other => panic!("{other:?}"),
+        }
+    };
+    assert_eq!((dc(0), dc(1), dc(2)), (0, 250_000, 0));
     assert_eq!(l.rx_size, 13 + 7 + 1);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {

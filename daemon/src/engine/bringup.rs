@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::cia402::{Cia402ConfigSet, Cia402Control, Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{FwVersionGet, InfoUpdate, WkcErrorLimit, WkcErrorLimitSet};
-use ecmxf_wire::payload::ecat_init::{DcTiming, EcatInit, EcatReconfig};
+use ecmxf_wire::payload::ecat_init::{DcSync, DcTiming, EcatInit, EcatInitDc, EcatReconfig};
 use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSize, FifoPackSizeGet, FifoSetRxCount, FifoSetTxCount};
 use ecmxf_wire::payload::interrupt::{IntConfig, IntPolarity, IntSetEnable};
 use ecmxf_wire::payload::pdo::{
@@ -280,6 +280,27 @@ pub fn bring_up<L: Link>(port: &mut Port<L>, config: &Config) -> Result<NetworkL
     }
     if remapped {
         blocking(port, &EcatReconfig, SLOW)?;
+    }
+
+    // 3b. Per-slave DC settings (DCSYNC each, then ECAT_INIT_DC applies them).
+    let mut dc_changed = false;
+    for (i, s) in config.slaves.iter().enumerate() {
+        if s.dc_assign_activate.is_none() && s.dc_shift_ns.is_none() {
+            continue;
+        }
+        let assign_activate = s.dc_assign_activate.unwrap_or(c.dc_assign_activate);
+        let timing = DcTiming {
+            assign_activate,
+            sync0_ns: if assign_activate != 0 { c.sync0_us * 1000 } else { 0 },
+            sync1_ns: 0,
+            shift_ns: s.dc_shift_ns.unwrap_or(c.shift_ns),
+        };
+        blocking(port, &DcSync { slave: i as u8, dc: timing }, SLOW)
+            .map_err(|e| step("DC settings", format!("slave {i}: {e}")))?;
+        dc_changed = true;
+    }
+    if dc_changed {
+        blocking(port, &EcatInitDc, SLOW).map_err(|e| step("ECAT_INIT_DC", e.to_string()))?;
     }
 
     // 4. Start-up SDOs.
