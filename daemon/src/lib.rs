@@ -8,6 +8,7 @@
 //! - [`engine`]: the thread that owns the chip: bring-up, cyclic FIFO
 //!   exchange, the blocking-slot transactions, supervision and recovery.
 //! - [`master`]: the async handle to the engine ([`master::Master`]).
+//! - [`outputs`]: client writes into the output image, and writer leases.
 //! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
 //! - [`config`]: the configuration file.
 #![warn(missing_docs)]
@@ -16,5 +17,6 @@ pub mod config;
 pub mod engine;
 pub mod link;
 pub mod master;
+pub mod outputs;
 pub mod port;
 pub mod realtime;

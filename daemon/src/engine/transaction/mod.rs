@@ -1,7 +1,8 @@
 //! Transactions on the chip's single blocking slot (v049 表三 notes): start
 //! the operation with a guarded call, watch the busy bit in whatever answers
 //! come next (cyclic ones included), then fetch the result (or, on error
-//! bit3, the SDO abort code with command 69). One at a time, in order.
+//! bit3, the SDO abort code with command 69). One at a time, taken from the
+//! fair queue (`fair.rs`). Multi-step FoE transfers live in `foe.rs`.
 //!
 //! Cancel-safety: a caller that stops waiting is answered with a timeout at
 //! once, but the operation it started still runs to its end (or is
@@ -15,9 +16,7 @@ use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset};
 use ecmxf_wire::payload::ecat_init::StateUpdate;
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
-use ecmxf_wire::payload::foe::{
-    FOE_FLASH_SIZE, FOE_HEADER_LEN, FOE_MAX_CHUNK, FoeGet, FoeReply, FoeRequest, FoeTransfer,
-};
+use ecmxf_wire::payload::foe::{FOE_FLASH_SIZE, FoeRequest, FoeTransfer};
 use ecmxf_wire::payload::pdo::{PdoConfigGet, PdoConfigReq};
 use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawReply, RawRequest};
 use ecmxf_wire::payload::sdo::{
@@ -31,6 +30,9 @@ use super::error::EngineError;
 use super::job::{Job, Request, TransferProgress};
 use crate::link::Link;
 use crate::port::{Answer, Port, PortError};
+use foe::{check_foe, chip_timeout_us};
+
+mod foe;
 
 /// How long an operation may overstay its caller's deadline before it is
 /// abandoned.
@@ -268,93 +270,6 @@ impl Active {
         }
     }
 
-    /// FoE write: stages the next chunk, or sends the file once all of it is
-    /// staged.
-    fn foe_stage_next<L: Link>(self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
-        let Request::FoeWrite { slave, name, password, data } = &self.request else {
-            return Ok((None, Progress::Done));
-        };
-        let chunk = foe_chunk(port.data_size());
-        let at = self.cursor as usize;
-        if at < data.len() {
-            let end = (at + chunk).min(data.len());
-            let refused = refused(&port.call(&FoeRequest::WriteFlash { offset: self.cursor, data: &data[at..end] })?);
-            return self.started(port, refused, Step::FoeStage);
-        }
-        let transfer = FoeTransfer {
-            slave: *slave,
-            password: *password,
-            file_length: data.len() as u32,
-            timeout_us: chip_timeout_us(self.deadline, now),
-            flash_offset: 0,
-            name: name.as_bytes(),
-        };
-        let refused = refused(&port.call(&FoeRequest::Download(transfer))?);
-        self.started(port, refused, Step::FoeSend)
-    }
-
-    /// FoE read: reads the next chunk of staged flash, or finishes.
-    fn foe_fetch_next<L: Link>(mut self, port: &mut Port<L>) -> Result<(Option<Self>, Progress), PortError> {
-        if self.cursor >= self.total {
-            let file = std::mem::take(&mut self.buffer);
-            return Ok((None, self.finish(Ok(file))));
-        }
-        let length = (self.total - self.cursor).min(foe_chunk(port.data_size()) as u32) as u16;
-        let refused = refused(&port.call(&FoeRequest::ReadFlash { offset: self.cursor, length })?);
-        self.started(port, refused, Step::FoeFetch)
-    }
-
-    /// Continues a multi-step transfer once the chip finished a step.
-    fn foe_continue<L: Link>(
-        mut self,
-        port: &mut Port<L>,
-        now: Instant,
-    ) -> Result<(Option<Self>, Progress), PortError> {
-        match self.step {
-            Step::FoeStage => {
-                let chunk = foe_chunk(port.data_size()) as u32;
-                self.cursor = (self.cursor + chunk).min(self.total);
-                self.report();
-                self.foe_stage_next(port, now)
-            }
-            Step::FoeSend => Ok((None, self.finish(Ok(Vec::new())))),
-            Step::FoeUpload => {
-                let a = port.call(&FoeGet)?;
-                let stored = a.data.first_chunk::<4>().map(|b| u32::from_le_bytes(*b));
-                let max = match &self.request {
-                    Request::FoeRead { max_len, .. } => *max_len,
-                    _ => 0,
-                };
-                let Some(stored) = stored else {
-                    let what = format!("{}: the chip reports no file length", self.describe());
-                    return Ok((None, self.finish(Err(EngineError::Failed(what)))));
-                };
-                if stored > max {
-                    let what = format!("{}: the file is longer than the {max} bytes allowed", self.describe());
-                    return Ok((None, self.finish(Err(EngineError::Failed(what)))));
-                }
-                self.total = stored;
-                self.buffer = Vec::with_capacity(stored as usize);
-                self.report();
-                self.foe_fetch_next(port)
-            }
-            Step::FoeFetch => {
-                let want = ((self.total - self.cursor) as usize).min(foe_chunk(port.data_size()));
-                let a = port.call(&FoeGet)?;
-                let got = FoeReply::decode(&fields(&a), a.data).map(|r| r.0).unwrap_or_default();
-                if got.len() < want {
-                    let what = format!("{}: a flash read returned {} of {want} bytes", self.describe(), got.len());
-                    return Ok((None, self.finish(Err(EngineError::Failed(what)))));
-                }
-                self.buffer.extend_from_slice(&got[..want]);
-                self.cursor += want as u32;
-                self.report();
-                self.foe_fetch_next(port)
-            }
-            _ => Ok((None, Progress::Done)),
-        }
-    }
-
     fn wait<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
         let status = *port.status();
         if status.blocking_busy() {
@@ -474,32 +389,4 @@ impl Active {
         };
         Ok((None, self.finish(result)))
     }
-}
-
-/// FoE bytes per packet: a flash chunk, or what fits the data section.
-fn foe_chunk(data_size: usize) -> usize {
-    (FOE_MAX_CHUNK as usize).min(data_size.saturating_sub(FOE_HEADER_LEN)).max(1)
-}
-
-/// A FoE request's arguments, checked before anything goes to the chip.
-fn check_foe(name: &str, len: usize, data_size: usize) -> Result<(), EngineError> {
-    if name.is_empty() {
-        return Err(EngineError::BadArgument { field: "name", reason: "a FoE file needs a name".into() });
-    }
-    if name.len() + FOE_HEADER_LEN > data_size {
-        let reason = format!("{} bytes do not fit one {data_size}-byte data section", name.len());
-        return Err(EngineError::BadArgument { field: "name", reason });
-    }
-    if len > FOE_FLASH_SIZE as usize {
-        let reason = format!("{len} bytes exceed the chip's {FOE_FLASH_SIZE}-byte staging flash");
-        return Err(EngineError::BadArgument { field: "length", reason });
-    }
-    Ok(())
-}
-
-/// The timeout handed to the chip for a slave-side transfer: what is left of
-/// the caller's deadline, at least one second.
-fn chip_timeout_us(deadline: Instant, now: Instant) -> u32 {
-    let left = deadline.saturating_duration_since(now).max(Duration::from_secs(1));
-    left.as_micros().min(u128::from(u32::MAX)) as u32
 }

@@ -1,0 +1,336 @@
+//! [`Master`]: the engine as async code sees it. Requests go into a bounded
+//! queue (full: [`EngineError::QueueFull`]) with a deadline; dropping the
+//! future, or the deadline passing, tells the engine to stop caring (it then
+//! finishes or abandons the chip operation cleanly). Input frames come out
+//! of the engine's wait-free ring through a distributor thread into a
+//! broadcast channel: a subscriber that falls behind is told how many frames
+//! it missed and slows no one.
+//!
+//! The methods are grouped by concern: here the plumbing, process data,
+//! events and status; `transactions` the blocking-slot operations (SDO, SII,
+//! states, PDO assignment, raw datagrams, FoE); `network` re-init, warm
+//! reset and applying a new configuration.
+
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
+
+use tokio::sync::{broadcast, oneshot};
+
+use crate::config::{Config, LinkConfig};
+use crate::engine::bringup::NetworkLayout;
+use crate::engine::cyclic::read_record;
+use crate::engine::error::EngineError;
+use crate::engine::events::Event;
+use crate::engine::job::{Job, PendingAction, Request, TransferProgress, Writers};
+use crate::engine::telemetry::{Snapshot, Telemetry};
+use crate::engine::{Command, Engine, Parts};
+use crate::link::sim::{SimHandle, SimLink};
+use crate::link::{Link, LinkError};
+use crate::outputs::OutputSender;
+pub use crate::outputs::OutputWriter;
+pub use transactions::RawAnswer;
+
+mod network;
+mod transactions;
+
+/// Requests that may wait at once.
+pub const QUEUE_DEPTH: usize = 256;
+/// Input frames a subscriber may fall behind by before losing some.
+pub const SUBSCRIBER_BACKLOG: usize = 4096;
+/// Events a subscriber may fall behind by before losing some.
+pub const EVENT_BACKLOG: usize = 1024;
+
+/// One input frame (one DC cycle's inputs).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InputFrame {
+    /// Sequence number, +1 per frame received.
+    pub seq: u64,
+    /// When the engine received it, ns since start.
+    pub time_ns: u64,
+    /// The frame.
+    pub data: Vec<u8>,
+}
+
+tokio::task_local! {
+    /// The client the current task works for (see [`as_client`]).
+    static CLIENT: u64;
+}
+
+/// Runs `work` on behalf of client `id` (non-zero: a connection, a peer):
+/// its requests to the chip's blocking slot take turns with other clients'
+/// instead of queuing behind them. Requests made outside any client share
+/// one turn.
+pub async fn as_client<F: std::future::Future>(id: u64, work: F) -> F::Output {
+    CLIENT.scope(id, work).await
+}
+
+/// Why the master could not start.
+#[derive(Debug)]
+pub enum StartError {
+    /// The link could not be opened.
+    Link(LinkError),
+    /// The simulator's network file is wrong.
+    Network(String),
+}
+
+impl std::fmt::Display for StartError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Link(e) => write!(f, "{e}"),
+            Self::Network(e) => write!(f, "{e}"),
+        }
+    }
+}
+
+impl std::error::Error for StartError {}
+
+/// The running master.
+#[derive(Debug)]
+pub struct Master {
+    commands: SyncSender<Command>,
+    outputs: Arc<OutputSender>,
+    telemetry: Arc<Telemetry>,
+    layout: Arc<Mutex<NetworkLayout>>,
+    inputs: broadcast::Sender<Arc<InputFrame>>,
+    events: broadcast::Sender<Event>,
+    threads: Mutex<Vec<JoinHandle<()>>>,
+    stop_distributor: Arc<AtomicBool>,
+    writers: Arc<Writers>,
+    action: Arc<PendingAction>,
+    reconfigure: SyncSender<(u64, Config)>,
+    config: Mutex<Config>,
+    config_generation: AtomicU64,
+    /// Timeout for requests that give none.
+    pub default_timeout: Duration,
+}
+
+/// Opens the link the configuration names. For the in-process simulator,
+/// also returns the handle to it.
+pub fn open_link(config: &Config) -> Result<(Box<dyn Link>, Option<SimHandle>), StartError> {
+    match &config.link {
+        LinkConfig::Sim { network } => {
+            let (net, chip_config) = match network {
+                None => (ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()),
+                Some(p) => {
+                    let f = ecmxf_sim::config::NetworkFile::load(p).map_err(|e| StartError::Network(e.to_string()))?;
+                    (f.build(p).map_err(|e| StartError::Network(e.to_string()))?, f.chip_config())
+                }
+            };
+            let (link, handle) = SimLink::new(ecmxf_sim::Chip::new(net, chip_config));
+            Ok((Box::new(link), Some(handle)))
+        }
+        LinkConfig::SimSocket { socket } => {
+            Ok((Box::new(crate::link::socket::SocketLink::connect(socket).map_err(StartError::Link)?), None))
+        }
+        #[cfg(target_os = "linux")]
+        LinkConfig::Spidev { device, spi_hz, gpio_chip, int0_line, int1_line, debounce_us, idle_us } => {
+            let hw = crate::link::hardware::HardwareConfig {
+                spi_device: device.clone(),
+                spi_hz: *spi_hz,
+                gpio_chip: gpio_chip.clone(),
+                int0_line: *int0_line,
+                int1_line: *int1_line,
+                debounce: debounce_us.map(|us| Duration::from_micros(us.into())),
+                idle: Duration::from_micros((*idle_us).into()),
+            };
+            Ok((Box::new(crate::link::hardware::HardwareLink::open(hw).map_err(StartError::Link)?), None))
+        }
+        #[cfg(not(target_os = "linux"))]
+        LinkConfig::Spidev { device, .. } => Err(StartError::Link(LinkError::io(
+            format!("open {}", device.display()),
+            std::io::Error::new(std::io::ErrorKind::Unsupported, "spidev needs Linux"),
+        ))),
+    }
+}
+
+impl Master {
+    /// Starts the engine thread (real-time as configured) over `link`, and
+    /// the input distributor.
+    pub fn start<L: Link + 'static>(link: L, config: Config) -> Self {
+        let (commands, command_rx) = sync_channel(QUEUE_DEPTH);
+        let (output_tx, output_rx) = sync_channel(1024);
+        let outputs = Arc::new(OutputSender::new(output_tx));
+        let telemetry = Arc::new(Telemetry::default());
+        let layout = Arc::new(Mutex::new(NetworkLayout::default()));
+        let writers = Arc::new(Writers::default());
+        let action = Arc::new(PendingAction::default());
+        let (reconfigure, reconfigure_rx) = sync_channel(1);
+        let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
+        let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
+        let (events, _) = broadcast::channel(EVENT_BACKLOG);
+        let (event_producer, mut event_consumer) = rtrb::RingBuffer::new(crate::engine::events::RING);
+        let event_tx = events.clone();
+        let stop_distributor = Arc::new(AtomicBool::new(false));
+
+        let tx = inputs.clone();
+        let stop = Arc::clone(&stop_distributor);
+        let distributor = std::thread::Builder::new()
+            .name("ecmxf-inputs".into())
+            .spawn(move || {
+                while !stop.load(Ordering::Relaxed) {
+                    while let Some(r) = read_record(&mut consumer) {
+                        // No subscribers is fine: the frame is dropped.
+                        let _ = tx.send(Arc::new(InputFrame { seq: r.seq, time_ns: r.time_ns, data: r.data }));
+                    }
+                    while let Ok(e) = event_consumer.pop() {
+                        let _ = event_tx.send(e);
+                    }
+                    std::thread::park_timeout(Duration::from_millis(5));
+                }
+            })
+            .expect("spawn the input distributor thread");
+        let parts = Parts {
+            link,
+            config: config.clone(),
+            commands: command_rx,
+            outputs: output_rx,
+            telemetry: Arc::clone(&telemetry),
+            layout: Arc::clone(&layout),
+            ring: producer,
+            distributor: Some(distributor.thread().clone()),
+            writers: Arc::clone(&writers),
+            events: event_producer,
+            action: Arc::clone(&action),
+            reconfigure: reconfigure_rx,
+        };
+        let rt = config.realtime.clone();
+        let engine = std::thread::Builder::new()
+            .name("ecmxf-rt".into())
+            .spawn(move || {
+                crate::realtime::apply(&rt);
+                Engine::new(parts).run();
+            })
+            .expect("spawn the engine thread");
+        Self {
+            commands,
+            outputs,
+            telemetry,
+            layout,
+            inputs,
+            events,
+            threads: Mutex::new(vec![engine, distributor]),
+            stop_distributor,
+            writers,
+            action,
+            reconfigure,
+            config: Mutex::new(config),
+            config_generation: AtomicU64::new(0),
+            default_timeout: Duration::from_secs(3),
+        }
+    }
+
+    /// Opens the configured link and starts.
+    pub fn from_config(config: Config) -> Result<(Self, Option<SimHandle>), StartError> {
+        let (link, sim) = open_link(&config)?;
+        Ok((Self::start(link, config), sim))
+    }
+
+    async fn request(&self, request: Request, timeout: Option<Duration>) -> Result<Vec<u8>, EngineError> {
+        self.request_with_progress(request, timeout, None).await
+    }
+
+    async fn request_with_progress(
+        &self,
+        request: Request,
+        timeout: Option<Duration>,
+        progress: Option<Arc<TransferProgress>>,
+    ) -> Result<Vec<u8>, EngineError> {
+        let timeout = timeout.unwrap_or(self.default_timeout);
+        let (reply, rx) = oneshot::channel();
+        let client = CLIENT.try_with(|c| *c).unwrap_or(0);
+        let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client };
+        match self.commands.try_send(Command::Job(job)) {
+            Ok(()) => {}
+            Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),
+            Err(TrySendError::Disconnected(_)) => return Err(EngineError::Unavailable("engine stopped".into())),
+        }
+        match tokio::time::timeout(timeout, rx).await {
+            Ok(Ok(r)) => r,
+            Ok(Err(_)) => Err(EngineError::Unavailable("engine stopped".into())),
+            // Dropping `rx` here tells the engine.
+            Err(_) => Err(EngineError::Timeout),
+        }
+    }
+
+    /// Writes bytes into the output image at `offset` (of the whole output
+    /// frame); they go out with the next frames pushed.
+    ///
+    /// Anonymous: it does not count as a writer for
+    /// `outputs.on_last_writer_gone`; clients use [`Master::output_writer`].
+    pub fn write_outputs(&self, offset: usize, bytes: &[u8]) -> Result<(), EngineError> {
+        self.outputs.send(self.layout().rx_size, offset, bytes)
+    }
+
+    /// A counted writer of outputs: when the last one is dropped, the
+    /// engine applies `outputs.on_last_writer_gone`.
+    pub fn output_writer(&self) -> OutputWriter {
+        self.writers.acquire();
+        OutputWriter {
+            outputs: Arc::clone(&self.outputs),
+            layout: Arc::clone(&self.layout),
+            writers: Arc::clone(&self.writers),
+        }
+    }
+
+    /// Output writers now.
+    pub fn output_writers(&self) -> usize {
+        self.writers.count()
+    }
+
+    /// A new subscriber to supervision events (state changes, link, DC,
+    /// error counters, underruns, recoveries) from now on.
+    pub fn events(&self) -> broadcast::Receiver<Event> {
+        self.events.subscribe()
+    }
+
+    /// A new subscriber to input frames.
+    pub fn subscribe(&self) -> broadcast::Receiver<Arc<InputFrame>> {
+        self.inputs.subscribe()
+    }
+
+    /// The engine's status.
+    pub fn status(&self) -> Snapshot {
+        self.telemetry.snapshot()
+    }
+
+    /// Why bring-up last failed or recovery last started.
+    pub fn last_error(&self) -> Option<String> {
+        self.telemetry.last_error()
+    }
+
+    /// The network as bring-up found it.
+    pub fn layout(&self) -> NetworkLayout {
+        self.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    /// Safe stop, then waits for the threads (blocking).
+    pub fn stop(&self) {
+        // A full queue still takes the stop: retry briefly.
+        for _ in 0..100 {
+            match self.commands.try_send(Command::Stop) {
+                Err(TrySendError::Full(_)) => std::thread::sleep(Duration::from_millis(10)),
+                _ => break,
+            }
+        }
+        let mut threads = self.threads.lock().unwrap_or_else(|e| e.into_inner());
+        // The engine thread first (it finishes the safe stop), then the
+        // distributor.
+        if !threads.is_empty() {
+            let _ = threads.remove(0).join();
+        }
+        self.stop_distributor.store(true, Ordering::Relaxed);
+        for t in threads.drain(..) {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+    }
+}
+
+impl Drop for Master {
+    fn drop(&mut self) {
+        self.stop();
+    }
+}

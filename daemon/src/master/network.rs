@@ -1,0 +1,105 @@
+//! Whole-network actions: re-init, warm reset, a new configuration. All go
+//! through the engine's own recovery path (the full bring-up), and return
+//! once the network runs again.
+
+use std::sync::atomic::Ordering;
+use std::sync::mpsc::TrySendError;
+use std::time::{Duration, Instant};
+
+use super::Master;
+use crate::config::Config;
+use crate::engine::error::EngineError;
+use crate::engine::job::NetworkAction;
+use crate::engine::telemetry::{Phase, Snapshot};
+
+impl Master {
+    /// Scans the network again and redoes the whole bring-up from the
+    /// configuration (mapping, start-up SDOs, states); returns once the
+    /// network runs again. Requests in flight fail with `Unavailable`.
+    pub async fn reinit(&self, timeout: Option<Duration>) -> Result<(), EngineError> {
+        self.network_action(NetworkAction::Reinit, timeout).await
+    }
+
+    /// Warm-resets the chip (cmd 127), then redoes the bring-up; returns once
+    /// the network runs again.
+    pub async fn warm_reset(&self, timeout: Option<Duration>) -> Result<(), EngineError> {
+        self.network_action(NetworkAction::WarmReset, timeout).await
+    }
+
+    /// Brings the network up again with `config`: expected slaves, PDO
+    /// mappings, start-up SDOs, axes, DC cycle, FIFO sizes, target state,
+    /// recovery and output policy all take effect (ECAT_INIT, PDO_CONFIG_SET,
+    /// FIFO_INIT... as at start). The link and the real-time settings belong
+    /// to the running process and cannot change. Returns once the network
+    /// runs with it; on a bring-up failure the engine keeps retrying the new
+    /// configuration, and [`Master::last_error`] says why.
+    pub async fn apply_config(&self, config: Config, timeout: Option<Duration>) -> Result<(), EngineError> {
+        config
+            .validate(std::path::Path::new("(applied)"))
+            .map_err(|e| EngineError::BadArgument { field: "config", reason: e.to_string() })?;
+        {
+            let current = self.config.lock().unwrap_or_else(|e| e.into_inner());
+            if config.link != current.link {
+                let reason = "the link cannot change while the daemon runs; restart it".to_string();
+                return Err(EngineError::BadArgument { field: "link", reason });
+            }
+            if config.realtime != current.realtime {
+                let reason = "real-time settings apply at start; restart the daemon".to_string();
+                return Err(EngineError::BadArgument { field: "realtime", reason });
+            }
+        }
+        if matches!(self.status().phase, Phase::Stopping | Phase::Stopped) {
+            return Err(EngineError::Unavailable("engine stopped".into()));
+        }
+        let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
+        self.reconfigure.try_send((generation, config.clone())).map_err(|e| match e {
+            TrySendError::Full(_) => EngineError::QueueFull,
+            TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+        })?;
+        *self.config.lock().unwrap_or_else(|e| e.into_inner()) = config;
+        self.until(timeout, |s| s.config_generation >= generation && s.phase == Phase::Running).await
+    }
+
+    /// The configuration in force.
+    pub fn config(&self) -> Config {
+        self.config.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+
+    fn running_or_unavailable(&self) -> Result<(), EngineError> {
+        if self.status().phase != Phase::Running {
+            let why = self.last_error().unwrap_or_else(|| format!("{:?}", self.status().phase));
+            return Err(EngineError::Unavailable(format!("the network is not running: {why}")));
+        }
+        Ok(())
+    }
+
+    async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
+        self.running_or_unavailable()?;
+        let before = self.status().recoveries;
+        self.action.request(action);
+        self.until(timeout, |s| s.recoveries > before && s.phase == Phase::Running).await
+    }
+
+    /// Waits until the status satisfies `done` (default limit 30 s).
+    async fn until(&self, timeout: Option<Duration>, done: impl Fn(&Snapshot) -> bool) -> Result<(), EngineError> {
+        let deadline = Instant::now() + timeout.unwrap_or(Duration::from_secs(30));
+        loop {
+            let s = self.status();
+            if done(&s) {
+                return Ok(());
+            }
+            if s.phase == Phase::Stopped {
+                return Err(EngineError::Unavailable("engine stopped".into()));
+            }
+            if Instant::now() >= deadline {
+                return Err(match self.last_error() {
+                    Some(why) if s.phase != Phase::Running => {
+                        EngineError::Failed(format!("the network is not back up yet: {why}"))
+                    }
+                    _ => EngineError::Timeout,
+                });
+            }
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+    }
+}

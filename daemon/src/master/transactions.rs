@@ -1,0 +1,225 @@
+//! The chip's blocking-slot operations as async methods: SDO, SII, states,
+//! PDO assignment, raw datagrams, FoE. Each is one queued transaction (or,
+//! for ranges, one per word pair) with a deadline; arguments are checked
+//! here, before anything is queued, and errors name the field.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use ecmxf_wire::payload::pdo::{PdoConfig, PdoConfigReply, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
+use ecmxf_wire::payload::raw::{DatagramHead, RAW_MAX_DATA};
+use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
+use ecmxf_wire::payload::state::SlaveSelector;
+use ecmxf_wire::{EcatState, Reply, ReplyFields};
+
+use super::Master;
+use crate::engine::error::EngineError;
+use crate::engine::job::{Request, TransferProgress};
+
+/// What a raw datagram brought back.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RawAnswer {
+    /// Working counter: how many slaves acted on it.
+    pub working_counter: u16,
+    /// The datagram's data as it returned.
+    pub data: Vec<u8>,
+}
+
+impl Master {
+    /// SDO upload.
+    pub async fn sdo_read(
+        &self,
+        slave: u8,
+        index: u16,
+        subindex: u8,
+        complete: bool,
+        timeout: Option<Duration>,
+    ) -> Result<Vec<u8>, EngineError> {
+        self.request(Request::SdoRead { slave, index, subindex, complete }, timeout).await
+    }
+
+    /// SDO download.
+    pub async fn sdo_write(
+        &self,
+        slave: u8,
+        index: u16,
+        subindex: u8,
+        complete: bool,
+        data: Vec<u8>,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        self.request(Request::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
+    }
+
+    /// SII words `word` and `word + 1`.
+    pub async fn eeprom_read(&self, slave: u8, word: u16, timeout: Option<Duration>) -> Result<[u8; 4], EngineError> {
+        let d = self.request(Request::EepromRead { slave, word }, timeout).await?;
+        let mut out = [0xFF; 4];
+        for (o, b) in out.iter_mut().zip(d) {
+            *o = b;
+        }
+        Ok(out)
+    }
+
+    /// `count` SII words from `word` on. Each word pair is its own
+    /// transaction, so a long read shares the blocking slot fairly with
+    /// other callers; `timeout` applies to each.
+    pub async fn eeprom_read_words(
+        &self,
+        slave: u8,
+        word: u16,
+        count: u16,
+        timeout: Option<Duration>,
+    ) -> Result<Vec<u16>, EngineError> {
+        if u32::from(word) + u32::from(count) > 0x1_0000 {
+            let reason = format!("{count} words from {word:#06x} run past the 16-bit word address space");
+            return Err(EngineError::BadArgument { field: "count", reason });
+        }
+        let mut out = Vec::with_capacity(usize::from(count));
+        let mut at = word;
+        while out.len() < usize::from(count) {
+            let pair = self.eeprom_read(slave, at, timeout).await?;
+            out.push(u16::from_le_bytes([pair[0], pair[1]]));
+            if out.len() < usize::from(count) {
+                out.push(u16::from_le_bytes([pair[2], pair[3]]));
+            }
+            at = at.wrapping_add(2);
+        }
+        Ok(out)
+    }
+
+    /// Writes SII words from `word` on, each verified by reading it back;
+    /// stops at the first failure, which names the word.
+    pub async fn eeprom_write_words(
+        &self,
+        slave: u8,
+        word: u16,
+        values: &[u16],
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        if u32::from(word) + values.len() as u32 > 0x1_0000 {
+            let reason = format!("{} words from {word:#06x} run past the 16-bit word address space", values.len());
+            return Err(EngineError::BadArgument { field: "values", reason });
+        }
+        for (i, v) in values.iter().enumerate() {
+            self.eeprom_write(slave, word + i as u16, *v, timeout).await?;
+        }
+        Ok(())
+    }
+
+    /// Writes one SII word and verifies it.
+    pub async fn eeprom_write(
+        &self,
+        slave: u8,
+        word: u16,
+        value: u16,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        self.request(Request::EepromWrite { slave, word, value }, timeout).await.map(|_| ())
+    }
+
+    /// Requests a state.
+    pub async fn set_state(
+        &self,
+        target: SlaveSelector,
+        state: EcatState,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        if !state.is_requestable() {
+            return Err(EngineError::BadArgument { field: "state", reason: format!("{state} cannot be requested") });
+        }
+        self.request(Request::SetState { target, state }, timeout).await.map(|_| ())
+    }
+
+    /// The state a slave (or, for `All`, the network) is in now, freshly
+    /// read from the slaves.
+    pub async fn get_state(&self, target: SlaveSelector, timeout: Option<Duration>) -> Result<EcatState, EngineError> {
+        let d = self.request(Request::GetState { target }, timeout).await?;
+        Ok(EcatState::from_u8(d.first().copied().unwrap_or(0)))
+    }
+
+    /// One item of slave information, as the chip answers it; decode with
+    /// [`SlaveInfo::decode`] for `item`.
+    pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
+        let d = self.request(Request::SlaveInfo { slave, item }, None).await?;
+        SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("slave {slave} {item:?}: {e}")))?;
+        Ok(d)
+    }
+
+    /// A slave's PDO assignment (`assign_index` 0x1C12 for RxPDOs, 0x1C13
+    /// for TxPDOs) and the mapping of each assigned PDO, read from the slave.
+    pub async fn pdo_config_read(
+        &self,
+        slave: u8,
+        assign_index: u16,
+        timeout: Option<Duration>,
+    ) -> Result<PdoConfig, EngineError> {
+        if ![RX_PDO_ASSIGN, TX_PDO_ASSIGN].contains(&assign_index) {
+            let reason = format!("{assign_index:#06x}; use {RX_PDO_ASSIGN:#06x} or {TX_PDO_ASSIGN:#06x}");
+            return Err(EngineError::BadArgument { field: "assign_index", reason });
+        }
+        let d = self.request(Request::PdoConfigRead { slave, assign_index }, timeout).await?;
+        let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
+        PdoConfigReply::decode(&fields, &d)
+            .map(|r| r.0)
+            .map_err(|e| EngineError::Failed(format!("PDO assignment {assign_index:#06x} of slave {slave}: {e}")))
+    }
+
+    /// Sends one raw EtherCAT datagram and returns what came back. A reading
+    /// datagram sends `head.length` zero bytes; a writing one sends `data`,
+    /// which must be exactly `head.length` bytes.
+    pub async fn raw_datagram(
+        &self,
+        head: DatagramHead,
+        data: Vec<u8>,
+        timeout: Option<Duration>,
+    ) -> Result<RawAnswer, EngineError> {
+        if head.length > RAW_MAX_DATA {
+            let reason = format!("{} bytes; a datagram carries at most {RAW_MAX_DATA}", head.length);
+            return Err(EngineError::BadArgument { field: "length", reason });
+        }
+        if head.command.writes() && data.len() != usize::from(head.length) {
+            let reason = format!("{} bytes given for a {}-byte writing datagram", data.len(), head.length);
+            return Err(EngineError::BadArgument { field: "data", reason });
+        }
+        if !head.command.writes() && !data.is_empty() {
+            let reason = format!("{:?} is a reading datagram and sends no data", head.command);
+            return Err(EngineError::BadArgument { field: "data", reason });
+        }
+        let d = self.request(Request::Raw { head, data }, timeout).await?;
+        let Some((wkc, data)) = d.split_first_chunk::<2>() else {
+            return Err(EngineError::Failed("raw datagram: answer without a working counter".into()));
+        };
+        Ok(RawAnswer { working_counter: u16::from_le_bytes(*wkc), data: data.to_vec() })
+    }
+
+    /// Writes a file to a slave over FoE (the slave must be in PRE-OP or
+    /// above). `progress`, when given, follows the bytes staged.
+    pub async fn foe_write(
+        &self,
+        slave: u8,
+        name: &str,
+        password: u32,
+        data: Vec<u8>,
+        progress: Option<Arc<TransferProgress>>,
+        timeout: Option<Duration>,
+    ) -> Result<(), EngineError> {
+        let request = Request::FoeWrite { slave, name: name.to_owned(), password, data };
+        self.request_with_progress(request, timeout, progress).await.map(|_| ())
+    }
+
+    /// Reads a file of at most `max_len` bytes from a slave over FoE.
+    /// `progress`, when given, follows the bytes read back.
+    pub async fn foe_read(
+        &self,
+        slave: u8,
+        name: &str,
+        password: u32,
+        max_len: u32,
+        progress: Option<Arc<TransferProgress>>,
+        timeout: Option<Duration>,
+    ) -> Result<Vec<u8>, EngineError> {
+        let request = Request::FoeRead { slave, name: name.to_owned(), password, max_len };
+        self.request_with_progress(request, timeout, progress).await
+    }
+}
