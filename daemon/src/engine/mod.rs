@@ -14,6 +14,7 @@ pub mod error;
 pub mod events;
 mod fair;
 pub mod job;
+mod running;
 pub mod telemetry;
 mod transaction;
 
@@ -23,27 +24,23 @@ use std::sync::{Arc, Mutex};
 use std::thread::Thread;
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::flags::{ControlFlags, ErrorFlags, StatusFlags};
+use ecmxf_wire::EcatState;
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
-use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::fifo::FifoEnable;
-use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
-use ecmxf_wire::payload::slave_info::SlaveCountGet;
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
-use ecmxf_wire::{CommandCode, EcatState, ResponseHeader};
-use tracing::{debug, error, info, warn};
+use tracing::{error, info, warn};
 
-use crate::config::{Config, WriterGoneAction};
+use crate::config::Config;
 use crate::link::Link;
-use crate::port::{Port, PortError};
+use crate::port::Port;
 use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
 use events::{Event, EventKind, EventSink};
 use fair::FairQueue;
-use job::{Job, NetworkAction, OutputAssembler, OutputWrite, PendingAction, Writers};
+use job::{Job, OutputAssembler, OutputWrite, PendingAction, Writers};
 use telemetry::{Phase, Telemetry};
-use transaction::{Active, Progress};
+use transaction::Active;
 
 /// Messages to the engine.
 #[derive(Debug)]
@@ -53,23 +50,6 @@ pub enum Command {
     /// Safe stop, then exit.
     Stop,
 }
-
-/// Working-counter errors this long in a row mean a slave left the
-/// exchange (lost, or dropped to a lower state): recover.
-const WKC_STREAK: Duration = Duration::from_millis(50);
-/// A streak ends after this long without a new WKC error.
-const WKC_QUIET: Duration = Duration::from_millis(20);
-
-/// This many cyclic answers lost in a row means the link or the chip is
-/// not what the port thinks (e.g. the chip reset to its power-up packet
-/// size): recover, which resynchronises.
-const LOST_IN_A_ROW: u32 = 16;
-
-/// How often the engine counts the slaves while idle.
-const CENSUS: Duration = Duration::from_secs(1);
-
-/// How often a transaction waiting for the chip polls its status.
-const POLL: Duration = Duration::from_micros(100);
 
 /// Why the running loop left.
 enum Exit {
@@ -303,293 +283,6 @@ impl<L: Link> Engine<L> {
                 Ok(Command::Job(j)) => self.queue.push(j),
                 Ok(Command::Stop) | Err(TryRecvError::Disconnected) => return false,
                 Err(TryRecvError::Empty) => return true,
-            }
-        }
-    }
-
-    fn check_health(&self, h: &ResponseHeader) -> Result<(), String> {
-        if h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) {
-            return Err("chip reset (status back to power-up values)".into());
-        }
-        if h.ecat_state == EcatState::Error {
-            return Err("a slave reports an error or is missing".into());
-        }
-        Ok(())
-    }
-
-    /// Handles an answer to a FIFO exchange: inputs out, level noted.
-    fn fifo_answer(
-        cyclic: &mut Cyclic,
-        telemetry: &Telemetry,
-        header: &ResponseHeader,
-        data: &[u8],
-        now: Instant,
-    ) -> usize {
-        if header.code != CommandCode::PdoDataFifoOp {
-            return 0;
-        }
-        let n = cyclic.publish(data, now);
-        telemetry.input_frames.fetch_add(n as u64, Relaxed);
-        n
-    }
-
-    fn running(&mut self, mut cyclic: Option<Cyclic>) -> Exit {
-        let mut fifo_pending = false;
-        let mut last_poll = Instant::now();
-        let mut lost_before = self.port.stats().lost;
-        let mut lost_run = 0u32;
-        let slaves = self.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
-        let mut last_census = Instant::now();
-        let mut wkc_errors = self.port.status().wkc_errors;
-        // (first WKC error of a streak, last one seen)
-        let mut wkc_streak: Option<(Instant, Instant)> = None;
-        // A FIFO error bit left from before this run (a fault, the bring-up)
-        // is cleared, not reported.
-        let mut fifo_dry = true;
-        self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
-        loop {
-            if !self.take_commands() {
-                return self.safe_stop(cyclic.as_mut());
-            }
-            while let Ok(w) = self.outputs.try_recv() {
-                self.assembler.push(w, cyclic.as_mut().map(|c| c.outputs.as_mut_slice()));
-            }
-            if self.writers.take_gone() {
-                self.last_writer_gone(cyclic.as_mut());
-            }
-            if self.take_new_config() {
-                return Exit::Recover("new configuration from a client".into());
-            }
-            match self.action.take() {
-                Some(NetworkAction::Reinit) => return Exit::Recover("re-init requested by a client".into()),
-                Some(NetworkAction::WarmReset) => {
-                    // The chip resets at once; its answer may never come.
-                    let _ = self.port.call(&WarmReset);
-                    return Exit::Recover("warm reset requested by a client".into());
-                }
-                None => {}
-            }
-            let now = Instant::now();
-            if self.active.is_none() && self.queue.is_empty() && now.duration_since(last_census) >= CENSUS {
-                // Slaves plugged in or out change the count the chip sees.
-                last_census = now;
-                match self.port.call(&SlaveCountGet) {
-                    Ok(a) if usize::from(a.header.return_value) != slaves => {
-                        let found = a.header.return_value;
-                        return Exit::Recover(format!("slave count changed from {slaves} to {found}"));
-                    }
-                    Ok(_) => {}
-                    Err(e) => return Exit::Recover(e.to_string()),
-                }
-                // Its first exchange carried the answer to the last FIFO
-                // packet: those inputs are published, not dropped.
-                if fifo_pending {
-                    if let (Some(c), Some(prev)) = (cyclic.as_mut(), self.port.previous()) {
-                        let (h, data) = (prev.header, prev.data.to_vec());
-                        Self::fifo_answer(c, &self.telemetry, &h, &data, now);
-                    }
-                    fifo_pending = false;
-                }
-            }
-            let result = match cyclic.as_mut() {
-                Some(c) if self.fifo_due(c, now) => self.fifo_exchange(c, now, &mut fifo_pending).map(|()| true),
-                _ => self.transaction_step(cyclic.as_mut(), &mut fifo_pending, &mut last_poll),
-            };
-            let progressed = match result {
-                Ok(p) => p,
-                Err(e) => return Exit::Recover(e.to_string()),
-            };
-            let lost = self.port.stats().lost;
-            lost_run = if lost > lost_before { lost_run + 1 } else { 0 };
-            lost_before = lost;
-            if lost_run >= LOST_IN_A_ROW {
-                return Exit::Recover(format!("{LOST_IN_A_ROW} cyclic answers lost in a row"));
-            }
-            let h = *self.port.status();
-            self.publish_status();
-            if let Err(why) = self.check_health(&h) {
-                return Exit::Recover(why);
-            }
-            let now = Instant::now();
-            if h.wkc_errors != wkc_errors {
-                debug!(count = h.wkc_errors, "working-counter errors");
-                wkc_errors = h.wkc_errors;
-                let first = wkc_streak.map_or(now, |(f, _)| f);
-                wkc_streak = Some((first, now));
-                if now.duration_since(first) > WKC_STREAK {
-                    return Exit::Recover(format!(
-                        "working-counter errors for {WKC_STREAK:?}: a slave is not exchanging"
-                    ));
-                }
-            } else if wkc_streak.is_some_and(|(_, last)| now.duration_since(last) > WKC_QUIET) {
-                wkc_streak = None;
-            }
-            if cyclic.is_some() && !h.status.flags.contains(StatusFlags::PDO_CONFIGURED) {
-                return Exit::Recover("process-data exchange stopped (working-counter limit)".into());
-            }
-            // The FIFO error bit stays set until cleared, and headers lag the
-            // clear: one alarm per rising edge, not one per header showing it.
-            let dry = h.errors.contains(ErrorFlags::FIFO_ERROR);
-            if dry && !fifo_dry {
-                self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
-                self.events.emit(EventKind::FifoUnderrun);
-                warn!("RxFIFO ran dry: outputs repeated");
-            }
-            if dry {
-                self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
-            }
-            fifo_dry = dry;
-            if !progressed {
-                let now = Instant::now();
-                let wake = match cyclic.as_ref() {
-                    Some(c) => c.next_exchange(now, self.rx_room(c), self.port.data_size() / c.tx_size.max(1)),
-                    None => now + Duration::from_millis(50),
-                };
-                let until = if self.active.is_some() { now + POLL } else { wake };
-                match self.idle_until(until) {
-                    Some(Command::Job(j)) => self.queue.push(j),
-                    Some(Command::Stop) => return self.safe_stop(cyclic.as_mut()),
-                    None => {}
-                }
-            }
-        }
-    }
-
-    /// Waits until `until` or the next command. The last `spin_us` of a
-    /// wait are spent yielding, not sleeping (see [`RealtimeConfig`]).
-    ///
-    /// [`RealtimeConfig`]: crate::config::RealtimeConfig
-    fn idle_until(&mut self, until: Instant) -> Option<Command> {
-        let spin = Duration::from_micros(self.config.realtime.spin_us.into());
-        loop {
-            let now = Instant::now();
-            let left = until.checked_duration_since(now).filter(|d| !d.is_zero())?;
-            if left > spin {
-                match self.commands.recv_timeout(left - spin) {
-                    Ok(c) => return Some(c),
-                    Err(RecvTimeoutError::Disconnected) => return Some(Command::Stop),
-                    Err(RecvTimeoutError::Timeout) => {}
-                }
-            } else {
-                match self.commands.try_recv() {
-                    Ok(c) => return Some(c),
-                    Err(TryRecvError::Disconnected) => return Some(Command::Stop),
-                    Err(TryRecvError::Empty) => std::thread::yield_now(),
-                }
-            }
-        }
-    }
-
-    fn rx_room(&self, c: &Cyclic) -> usize {
-        self.port.data_size().checked_div(c.rx_size).unwrap_or(0)
-    }
-
-    fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
-        let tx_room = self.port.data_size() / c.tx_size.max(1);
-        now >= c.next_exchange(now, self.rx_room(c), tx_room) || c.estimate(now) < i64::from(c.low()) + 2
-    }
-
-    fn fifo_exchange(&mut self, c: &mut Cyclic, now: Instant, fifo_pending: &mut bool) -> Result<(), PortError> {
-        if let Some(last) = c.last_exchange() {
-            let gap = now.saturating_duration_since(last).as_micros() as u64;
-            self.telemetry.max_fifo_gap_us.fetch_max(gap, Relaxed);
-        }
-        let room = self.port.data_size().checked_div(c.rx_size).unwrap_or(0);
-        let n = if c.rx_size > 0 { c.frames_to_push(now, room) } else { 0 };
-        let outputs = c.push_bytes(n).to_vec();
-        let answer = self.port.pipelined(&PdoFifoOp {
-            op: FifoOpFlags::WRITE | FifoOpFlags::READ,
-            frames: n,
-            outputs: &outputs,
-        })?;
-        let count = match answer {
-            Some(a) => {
-                if *fifo_pending {
-                    let h = a.header;
-                    let data = a.data.to_vec();
-                    Self::fifo_answer(c, &self.telemetry, &h, &data, now);
-                }
-                Some(self.port.status().rx_fifo_count)
-            }
-            None => None,
-        };
-        c.exchanged(now, n, count);
-        self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
-        *fifo_pending = true;
-        if let Some(t) = &self.distributor {
-            t.unpark();
-        }
-        Ok(())
-    }
-
-    fn transaction_step(
-        &mut self,
-        mut cyclic: Option<&mut Cyclic>,
-        fifo_pending: &mut bool,
-        last_poll: &mut Instant,
-    ) -> Result<bool, PortError> {
-        let now = Instant::now();
-        if self.active.is_none() {
-            while let Some(j) = self.queue.pop() {
-                if let Some(a) = Active::new(j) {
-                    self.active = Some(a);
-                    break;
-                }
-            }
-        }
-        let Some(active) = self.active.take() else {
-            return Ok(false);
-        };
-        let exchanges = self.port.stats().exchanges;
-        let (rest, progress) = active.step(&mut self.port, now)?;
-        self.active = rest;
-        if progress == Progress::Done {
-            self.telemetry.transactions.fetch_add(1, Relaxed);
-        }
-        let sent = self.port.stats().exchanges != exchanges;
-        if sent && *fifo_pending {
-            if let (Some(c), Some(prev)) = (cyclic.as_deref_mut(), self.port.previous()) {
-                let h = prev.header;
-                let data = prev.data.to_vec();
-                Self::fifo_answer(c, &self.telemetry, &h, &data, now);
-            }
-            *fifo_pending = false;
-        }
-        if progress == Progress::Waiting && now.duration_since(*last_poll) >= POLL {
-            // The busy bit only changes in answers: fetch one now. With
-            // cyclic data running, a FIFO exchange is the poll (it reads
-            // inputs and tops up outputs anyway).
-            match cyclic {
-                Some(c) => self.fifo_exchange(c, now, fifo_pending)?,
-                None => {
-                    self.port.call(&InfoUpdate)?;
-                }
-            }
-            *last_poll = now;
-            return Ok(true);
-        }
-        Ok(sent && progress != Progress::Waiting)
-    }
-
-    /// The last output writer went away: `outputs.on_last_writer_gone`.
-    fn last_writer_gone(&mut self, cyclic: Option<&mut Cyclic>) {
-        self.events.emit(EventKind::LastWriterGone(self.config.outputs.on_last_writer_gone));
-        match self.config.outputs.on_last_writer_gone {
-            WriterGoneAction::HoldLast => info!("last output writer gone: holding the last outputs"),
-            WriterGoneAction::Zero => {
-                if let Some(c) = cyclic {
-                    c.outputs.fill(0);
-                }
-                warn!("last output writer gone: outputs zeroed");
-            }
-            WriterGoneAction::QuickStop => {
-                for n in 0..self.config.axes.len() {
-                    let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
-                    if let Err(e) = r {
-                        warn!("quick stop of axis {n}: {e}");
-                    }
-                }
-                warn!("last output writer gone: {} axes quick-stopped", self.config.axes.len());
             }
         }
     }
