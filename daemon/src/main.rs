@@ -48,13 +48,16 @@ fn init_logging(filter: &str) {
 fn status_line(m: &Master) -> String {
     let s = m.status();
     format!(
-        "phase={:?} state={} crc_errors={} wkc_errors={} rx_fifo={} exchanges={} inputs={} outputs={} fifo_alarms={} recoveries={} max_fifo_gap_us={}",
+        "phase={:?} state={} crc_errors={} wkc_errors={} rx_fifo={} exchanges={} corrupt={} not_ready={} transactions={} inputs={} outputs={} fifo_alarms={} recoveries={} max_fifo_gap_us={}",
         s.phase,
         s.ecat_state,
         s.crc_errors,
         s.wkc_errors,
         s.rx_fifo,
         s.exchanges,
+        s.corrupt,
+        s.not_ready,
+        s.transactions,
         s.input_frames,
         s.output_frames,
         s.fifo_alarms,

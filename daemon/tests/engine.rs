@@ -254,6 +254,7 @@ fn recovers_from_unplug_replug_and_bit_flips() {
     sim.control("flip mosi 0").unwrap();
     sim.control("flip miso 0").unwrap();
     assert!(sim.with_chip(|c| c.stats.crc_failures) > 0, "the flips were real");
+    assert!(m.status().corrupt > 0, "flipped answers are counted: {:?}", m.status());
 }
 
 #[test]

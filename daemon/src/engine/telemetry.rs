@@ -100,6 +100,14 @@ pub struct Snapshot {
     pub tx_fifo: u8,
     /// Exchanges.
     pub exchanges: u64,
+    /// Answers the host found corrupt (check word, framing).
+    pub corrupt: u64,
+    /// Answers the chip marked not ready (its command was lost and resent).
+    pub not_ready: u64,
+    /// Batches of input frames lost with a corrupt FIFO answer.
+    pub input_batches_lost: u64,
+    /// Blocking-slot transactions completed.
+    pub transactions: u64,
     /// Input frames published.
     pub input_frames: u64,
     /// Output frames pushed.
@@ -158,6 +166,10 @@ impl Telemetry {
             rx_fifo: self.rx_fifo.load(Relaxed),
             tx_fifo: self.tx_fifo.load(Relaxed),
             exchanges: self.exchanges.load(Relaxed),
+            corrupt: self.corrupt.load(Relaxed),
+            not_ready: self.not_ready.load(Relaxed),
+            input_batches_lost: self.input_batches_lost.load(Relaxed),
+            transactions: self.transactions.load(Relaxed),
             input_frames: self.input_frames.load(Relaxed),
             output_frames: self.output_frames.load(Relaxed),
             fifo_alarms: self.fifo_alarms.load(Relaxed),
