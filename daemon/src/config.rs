@@ -3,11 +3,15 @@
 //! syntax, the line), so `ecmxfd --check-config FILE` tells an engineer what
 //! to fix before the daemon touches a bus.
 
-use std::fmt;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 use serde::Deserialize;
+
+/// A configuration mistake: unreadable file, TOML syntax or schema (naming
+/// key and line), or a value not allowed (naming the dotted key). The same
+/// type as the simulator's network files, which follow the same rules.
+pub use ecmxf_sim::config::ConfigError;
 
 /// The file format version this build reads.
 pub const VERSION: u32 = 1;
@@ -302,36 +306,6 @@ impl Default for RecoveryConfig {
     }
 }
 
-/// A configuration mistake.
-#[derive(Debug)]
-pub enum ConfigError {
-    /// Could not read the file.
-    Io(PathBuf, std::io::Error),
-    /// Syntax or schema (toml names key, line and column).
-    Parse(PathBuf, String),
-    /// A value is not allowed.
-    Invalid {
-        /// The file.
-        file: PathBuf,
-        /// Dotted key, e.g. `cycle.sync0_us`.
-        key: String,
-        /// Why.
-        message: String,
-    },
-}
-
-impl fmt::Display for ConfigError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Io(p, e) => write!(f, "{}: {e}", p.display()),
-            Self::Parse(p, e) => write!(f, "{}: {e}", p.display()),
-            Self::Invalid { file, key, message } => write!(f, "{}: {key}: {message}", file.display()),
-        }
-    }
-}
-
-impl std::error::Error for ConfigError {}
-
 impl Config {
     /// The configuration `--sim` runs: the in-process simulator with the demo
     /// network, 125 us cycle, normal scheduling (the simulator needs no
@@ -364,7 +338,7 @@ impl Config {
     /// Parses and validates `text`, read from `path`. Relative paths in it
     /// are taken relative to the file's folder.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
-        let mut c: Self = toml::from_str(text).map_err(|e| ConfigError::Parse(path.into(), e.to_string()))?;
+        let mut c: Self = toml::from_str(text).map_err(|e| ConfigError::Toml(path.into(), e.to_string()))?;
         c.validate(path)?;
         let base = path.parent().unwrap_or(Path::new(""));
         let resolve = |p: &mut PathBuf| {

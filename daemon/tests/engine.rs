@@ -27,6 +27,17 @@ fn start() -> (Arc<Master>, SimHandle, std::sync::MutexGuard<'static, ()>) {
     (master, sim, guard)
 }
 
+/// Waits until the engine noticed a fault (a recovery after `before`
+/// started within 5 s: else `what` fails the test) and runs again.
+fn recovered_from(m: &Master, before: u64, what: &str) {
+    let t = Instant::now();
+    while m.status().recoveries == before {
+        assert!(t.elapsed() < Duration::from_secs(5), "{what}");
+        std::thread::sleep(Duration::from_millis(10));
+    }
+    wait_running(m, Duration::from_secs(20));
+}
+
 fn wait_running(m: &Master, limit: Duration) {
     let t = Instant::now();
     while m.status().phase != Phase::Running {
@@ -175,12 +186,7 @@ fn cancelled_requests_leave_the_slot_clean() {
 fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     let (m, sim, _serial) = start();
     sim.control("warm-reset").unwrap();
-    let t = Instant::now();
-    while m.status().recoveries == 0 {
-        assert!(t.elapsed() < Duration::from_secs(5), "reset not noticed");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    wait_running(&m, Duration::from_secs(20));
+    recovered_from(&m, 0, "reset not noticed");
     rt().block_on(async {
         assert_eq!(m.sdo_read(1, 0x1018, 1, false, None).await.unwrap(), 0x059Du32.to_le_bytes());
     });
@@ -188,12 +194,7 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     let mut events = m.events();
     let alarms_before = m.status().fifo_alarms;
     sim.control("al-error 2 0x001B").unwrap();
-    let t = Instant::now();
-    while m.status().recoveries == before {
-        assert!(t.elapsed() < Duration::from_secs(5), "AL error not noticed");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    wait_running(&m, Duration::from_secs(20));
+    recovered_from(&m, before, "AL error not noticed");
     assert!(sim.with_chip(|c| c.net.slaves.iter().all(|s| s.esm.state == ecmxf_sim::net::esm::AlState::Op)));
     // The story, as events: the state left OP, recovery started, running again.
     let mut seen = Vec::new();
@@ -224,12 +225,7 @@ fn recovers_from_unplug_replug_and_bit_flips() {
     let (m, sim, _serial) = start();
     // Unplug the IO slave: working-counter errors, then a network of 2.
     sim.control("unplug 2").unwrap();
-    let t = Instant::now();
-    while m.status().recoveries == 0 {
-        assert!(t.elapsed() < Duration::from_secs(5), "unplug not noticed");
-        std::thread::sleep(Duration::from_millis(10));
-    }
-    wait_running(&m, Duration::from_secs(20));
+    recovered_from(&m, 0, "unplug not noticed");
     assert_eq!(m.layout().slaves.len(), 2);
     // Plug it back: the slave count changes, the network is rebuilt.
     let before = m.status().recoveries;

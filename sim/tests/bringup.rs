@@ -28,20 +28,21 @@ use ecmxf_wire::{CheckType, EcatState, Reply, ReplyFields};
 
 const TI: u8 = 1;
 
-fn sdo_read(h: &mut Host, slave: u8, index: u16, subindex: u8) -> Result<Vec<u8>, SdoAbortCode> {
-    let status = h.blocking(&SdoRequest {
-        slave,
-        index,
-        subindex,
-        complete_access: false,
-        timeout_us: 100_000,
-        access: SdoAccess::Read { max_len: 64 },
-    });
+/// Runs one SDO transfer on the blocking slot; a failure is answered with
+/// its abort code (cmd 69).
+fn sdo(h: &mut Host, slave: u8, index: u16, subindex: u8, access: SdoAccess<'_>) -> Result<(), SdoAbortCode> {
+    let status =
+        h.blocking(&SdoRequest { slave, index, subindex, complete_access: false, timeout_us: 100_000, access });
     if status.errors.contains(ErrorFlags::BLOCKING_FAILED) {
         h.control = ecmxf_wire::ControlFlags::CLEAR_BLOCKING_ERROR;
         let code: SdoAbortReply = h.get(&SdoAbortCodeGet);
         return Err(code.0);
     }
+    Ok(())
+}
+
+fn sdo_read(h: &mut Host, slave: u8, index: u16, subindex: u8) -> Result<Vec<u8>, SdoAbortCode> {
+    sdo(h, slave, index, subindex, SdoAccess::Read { max_len: 64 })?;
     let a = h.call(&SdoGet);
     let r = SdoGetReply::decode(&ReplyFields { value: a.header.return_value, data_len: a.header.data_len }, &a.data)
         .unwrap();
@@ -49,20 +50,7 @@ fn sdo_read(h: &mut Host, slave: u8, index: u16, subindex: u8) -> Result<Vec<u8>
 }
 
 fn sdo_write(h: &mut Host, slave: u8, index: u16, subindex: u8, data: &[u8]) -> Result<(), SdoAbortCode> {
-    let status = h.blocking(&SdoRequest {
-        slave,
-        index,
-        subindex,
-        complete_access: false,
-        timeout_us: 100_000,
-        access: SdoAccess::Write(data),
-    });
-    if status.errors.contains(ErrorFlags::BLOCKING_FAILED) {
-        h.control = ecmxf_wire::ControlFlags::CLEAR_BLOCKING_ERROR;
-        let code: SdoAbortReply = h.get(&SdoAbortCodeGet);
-        return Err(code.0);
-    }
-    Ok(())
+    sdo(h, slave, index, subindex, SdoAccess::Write(data))
 }
 
 fn info(h: &mut Host, slave: u8, item: SlaveInfoCode) -> u32 {

@@ -119,13 +119,6 @@ pub enum Request {
     },
 }
 
-impl Request {
-    /// Whether the request uses the chip's blocking slot.
-    pub fn is_blocking(&self) -> bool {
-        !matches!(self, Self::SlaveInfo { .. })
-    }
-}
-
 /// A request in flight.
 #[derive(Debug)]
 pub struct Job {

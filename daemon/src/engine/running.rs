@@ -121,8 +121,7 @@ impl<L: Link> Engine<L> {
                 // packet: those inputs are published, not dropped.
                 if fifo_pending {
                     if let (Some(c), Some(prev)) = (cyclic.as_mut(), self.port.previous()) {
-                        let (h, data) = (prev.header, prev.data.to_vec());
-                        Self::fifo_answer(c, &self.telemetry, &h, &data, now);
+                        Self::fifo_answer(c, &self.telemetry, &prev.header, prev.data, now);
                     }
                     fifo_pending = false;
                 }
@@ -237,18 +236,14 @@ impl<L: Link> Engine<L> {
         }
         let room = self.port.data_size().checked_div(c.rx_size).unwrap_or(0);
         let n = if c.rx_size > 0 { c.frames_to_push(now, room) } else { 0 };
-        let outputs = c.push_bytes(n).to_vec();
-        let answer = self.port.pipelined(&PdoFifoOp {
-            op: FifoOpFlags::WRITE | FifoOpFlags::READ,
-            frames: n,
-            outputs: &outputs,
-        })?;
+        // Borrowed, not copied: this runs thousands of times a second.
+        let outputs = c.push_bytes(n);
+        let answer =
+            self.port.pipelined(&PdoFifoOp { op: FifoOpFlags::WRITE | FifoOpFlags::READ, frames: n, outputs })?;
         let count = match answer {
             Some(a) => {
                 if *fifo_pending {
-                    let h = a.header;
-                    let data = a.data.to_vec();
-                    Self::fifo_answer(c, &self.telemetry, &h, &data, now);
+                    Self::fifo_answer(c, &self.telemetry, &a.header, a.data, now);
                 }
                 Some(self.port.status().rx_fifo_count)
             }
@@ -290,9 +285,7 @@ impl<L: Link> Engine<L> {
         let sent = self.port.stats().exchanges != exchanges;
         if sent && *fifo_pending {
             if let (Some(c), Some(prev)) = (cyclic.as_deref_mut(), self.port.previous()) {
-                let h = prev.header;
-                let data = prev.data.to_vec();
-                Self::fifo_answer(c, &self.telemetry, &h, &data, now);
+                Self::fifo_answer(c, &self.telemetry, &prev.header, prev.data, now);
             }
             *fifo_pending = false;
         }

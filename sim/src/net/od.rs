@@ -260,6 +260,18 @@ pub struct Object {
 }
 
 impl Object {
+    /// Whether a complete access starting at `sub` is possible (ETG.1000.6:
+    /// only records and arrays, from subindex 0 or 1).
+    fn allows_complete_access(&self, sub: u8) -> SdoResult<()> {
+        if self.kind == ObjectKind::Var {
+            return Err(SdoAbortCode::NO_COMPLETE_ACCESS);
+        }
+        if sub > 1 {
+            return Err(SdoAbortCode::SUBINDEX_MISSING);
+        }
+        Ok(())
+    }
+
     /// A VAR object.
     pub fn var(name: &str, entry: Entry) -> Self {
         Self { name: name.into(), kind: ObjectKind::Var, entries: BTreeMap::from([(0, entry)]) }
@@ -333,12 +345,7 @@ impl ObjectDictionary {
     pub fn upload(&self, index: u16, sub: u8, complete: bool, state: AlState) -> SdoResult<Vec<u8>> {
         let obj = self.objects.get(&index).ok_or(SdoAbortCode::OBJECT_MISSING)?;
         if complete {
-            if obj.kind == ObjectKind::Var {
-                return Err(SdoAbortCode::NO_COMPLETE_ACCESS);
-            }
-            if sub > 1 {
-                return Err(SdoAbortCode::SUBINDEX_MISSING);
-            }
+            obj.allows_complete_access(sub)?;
             let count = obj.entries.get(&0).map_or(0, |e| e.int() as u8);
             let mut out = Vec::new();
             for (s, e) in obj.entries.range(sub..) {
@@ -386,12 +393,7 @@ impl ObjectDictionary {
     ) -> SdoResult<()> {
         let obj = self.objects.get(&index).ok_or(SdoAbortCode::OBJECT_MISSING)?;
         if complete {
-            if obj.kind == ObjectKind::Var {
-                return Err(SdoAbortCode::NO_COMPLETE_ACCESS);
-            }
-            if sub > 1 {
-                return Err(SdoAbortCode::SUBINDEX_MISSING);
-            }
+            obj.allows_complete_access(sub)?;
             // Split the data over the entries, subindex 0 as 16 bits.
             let mut writes: Vec<(u8, Vec<u8>)> = Vec::new();
             let mut rest = data;
