@@ -25,6 +25,7 @@
 #[cfg(test)]
 extern crate std;
 
+pub mod al_status;
 mod bytes;
 pub mod check;
 pub mod command;
@@ -35,6 +36,7 @@ pub mod header;
 pub mod packet;
 pub mod payload;
 
+pub use al_status::al_status_text;
 pub use check::CheckType;
 pub use command::CommandCode;
 pub use error::{DecodeError, EncodeError, PayloadError};

@@ -7,6 +7,9 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use ecmxf_wire::EcatState;
+use ecmxf_wire::payload::cia402::Cia402StateSet;
+use ecmxf_wire::payload::gpio::{GpioConfig, GpioFunc};
+use ecmxf_wire::payload::periph::{AdcOp, DacOp, QeiOp};
 use ecmxf_wire::payload::raw::DatagramHead;
 use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::payload::state::SlaveSelector;
@@ -117,6 +120,35 @@ pub enum Request {
         /// Largest file accepted.
         max_len: u32,
     },
+    /// A non-blocking chip command (peripherals, the CiA402 helper, the
+    /// emergency history): answered in the next packet, never occupies the
+    /// blocking slot's busy bit. The result is the return value byte
+    /// followed by the answer's data.
+    Immediate(Immediate),
+}
+
+/// The non-blocking commands the API reaches (v049 表三: commands 26..35,
+/// 74 and 83 are not in the blocking list).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Immediate {
+    /// GPIO_CONFIG_SET (31).
+    GpioConfig(GpioConfig),
+    /// GPIO_FUNC_OP (32).
+    Gpio(GpioFunc),
+    /// QEI_FUNC_OP (33).
+    Qei(QeiOp),
+    /// DAC_FUNC_OP (34).
+    Dac(DacOp),
+    /// ADC_FUNC_OP (35).
+    Adc(AdcOp),
+    /// 402_STATE_SET (27): the helper walks an axis to a state.
+    Cia402StateSet(Cia402StateSet),
+    /// 402_STATE_GET (28) of an axis.
+    Cia402StateGet(u8),
+    /// 402_GET_STATUSWORD (74) of an axis.
+    Cia402Statusword(u8),
+    /// COE_EMERGENCY (83): the last n (1..=8) emergency records.
+    Emergencies(u8),
 }
 
 /// A request in flight.

@@ -13,9 +13,11 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
+use ecmxf_wire::payload::cia402::{Cia402GetStatusword, Cia402StateGet};
 use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset};
 use ecmxf_wire::payload::ecat_init::StateUpdate;
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
+use ecmxf_wire::payload::emergency::CoeEmergencyGet;
 use ecmxf_wire::payload::foe::{FOE_FLASH_SIZE, FoeRequest, FoeTransfer};
 use ecmxf_wire::payload::pdo::{PdoConfigGet, PdoConfigReq};
 use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawReply, RawRequest};
@@ -27,7 +29,7 @@ use ecmxf_wire::payload::state::{StateCheck, StateGet};
 use ecmxf_wire::{Reply, ReplyFields};
 
 use super::error::EngineError;
-use super::job::{Job, Request, TransferProgress};
+use super::job::{Immediate, Job, Request, TransferProgress};
 use crate::link::Link;
 use crate::port::{Answer, Port, PortError};
 use foe::{check_foe, chip_timeout_us};
@@ -217,6 +219,28 @@ impl Active {
                 let refused = refused(&port.call(&FoeRequest::Upload(transfer))?);
                 return self.started(port, refused, Step::FoeUpload);
             }
+            Request::Immediate(command) => {
+                let a = match command {
+                    Immediate::GpioConfig(c) => port.call(c)?,
+                    Immediate::Gpio(c) => port.call(c)?,
+                    Immediate::Qei(c) => port.call(c)?,
+                    Immediate::Dac(c) => port.call(c)?,
+                    Immediate::Adc(c) => port.call(c)?,
+                    Immediate::Cia402StateSet(c) => port.call(c)?,
+                    Immediate::Cia402StateGet(axis) => port.call(&Cia402StateGet(*axis))?,
+                    Immediate::Cia402Statusword(axis) => port.call(&Cia402GetStatusword(*axis))?,
+                    Immediate::Emergencies(n) => port.call(&CoeEmergencyGet(*n))?,
+                };
+                if refused(&a) {
+                    port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+                    let what = self.describe();
+                    return Ok((None, self.finish(Err(EngineError::Refused(what)))));
+                }
+                let mut out = Vec::with_capacity(1 + a.data.len());
+                out.push(a.header.return_value);
+                out.extend_from_slice(a.data);
+                return Ok((None, self.finish(Ok(out))));
+            }
             Request::SlaveInfo { slave, item } => {
                 let a = port.call(&SlaveInfoGet { slave: *slave, item: *item })?;
                 let refused = a.header.errors.contains(ErrorFlags::COMMAND_ERROR);
@@ -363,7 +387,7 @@ impl Active {
                     Ok(vec![a.header.return_value])
                 }
             }
-            (Request::SlaveInfo { .. }, _) => Ok(Vec::new()),
+            (Request::SlaveInfo { .. } | Request::Immediate(_), _) => Ok(Vec::new()),
             (Request::PdoConfigRead { slave, assign_index }, true) => Err(EngineError::Failed(format!(
                 "PDO assignment {assign_index:#06x} of slave {slave} could not be read"
             ))),
