@@ -8,6 +8,8 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
+pub use crate::api::config::ApiConfig;
+
 /// A configuration mistake: unreadable file, TOML syntax or schema (naming
 /// key and line), or a value not allowed (naming the dotted key). The same
 /// type as the simulator's network files, which follow the same rules.
@@ -45,6 +47,9 @@ pub struct Config {
     /// What happens to the outputs when their writers go.
     #[serde(default)]
     pub outputs: OutputsConfig,
+    /// The gRPC API: socket, TCP/TLS, roles.
+    #[serde(default)]
+    pub api: ApiConfig,
 }
 
 /// `[outputs]`.
@@ -201,7 +206,7 @@ impl Default for CycleConfig {
 }
 
 /// One expected slave (`[[slave]]`).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SlaveConfig {
     /// A label for logs and the API.
@@ -332,6 +337,7 @@ impl Config {
             axes: Vec::new(),
             recovery: RecoveryConfig::default(),
             outputs: OutputsConfig::default(),
+            api: ApiConfig::default(),
         }
     }
 
@@ -351,6 +357,7 @@ impl Config {
             LinkConfig::SimSocket { socket } => resolve(socket),
             _ => {}
         }
+        c.api.resolve_paths(base);
         Ok(c)
     }
 
@@ -392,6 +399,7 @@ impl Config {
                 "quick-stop acts on [[axis]] entries, and none is configured".into(),
             );
         }
+        self.api.validate(path)?;
         if !matches!(c.target_state.as_str(), "preop" | "safeop" | "op") {
             return bad("cycle.target_state", format!("{:?} is not one of preop, safeop, op", c.target_state));
         }

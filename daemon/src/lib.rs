@@ -13,6 +13,7 @@
 //! - [`config`]: the configuration file.
 #![warn(missing_docs)]
 
+pub mod api;
 pub mod config;
 pub mod engine;
 pub mod link;

@@ -29,6 +29,11 @@ struct Cli {
     /// Log filter when RUST_LOG is not set, e.g. "info" or "ecmxfd=debug".
     #[arg(long, default_value = "info")]
     log: String,
+    /// Serve the API on this Unix socket (overrides api.socket; default:
+    /// $ECMXF_SOCKET, /run/ecmxfd/ecmxfd.sock for root, else
+    /// $XDG_RUNTIME_DIR/ecmxfd.sock or /tmp/ecmxfd-UID.sock).
+    #[arg(long, value_name = "PATH")]
+    socket: Option<PathBuf>,
     /// Print the engine status every this many seconds (0: never).
     #[arg(long, default_value_t = 5)]
     status_every: u64,
@@ -67,7 +72,11 @@ fn status_line(m: &Master) -> String {
 }
 
 async fn run(config: Config, status_every: u64) -> Result<(), String> {
+    let api = config.api.clone();
     let (master, _sim) = Master::from_config(config).map_err(|e| e.to_string())?;
+    let master = std::sync::Arc::new(master);
+    let (stop_api, api_stopped) = tokio::sync::watch::channel(());
+    let mut server = tokio::spawn(ecmxfd::api::server::serve(std::sync::Arc::clone(&master), api, api_stopped));
     let mut sigterm =
         tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).map_err(|e| e.to_string())?;
     let mut ticker = tokio::time::interval(Duration::from_secs(status_every.max(1)));
@@ -83,6 +92,15 @@ async fn run(config: Config, status_every: u64) -> Result<(), String> {
                 Err(tokio::sync::broadcast::error::RecvError::Lagged(n)) => info!("{n} events not logged"),
                 Err(tokio::sync::broadcast::error::RecvError::Closed) => events_open = false,
             },
+            r = &mut server => {
+                let why = match r {
+                    Ok(Ok(())) => "the API server ended".to_string(),
+                    Ok(Err(e)) => e.to_string(),
+                    Err(e) => format!("the API server failed: {e}"),
+                };
+                tokio::task::spawn_blocking(move || master.stop()).await.map_err(|e| e.to_string())?;
+                return Err(why);
+            }
             _ = tokio::signal::ctrl_c() => { info!("SIGINT"); break; }
             _ = sigterm.recv() => { info!("SIGTERM"); break; }
             _ = ticker.tick(), if status_every > 0 => info!("{}", status_line(&master)),
@@ -102,6 +120,8 @@ async fn run(config: Config, status_every: u64) -> Result<(), String> {
             }
         }
     }
+    let _ = stop_api.send(());
+    let _ = tokio::time::timeout(Duration::from_secs(2), server).await;
     tokio::task::spawn_blocking(move || master.stop()).await.map_err(|e| e.to_string())?;
     info!("stopped");
     Ok(())
@@ -132,7 +152,7 @@ fn main() -> ExitCode {
             }
         };
     }
-    let config = if cli.sim {
+    let mut config = if cli.sim {
         let mut c = Config::simulator();
         c.link = LinkConfig::Sim { network: cli.network.clone() };
         c
@@ -148,6 +168,9 @@ fn main() -> ExitCode {
         eprintln!("ecmxfd: give --config FILE, or --sim to run on the simulator");
         return ExitCode::from(2);
     };
+    if let Some(socket) = cli.socket {
+        config.api.socket = Some(socket);
+    }
     let rt = match tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build() {
         Ok(rt) => rt,
         Err(e) => {

@@ -38,6 +38,10 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
 fn runs_on_the_simulator_until_sigterm() {
     let mut child = Command::new(BIN)
         .args(["--config", &repo("config/ecmxfd-sim.toml"), "--status-every", "0"])
+        .args([
+            "--socket",
+            &std::env::temp_dir().join(format!("ecmxfd-binary-{}.sock", std::process::id())).display().to_string(),
+        ])
         .stderr(Stdio::piped())
         .spawn()
         .unwrap();

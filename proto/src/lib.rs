@@ -1,4 +1,54 @@
-//! `ecmxf-proto`: the `ecmxf.v1` gRPC API.
-//!
-//! Not built yet (issue #5). Nothing here pretends to work: the crate exists
-//! so the workspace layout is in place.
+//! `ecmxf-proto`: the `ecmxf.v1` gRPC API — the `.proto` files in
+//! `proto/ecmxf/v1/` (the contract, usable from any language) and the Rust
+//! client and server code generated from them at build time with protox
+//! (no system `protoc` needed).
+
+#![allow(missing_docs, missing_debug_implementations, clippy::all)]
+
+/// The `ecmxf.v1` package: messages, `*_client` and `*_server` modules.
+pub mod v1 {
+    tonic::include_proto!("ecmxf.v1");
+
+    /// The encoded `FileDescriptorSet` of every file, for gRPC reflection.
+    pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/ecmxf_descriptor.bin"));
+}
+
+/// Where `ecmxfd` listens and `ecmxfctl` connects when not told otherwise:
+/// `$ECMXF_SOCKET` if set; for root `/run/ecmxfd/ecmxfd.sock` (the systemd
+/// unit's RuntimeDirectory); for other users `$XDG_RUNTIME_DIR/ecmxfd.sock`,
+/// or `/tmp/ecmxfd-<uid>.sock` without one.
+pub fn default_socket_path() -> std::path::PathBuf {
+    if let Some(p) = std::env::var_os("ECMXF_SOCKET") {
+        return p.into();
+    }
+    let uid = current_uid();
+    if uid == 0 {
+        return "/run/ecmxfd/ecmxfd.sock".into();
+    }
+    match std::env::var_os("XDG_RUNTIME_DIR") {
+        Some(d) if !d.is_empty() => std::path::Path::new(&d).join("ecmxfd.sock"),
+        _ => format!("/tmp/ecmxfd-{uid}.sock").into(),
+    }
+}
+
+fn current_uid() -> u32 {
+    // The owner of /proc/self is the process's real uid; no libc needed.
+    use std::os::unix::fs::MetadataExt;
+    std::fs::metadata("/proc/self").map(|m| m.uid()).unwrap_or(u32::MAX)
+}
+
+/// A channel to a daemon's Unix socket (gRPC over HTTP/2 on the socket;
+/// the URI is a placeholder the connector ignores).
+pub async fn connect_unix(
+    path: impl Into<std::path::PathBuf>,
+) -> Result<tonic::transport::Channel, tonic::transport::Error> {
+    let path: std::path::PathBuf = path.into();
+    tonic::transport::Endpoint::from_static("http://ecmxfd.sock")
+        .connect_with_connector(tower::service_fn(move |_: tonic::transport::Uri| {
+            let path = path.clone();
+            async move {
+                Ok::<_, std::io::Error>(hyper_util::rt::TokioIo::new(tokio::net::UnixStream::connect(path).await?))
+            }
+        }))
+        .await
+}

@@ -1,3 +1,152 @@
-//! End-to-end tests that start the real `ecmxfd` on the simulator.
-//!
-//! None yet: they arrive with the daemon (issue #4) and its API (issue #5).
+//! End-to-end tests that start the real `ecmxfd` binary on the simulator
+//! and talk to it over its Unix socket (and TCP/TLS), as any client would.
+//! This library is the harness: find or build the binary, start it with a
+//! private socket, wait until the bus runs, stop it with SIGTERM.
+
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
+
+use ecmxf_proto::v1 as pb;
+use tonic::transport::Channel;
+
+/// Tests that start daemons take turns: each runs the simulator in real
+/// time, and two at once on a 2-core machine would stall each other.
+pub static SERIAL: Mutex<()> = Mutex::new(());
+
+/// The workspace root.
+pub fn repo() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap_or(Path::new("..")).to_path_buf()
+}
+
+/// The `ecmxfd` binary of this build (built first when missing, e.g. when
+/// only this package's tests are run).
+pub fn daemon_binary() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    // target/<profile>/deps/<test> -> target/<profile>/ecmxfd
+    let dir = exe.parent().and_then(Path::parent).expect("target directory");
+    let bin = dir.join("ecmxfd");
+    if !bin.exists() {
+        let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let status = Command::new(cargo)
+            .args(["build", "-p", "ecmxfd", "--bin", "ecmxfd"])
+            .current_dir(repo())
+            .status()
+            .expect("run cargo build");
+        assert!(status.success(), "building ecmxfd failed");
+    }
+    bin
+}
+
+/// A running daemon.
+#[derive(Debug)]
+pub struct Daemon {
+    child: Child,
+    /// Its socket.
+    pub socket: PathBuf,
+    /// A folder for this daemon's files, removed on drop.
+    pub dir: PathBuf,
+    log: PathBuf,
+}
+
+/// A fresh temporary folder.
+pub fn temp_dir(tag: &str) -> PathBuf {
+    static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);
+    let n = N.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+    let dir = std::env::temp_dir().join(format!("ecmxf-e2e-{tag}-{}-{n}", std::process::id()));
+    let _ = std::fs::remove_dir_all(&dir);
+    std::fs::create_dir_all(&dir).expect("create temp dir");
+    dir
+}
+
+impl Daemon {
+    /// `ecmxfd --sim` with a private socket.
+    pub fn sim() -> Self {
+        Self::start(&["--sim"], "sim")
+    }
+
+    /// `ecmxfd --config <text written to a file>`; `{dir}` in the text is
+    /// replaced by the daemon's folder, `{repo}` by the workspace root.
+    pub fn with_config(text: &str) -> Self {
+        let dir = temp_dir("cfg");
+        let text = text.replace("{dir}", &dir.display().to_string()).replace("{repo}", &repo().display().to_string());
+        let path = dir.join("ecmxfd.toml");
+        std::fs::write(&path, text).expect("write config");
+        let path = path.display().to_string();
+        Self::start_in(dir, &["--config", &path])
+    }
+
+    fn start(args: &[&str], tag: &str) -> Self {
+        Self::start_in(temp_dir(tag), args)
+    }
+
+    fn start_in(dir: PathBuf, args: &[&str]) -> Self {
+        let socket = dir.join("ecmxfd.sock");
+        let log = dir.join("ecmxfd.log");
+        let child = Command::new(daemon_binary())
+            .args(args)
+            .args(["--socket", &socket.display().to_string(), "--status-every", "0"])
+            .stdout(Stdio::null())
+            .stderr(std::fs::File::create(&log).expect("log file"))
+            .spawn()
+            .expect("start ecmxfd");
+        Self { child, socket, dir, log }
+    }
+
+    /// What the daemon logged so far.
+    pub fn log(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// Connects, and waits until the engine runs (GetStatus says RUNNING).
+    pub async fn connect(&mut self) -> Channel {
+        let start = Instant::now();
+        loop {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                panic!("ecmxfd exited with {status}:\n{}", self.log());
+            }
+            if let Ok(ch) = ecmxf_proto::connect_unix(&self.socket).await {
+                let mut m = pb::master_client::MasterClient::new(ch.clone());
+                if let Ok(s) = m.get_status(pb::GetStatusRequest {}).await {
+                    if s.get_ref().phase == pb::EnginePhase::Running as i32 {
+                        return ch;
+                    }
+                }
+            }
+            assert!(start.elapsed() < Duration::from_secs(30), "ecmxfd not running after 30 s:\n{}", self.log());
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+    }
+
+    /// SIGTERM, then the exit status (killed after 10 s).
+    pub fn stop(&mut self) -> Option<i32> {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+        let start = Instant::now();
+        while start.elapsed() < Duration::from_secs(10) {
+            if let Ok(Some(s)) = self.child.try_wait() {
+                return s.code();
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        None
+    }
+}
+
+impl Drop for Daemon {
+    fn drop(&mut self) {
+        if self.child.try_wait().ok().flatten().is_none() {
+            self.stop();
+        }
+        let _ = std::fs::remove_dir_all(&self.dir);
+    }
+}
+
+/// Runs an async test body on a runtime of its own, holding [`SERIAL`].
+pub fn run<F: std::future::Future<Output = ()>>(body: F) {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime").block_on(body);
+}

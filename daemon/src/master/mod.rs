@@ -34,7 +34,7 @@ pub use crate::outputs::OutputWriter;
 pub use transactions::RawAnswer;
 
 mod network;
-mod transactions;
+pub mod transactions;
 
 /// Requests that may wait at once.
 pub const QUEUE_DEPTH: usize = 256;

@@ -14,6 +14,7 @@ use ecmxf_wire::{EcatState, Reply, ReplyFields};
 
 use super::Master;
 use crate::engine::error::EngineError;
+pub use crate::engine::job::Immediate;
 use crate::engine::job::{Request, TransferProgress};
 
 /// What a raw datagram brought back.
@@ -221,5 +222,16 @@ impl Master {
     ) -> Result<Vec<u8>, EngineError> {
         let request = Request::FoeRead { slave, name: name.to_owned(), password, max_len };
         self.request_with_progress(request, timeout, progress).await
+    }
+
+    /// A non-blocking chip command (peripherals, CiA402 helper, emergency
+    /// history): its return value and data.
+    pub async fn immediate(&self, command: Immediate, timeout: Option<Duration>) -> Result<(u8, Vec<u8>), EngineError> {
+        let mut d = self.request(Request::Immediate(command), timeout).await?;
+        if d.is_empty() {
+            return Err(EngineError::Failed(format!("{command:?}: empty answer")));
+        }
+        let value = d.remove(0);
+        Ok((value, d))
     }
 }

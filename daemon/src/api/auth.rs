@@ -1,0 +1,157 @@
+//! Who is calling and what they may do. Three roles, each including the
+//! one below: observer (read-only), operator (process data, SDO writes,
+//! states, CiA402, peripherals), admin (EEPROM writes, FoE, raw registers,
+//! resets). Identity comes from, in order: a bearer token (`authorization:
+//! Bearer ...`, any transport), a TLS client certificate (TCP), the Unix
+//! peer's uid/gid (SO_PEERCRED). A TCP call with none is UNAUTHENTICATED; a
+//! call above the caller's role is PERMISSION_DENIED naming both roles.
+
+use std::collections::HashMap;
+
+use sha2::{Digest, Sha256};
+use tonic::transport::server::{TcpConnectInfo, TlsConnectInfo, UdsConnectInfo};
+use tonic::{Request, Status};
+
+use super::config::ApiConfig;
+
+/// What a caller may do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Role {
+    /// Read-only.
+    Observer,
+    /// Process data, SDO writes, states, CiA402, peripherals.
+    Operator,
+    /// Everything.
+    Admin,
+}
+
+impl std::fmt::Display for Role {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Observer => "observer",
+            Self::Operator => "operator",
+            Self::Admin => "admin",
+        })
+    }
+}
+
+/// A caller, as authenticated.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Caller {
+    /// Their role.
+    pub role: Role,
+    /// Who, for logs and errors ("uid 1000", "token ci-robot").
+    pub who: String,
+    /// A stable number per peer (pid, or TCP address) so that one peer's
+    /// requests take turns with others' on the chip's blocking slot.
+    pub client_id: u64,
+}
+
+/// The rules from `[api]`.
+#[derive(Debug)]
+pub struct Authenticator {
+    own_uid: u32,
+    users: HashMap<u32, Option<Role>>,
+    groups: HashMap<u32, Option<Role>>,
+    tokens: HashMap<String, (Option<Role>, String)>,
+    certs: HashMap<String, (Option<Role>, String)>,
+    default_role: Option<Role>,
+}
+
+fn fingerprint(bytes: &[u8]) -> String {
+    hex::encode(Sha256::digest(bytes))
+}
+
+impl Authenticator {
+    /// The rules of `config`; `own_uid` (the daemon's) is always admin.
+    pub fn new(config: &ApiConfig, own_uid: u32) -> Self {
+        let fp = |list: &[super::config::TokenRole]| {
+            list.iter().map(|t| (t.sha256.to_ascii_lowercase(), (t.role.role(), t.name.clone()))).collect()
+        };
+        Self {
+            own_uid,
+            users: config.users.iter().map(|u| (u.uid, u.role.role())).collect(),
+            groups: config.groups.iter().map(|g| (g.gid, g.role.role())).collect(),
+            tokens: fp(&config.tokens),
+            certs: fp(&config.client_certs),
+            default_role: config.default_role.role(),
+        }
+    }
+
+    /// Identifies the caller of `request`.
+    pub fn identify<T>(&self, request: &Request<T>) -> Result<Caller, Status> {
+        let client_id = client_id(request);
+        if let Some(value) = request.metadata().get("authorization") {
+            let token = value
+                .to_str()
+                .ok()
+                .and_then(|v| v.strip_prefix("Bearer "))
+                .ok_or_else(|| Status::unauthenticated("the authorization header must be \"Bearer <token>\""))?;
+            return match self.tokens.get(&fingerprint(token.trim().as_bytes())) {
+                Some((Some(role), name)) => Ok(Caller { role: *role, who: format!("token {name}"), client_id }),
+                Some((None, name)) => Err(Status::permission_denied(format!("token {name} has no access"))),
+                None => Err(Status::unauthenticated("unknown bearer token")),
+            };
+        }
+        if let Some(tls) = request.extensions().get::<TlsConnectInfo<TcpConnectInfo>>() {
+            if let Some(cert) = tls.peer_certs().and_then(|c| c.first().cloned()) {
+                let fp = fingerprint(cert.as_ref());
+                return match self.certs.get(&fp) {
+                    Some((Some(role), name)) => {
+                        Ok(Caller { role: *role, who: format!("certificate {name}"), client_id })
+                    }
+                    Some((None, name)) => Err(Status::permission_denied(format!("certificate {name} has no access"))),
+                    None => {
+                        Err(Status::unauthenticated(format!("client certificate {fp} is not in [[api.client_cert]]")))
+                    }
+                };
+            }
+            return Err(Status::unauthenticated("TCP callers need a bearer token or a client certificate"));
+        }
+        if let Some(uds) = request.extensions().get::<UdsConnectInfo>() {
+            let Some(cred) = uds.peer_cred else {
+                return Err(Status::unauthenticated("the peer's credentials could not be read"));
+            };
+            let uid = cred.uid();
+            let gid = cred.gid();
+            let role = if uid == 0 || uid == self.own_uid {
+                Some(Role::Admin)
+            } else if let Some(r) = self.users.get(&uid) {
+                *r
+            } else if let Some(r) = self.groups.get(&gid) {
+                *r
+            } else {
+                self.default_role
+            };
+            return match role {
+                Some(role) => Ok(Caller { role, who: format!("uid {uid}"), client_id }),
+                None => Err(Status::permission_denied(format!("uid {uid} (gid {gid}) has no access"))),
+            };
+        }
+        Err(Status::unauthenticated("no identity: connect through the Unix socket or with TLS"))
+    }
+
+    /// Identifies the caller and checks they have `needed`.
+    pub fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
+        let caller = self.identify(request)?;
+        if caller.role < needed {
+            return Err(Status::permission_denied(format!(
+                "{} has role {}; this call needs {needed}",
+                caller.who, caller.role
+            )));
+        }
+        Ok(caller)
+    }
+}
+
+fn client_id<T>(request: &Request<T>) -> u64 {
+    use std::hash::{Hash, Hasher};
+    let mut h = std::collections::hash_map::DefaultHasher::new();
+    if let Some(uds) = request.extensions().get::<UdsConnectInfo>() {
+        uds.peer_cred.and_then(|c| c.pid()).hash(&mut h);
+    } else if let Some(tls) = request.extensions().get::<TlsConnectInfo<TcpConnectInfo>>() {
+        tls.get_ref().remote_addr().hash(&mut h);
+    }
+    // Zero means "no client" to the engine.
+    h.finish() | 1
+}

@@ -1,0 +1,181 @@
+//! `[api]`: where the gRPC API is served and who may do what.
+//!
+//! The Unix socket is the default transport, like the Docker socket: its
+//! file mode and group decide who may connect, and the peer's uid/gid
+//! (SO_PEERCRED) decide the role. TCP is optional and only with TLS; there a
+//! client proves who it is with a client certificate or a bearer token.
+//! Tokens and certificates are stored as SHA-256 fingerprints, never in
+//! clear.
+
+use std::net::SocketAddr;
+use std::path::{Path, PathBuf};
+
+use serde::Deserialize;
+
+use super::auth::Role;
+use crate::config::ConfigError;
+
+/// `[api]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct ApiConfig {
+    /// Unix socket path (default: [`ecmxf_proto::default_socket_path`]).
+    pub socket: Option<PathBuf>,
+    /// Socket file mode, e.g. 0o660.
+    pub socket_mode: u32,
+    /// Group owning the socket (name or numeric gid); unset: the daemon's.
+    pub socket_group: Option<String>,
+    /// Role of Unix peers matched by no `[[api.user]]`/`[[api.group]]`
+    /// ("none" refuses them). The daemon's own uid and root are admin.
+    pub default_role: RoleName,
+    /// Serve on TCP too (needs `tls_cert` and `tls_key`).
+    pub tcp: Option<SocketAddr>,
+    /// Server certificate chain (PEM), for TCP.
+    pub tls_cert: Option<PathBuf>,
+    /// Server private key (PEM), for TCP.
+    pub tls_key: Option<PathBuf>,
+    /// CA (PEM) that client certificates must chain to; unset: no client
+    /// certificates (tokens only).
+    pub client_ca: Option<PathBuf>,
+    /// Roles of Unix peers by uid.
+    #[serde(rename = "user")]
+    pub users: Vec<UserRole>,
+    /// Roles of Unix peers by gid (primary group).
+    #[serde(rename = "group")]
+    pub groups: Vec<GroupRole>,
+    /// Bearer tokens (any transport).
+    #[serde(rename = "token")]
+    pub tokens: Vec<TokenRole>,
+    /// Client certificates (TCP).
+    #[serde(rename = "client_cert")]
+    pub client_certs: Vec<TokenRole>,
+    /// Default output-lease time-to-live, ms.
+    pub lease_ttl_ms: u32,
+}
+
+impl Default for ApiConfig {
+    fn default() -> Self {
+        Self {
+            socket: None,
+            socket_mode: 0o660,
+            socket_group: None,
+            default_role: RoleName::Observer,
+            tcp: None,
+            tls_cert: None,
+            tls_key: None,
+            client_ca: None,
+            users: Vec::new(),
+            groups: Vec::new(),
+            tokens: Vec::new(),
+            client_certs: Vec::new(),
+            lease_ttl_ms: 2000,
+        }
+    }
+}
+
+/// A role as written in the file.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum RoleName {
+    /// No access.
+    None,
+    /// Read-only.
+    #[default]
+    Observer,
+    /// Process data, SDO write, states, CiA402.
+    Operator,
+    /// Everything.
+    Admin,
+}
+
+impl RoleName {
+    /// The role, `None` for no access.
+    pub fn role(self) -> Option<Role> {
+        match self {
+            Self::None => None,
+            Self::Observer => Some(Role::Observer),
+            Self::Operator => Some(Role::Operator),
+            Self::Admin => Some(Role::Admin),
+        }
+    }
+}
+
+/// `[[api.user]]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct UserRole {
+    /// Numeric uid.
+    pub uid: u32,
+    /// Role.
+    pub role: RoleName,
+}
+
+/// `[[api.group]]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GroupRole {
+    /// Numeric gid.
+    pub gid: u32,
+    /// Role.
+    pub role: RoleName,
+}
+
+/// `[[api.token]]` / `[[api.client_cert]]`: a SHA-256 fingerprint (hex) of
+/// the token's bytes or of the certificate's DER bytes.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct TokenRole {
+    /// 64 hex digits (`printf %s TOKEN | sha256sum`, or `openssl x509
+    /// -outform der | sha256sum` for a certificate).
+    pub sha256: String,
+    /// Role.
+    pub role: RoleName,
+    /// Who this is, for the log.
+    #[serde(default)]
+    pub name: String,
+}
+
+impl ApiConfig {
+    /// Checks what serde cannot: TLS for TCP, fingerprints, ranges.
+    pub fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad =
+            |key: &str, message: String| Err(ConfigError::Invalid { file: path.into(), key: key.into(), message });
+        if self.socket_mode > 0o777 {
+            return bad("api.socket_mode", format!("{:#o} is not a file mode (0..=0o777)", self.socket_mode));
+        }
+        if self.tcp.is_some() && (self.tls_cert.is_none() || self.tls_key.is_none()) {
+            return bad("api.tcp", "TCP is served only with TLS: set api.tls_cert and api.tls_key".into());
+        }
+        if self.tcp.is_some() && self.tokens.is_empty() && self.client_certs.is_empty() {
+            return bad("api.tcp", "no [[api.token]] or [[api.client_cert]]: no TCP client could authenticate".into());
+        }
+        if !self.client_certs.is_empty() && self.client_ca.is_none() {
+            return bad("api.client_cert", "client certificates need api.client_ca to verify them".into());
+        }
+        for (key, list) in [("api.token", &self.tokens), ("api.client_cert", &self.client_certs)] {
+            for (i, t) in list.iter().enumerate() {
+                if t.sha256.len() != 64 || !t.sha256.bytes().all(|b| b.is_ascii_hexdigit()) {
+                    return bad(&format!("{key}[{i}].sha256"), format!("{:?} is not 64 hex digits", t.sha256));
+                }
+            }
+        }
+        if !(100..=60_000).contains(&self.lease_ttl_ms) {
+            return bad("api.lease_ttl_ms", format!("{} ms is outside 100..=60000", self.lease_ttl_ms));
+        }
+        Ok(())
+    }
+
+    /// Makes relative paths relative to `base` (the config file's folder).
+    pub fn resolve_paths(&mut self, base: &Path) {
+        for p in [&mut self.socket, &mut self.tls_cert, &mut self.tls_key, &mut self.client_ca].into_iter().flatten() {
+            if p.is_relative() {
+                *p = base.join(&*p);
+            }
+        }
+    }
+
+    /// The socket path in force.
+    pub fn socket_path(&self) -> PathBuf {
+        self.socket.clone().unwrap_or_else(ecmxf_proto::default_socket_path)
+    }
+}

@@ -1,0 +1,263 @@
+//! Conversions between engine/wire types and `ecmxf.v1` messages, and the
+//! typed-value codec (CiA 301 data types, little-endian as on EtherCAT).
+
+use ecmxf_proto::v1 as pb;
+use ecmxf_wire::EcatState;
+use tonic::Status;
+
+use super::status::bad_argument;
+use crate::engine::telemetry::Phase;
+
+/// Wire state to API state.
+pub fn state_to_pb(s: EcatState) -> pb::EcatState {
+    match s {
+        EcatState::Init => pb::EcatState::Init,
+        EcatState::PreOp => pb::EcatState::PreOp,
+        EcatState::Boot => pb::EcatState::Boot,
+        EcatState::SafeOp => pb::EcatState::SafeOp,
+        EcatState::Op => pb::EcatState::Op,
+        EcatState::Error => pb::EcatState::Error,
+        _ => pb::EcatState::Unspecified,
+    }
+}
+
+/// API state (as sent: an i32) to a requestable wire state.
+pub fn state_from_pb(v: i32, field: &'static str) -> Result<EcatState, Status> {
+    match pb::EcatState::try_from(v) {
+        Ok(pb::EcatState::Init) => Ok(EcatState::Init),
+        Ok(pb::EcatState::PreOp) => Ok(EcatState::PreOp),
+        Ok(pb::EcatState::Boot) => Ok(EcatState::Boot),
+        Ok(pb::EcatState::SafeOp) => Ok(EcatState::SafeOp),
+        Ok(pb::EcatState::Op) => Ok(EcatState::Op),
+        _ => Err(bad_argument(field, format!("{v} is not a requestable state (INIT, PRE_OP, BOOT, SAFE_OP, OP)"))),
+    }
+}
+
+/// Engine phase to API phase.
+pub fn phase_to_pb(p: Phase) -> pb::EnginePhase {
+    match p {
+        Phase::Starting => pb::EnginePhase::Starting,
+        Phase::BringUp => pb::EnginePhase::BringingUp,
+        Phase::Running => pb::EnginePhase::Running,
+        Phase::Recovering => pb::EnginePhase::Recovering,
+        Phase::Stopping => pb::EnginePhase::Stopping,
+        Phase::Stopped => pb::EnginePhase::Stopped,
+    }
+}
+
+/// A slave position from a request (0..=127, the chip's addressing range).
+pub fn slave(v: u32) -> Result<u8, Status> {
+    u8::try_from(v).ok().filter(|s| *s < 128).ok_or_else(|| bad_argument("slave", format!("{v} is outside 0..=127")))
+}
+
+/// An object index from a request.
+pub fn index(v: u32) -> Result<u16, Status> {
+    u16::try_from(v).map_err(|_| bad_argument("index", format!("{v:#x} is outside 0..=0xFFFF")))
+}
+
+/// A subindex from a request.
+pub fn subindex(v: u32) -> Result<u8, Status> {
+    u8::try_from(v).map_err(|_| bad_argument("subindex", format!("{v:#x} is outside 0..=0xFF")))
+}
+
+/// Size in bytes of a fixed-size type, `None` for strings and unknown.
+pub fn type_size(t: pb::DataType) -> Option<usize> {
+    use pb::DataType as T;
+    Some(match t {
+        T::Boolean | T::Integer8 | T::Unsigned8 => 1,
+        T::Integer16 | T::Unsigned16 => 2,
+        T::Integer32 | T::Unsigned32 | T::Real32 => 4,
+        T::Integer64 | T::Unsigned64 | T::Real64 => 8,
+        T::VisibleString | T::OctetString | T::Unspecified => return None,
+    })
+}
+
+/// A type from a request field.
+pub fn data_type(v: i32) -> Result<pb::DataType, Status> {
+    pb::DataType::try_from(v).map_err(|_| bad_argument("data_type", format!("{v} is not a DataType")))
+}
+
+/// Decodes bytes (little-endian) as `t`. Short data is an error naming the
+/// sizes; longer data is decoded from its start (complete access).
+pub fn decode_value(t: pb::DataType, raw: &[u8]) -> Result<Option<pb::Value>, String> {
+    use pb::DataType as T;
+    use pb::value::Kind;
+    if let Some(n) = type_size(t) {
+        if raw.len() < n {
+            return Err(format!("{} bytes received for a {}-byte {}", raw.len(), n, t.as_str_name()));
+        }
+    }
+    let mut b = [0u8; 8];
+    let n = raw.len().min(8);
+    b[..n].copy_from_slice(&raw[..n]);
+    let signed = |bytes: usize| {
+        let v = u64::from_le_bytes(b);
+        let shift = 64 - 8 * bytes as u32;
+        ((v << shift) as i64) >> shift
+    };
+    let unsigned = |bytes: usize| {
+        let v = u64::from_le_bytes(b);
+        if bytes == 8 { v } else { v & ((1u64 << (8 * bytes)) - 1) }
+    };
+    let kind = match t {
+        T::Unspecified => return Ok(None),
+        T::Boolean => Kind::Boolean(b[0] != 0),
+        T::Integer8 => Kind::Integer(signed(1)),
+        T::Integer16 => Kind::Integer(signed(2)),
+        T::Integer32 => Kind::Integer(signed(4)),
+        T::Integer64 => Kind::Integer(signed(8)),
+        T::Unsigned8 => Kind::Unsigned(unsigned(1)),
+        T::Unsigned16 => Kind::Unsigned(unsigned(2)),
+        T::Unsigned32 => Kind::Unsigned(unsigned(4)),
+        T::Unsigned64 => Kind::Unsigned(unsigned(8)),
+        T::Real32 => Kind::Real(f32::from_le_bytes([b[0], b[1], b[2], b[3]]).into()),
+        T::Real64 => Kind::Real(f64::from_le_bytes(b)),
+        T::VisibleString => {
+            let end = raw.iter().position(|&c| c == 0).unwrap_or(raw.len());
+            Kind::Text(String::from_utf8_lossy(&raw[..end]).into_owned())
+        }
+        T::OctetString => Kind::Raw(raw.to_vec()),
+    };
+    Ok(Some(pb::Value { kind: Some(kind) }))
+}
+
+/// Encodes `value` as `t`; a raw value is taken as it is. Errors name
+/// `value` and say why (out of range, wrong kind, no type).
+pub fn encode_value(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, Status> {
+    use pb::DataType as T;
+    use pb::value::Kind;
+    let kind = value.kind.as_ref().ok_or_else(|| bad_argument("value", "no value given"))?;
+    if let Kind::Raw(b) = kind {
+        return Ok(b.clone());
+    }
+    if let Kind::Text(s) = kind {
+        return match t {
+            T::VisibleString | T::OctetString | T::Unspecified => Ok(s.as_bytes().to_vec()),
+            _ => Err(bad_argument("value", format!("text given for a {} object", t.as_str_name()))),
+        };
+    }
+    let Some(size) = type_size(t) else {
+        return Err(bad_argument(
+            "data_type",
+            "the object's type is not known: give data_type, or a raw value".to_string(),
+        ));
+    };
+    let out_of_range = |v: String| bad_argument("value", format!("{v} does not fit {}", t.as_str_name()));
+    let bytes: Vec<u8> = match (t, kind) {
+        (T::Real32, Kind::Real(f)) => (*f as f32).to_le_bytes().to_vec(),
+        (T::Real64, Kind::Real(f)) => f.to_le_bytes().to_vec(),
+        (T::Real32 | T::Real64, Kind::Integer(i)) => return encode_value(t, &real(*i as f64)),
+        (T::Real32 | T::Real64, Kind::Unsigned(u)) => return encode_value(t, &real(*u as f64)),
+        (_, Kind::Real(f)) => {
+            return Err(bad_argument("value", format!("{f} is a real; {} wants an integer", t.as_str_name())));
+        }
+        (_, Kind::Boolean(v)) => {
+            let mut b = vec![0u8; size];
+            b[0] = u8::from(*v);
+            b
+        }
+        (_, Kind::Integer(i)) => {
+            let signed = matches!(t, T::Integer8 | T::Integer16 | T::Integer32 | T::Integer64);
+            let bits = 8 * size as u32;
+            let fits = if signed {
+                bits == 64 || (*i >= -(1i64 << (bits - 1)) && *i < (1i64 << (bits - 1)))
+            } else {
+                *i >= 0 && (bits == 64 || *i < (1i64 << bits))
+            };
+            if !fits {
+                return Err(out_of_range(i.to_string()));
+            }
+            i.to_le_bytes()[..size].to_vec()
+        }
+        (_, Kind::Unsigned(u)) => {
+            let signed = matches!(t, T::Integer8 | T::Integer16 | T::Integer32 | T::Integer64);
+            let bits = 8 * size as u32 - u32::from(signed);
+            if bits < 64 && *u >= (1u64 << bits) {
+                return Err(out_of_range(u.to_string()));
+            }
+            u.to_le_bytes()[..size].to_vec()
+        }
+        (_, Kind::Raw(_) | Kind::Text(_)) => unreachable!("handled above"),
+    };
+    Ok(bytes)
+}
+
+fn real(f: f64) -> pb::Value {
+    pb::Value { kind: Some(pb::value::Kind::Real(f)) }
+}
+
+/// The natural type of an entry of `bits` bits with no better knowledge.
+pub fn type_for_bits(bits: u32, signed: bool) -> pb::DataType {
+    use pb::DataType as T;
+    match (bits, signed) {
+        (1, _) => T::Boolean,
+        (8, false) => T::Unsigned8,
+        (16, false) => T::Unsigned16,
+        (32, false) => T::Unsigned32,
+        (64, false) => T::Unsigned64,
+        (8, true) => T::Integer8,
+        (16, true) => T::Integer16,
+        (32, true) => T::Integer32,
+        (64, true) => T::Integer64,
+        _ => T::OctetString,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use pb::DataType as T;
+    use pb::value::Kind;
+
+    fn v(k: Kind) -> pb::Value {
+        pb::Value { kind: Some(k) }
+    }
+
+    #[test]
+    fn every_fixed_type_round_trips_at_its_limits() {
+        let cases = [
+            (T::Boolean, Kind::Boolean(true)),
+            (T::Integer8, Kind::Integer(-128)),
+            (T::Integer8, Kind::Integer(127)),
+            (T::Integer16, Kind::Integer(-32768)),
+            (T::Integer32, Kind::Integer(i32::MIN.into())),
+            (T::Integer64, Kind::Integer(i64::MIN)),
+            (T::Unsigned8, Kind::Unsigned(255)),
+            (T::Unsigned16, Kind::Unsigned(65535)),
+            (T::Unsigned32, Kind::Unsigned(u32::MAX.into())),
+            (T::Unsigned64, Kind::Unsigned(u64::MAX)),
+            (T::Real32, Kind::Real(1.5)),
+            (T::Real64, Kind::Real(-2.25)),
+            (T::VisibleString, Kind::Text("abc".into())),
+            (T::OctetString, Kind::Raw(vec![1, 2, 3])),
+        ];
+        for (t, k) in cases {
+            let bytes = encode_value(t, &v(k.clone())).unwrap();
+            assert_eq!(Some(bytes.len()), type_size(t).or(Some(bytes.len())));
+            assert_eq!(decode_value(t, &bytes).unwrap(), Some(v(k)), "{t:?}");
+        }
+    }
+
+    #[test]
+    fn out_of_range_values_are_refused_naming_the_type() {
+        for (t, k) in [
+            (T::Integer8, Kind::Integer(128)),
+            (T::Unsigned8, Kind::Integer(-1)),
+            (T::Unsigned16, Kind::Unsigned(65536)),
+            (T::Integer16, Kind::Unsigned(32768)),
+            (T::Unsigned32, Kind::Real(1.0)),
+            (T::Unsigned32, Kind::Text("x".into())),
+        ] {
+            let e = encode_value(t, &v(k)).unwrap_err();
+            assert_eq!(e.code(), tonic::Code::InvalidArgument);
+            assert!(e.message().contains("value"), "{}", e.message());
+        }
+        assert!(encode_value(T::Unspecified, &v(Kind::Integer(1))).unwrap_err().message().contains("data_type"));
+    }
+
+    #[test]
+    fn short_data_is_an_error_naming_sizes() {
+        assert!(decode_value(T::Unsigned32, &[1, 2]).unwrap_err().contains("2 bytes"));
+        assert_eq!(decode_value(T::Integer16, &[0xFF, 0xFF]).unwrap(), Some(v(Kind::Integer(-1))));
+    }
+}

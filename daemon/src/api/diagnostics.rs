@@ -1,0 +1,192 @@
+//! `Diagnostics` service: the event stream, the CoE emergency history, and
+//! counters with per-slave AL status.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use ecmxf_proto::v1 as pb;
+use ecmxf_proto::v1::diagnostics_server::Diagnostics as DiagnosticsApi;
+use ecmxf_wire::payload::emergency::{CoeEmergencyReply, EMERGENCY_MAX, EmergencyRecord};
+use tokio::sync::broadcast::error::RecvError;
+use tonic::{Request, Response, Status};
+
+use super::auth::Role;
+use super::convert::{phase_to_pb, state_to_pb};
+use super::master::{counters_pb, list_slaves};
+use super::status::{bad_argument, to_status};
+use super::{BoxStream, Context, deadline};
+use crate::engine::events::{Event, EventKind};
+use crate::master::transactions::Immediate;
+use crate::master::{Master, as_client};
+
+/// How often the emergency history is polled for the event stream.
+pub const EMERGENCY_POLL: Duration = Duration::from_millis(500);
+
+/// The `Diagnostics` service.
+#[derive(Debug, Clone)]
+pub struct DiagnosticsService(pub Arc<Context>);
+
+fn emergency_pb(r: &EmergencyRecord) -> pb::Emergency {
+    pb::Emergency {
+        slave: r.slave.into(),
+        number: r.number.into(),
+        error_code: r.error_code.into(),
+        error_register: r.error_register.into(),
+        data: r.data.to_vec(),
+    }
+}
+
+/// The chip's last `n` emergency records (empty slots left out), newest first.
+pub async fn emergencies(m: &Master, n: u8, t: Option<Duration>) -> Result<Vec<EmergencyRecord>, Status> {
+    let (_, data) = m.immediate(Immediate::Emergencies(n), t).await.map_err(to_status)?;
+    let reply = CoeEmergencyReply::new(&data).map_err(|e| Status::internal(format!("emergency history: {e}")))?;
+    let mut out: Vec<EmergencyRecord> = reply.records().filter(|r| !r.is_empty()).collect();
+    out.sort_by_key(|r| std::cmp::Reverse(r.number));
+    Ok(out)
+}
+
+/// An engine event as a message.
+pub fn event_pb(e: &Event) -> pb::Event {
+    use pb::EventKind as K;
+    let mut out = pb::Event { time_ns: e.time_ns, text: format!("{:?}", e.kind), ..pb::Event::default() };
+    let kind = match &e.kind {
+        EventKind::Phase(p) => {
+            out.detail = format!("{:?}", phase_to_pb(*p));
+            K::Phase
+        }
+        EventKind::EcatState { from, to } => {
+            out.from_state = state_to_pb(*from) as i32;
+            out.to_state = state_to_pb(*to) as i32;
+            out.text = format!("network state {from} -> {to}");
+            K::StateChange
+        }
+        EventKind::LinkPin(v) => {
+            out.flag = *v;
+            K::Link
+        }
+        EventKind::DcStable(v) => {
+            out.flag = *v;
+            K::DcStable
+        }
+        EventKind::CrcErrors { total } => {
+            out.counter = (*total).into();
+            K::CrcErrors
+        }
+        EventKind::WkcErrors { total } => {
+            out.counter = (*total).into();
+            K::WkcErrors
+        }
+        EventKind::FifoUnderrun => K::FifoUnderrun,
+        EventKind::BringUpFailed(why) => {
+            out.detail = why.clone();
+            K::BringUpFailed
+        }
+        EventKind::Recovering(why) => {
+            out.detail = why.clone();
+            K::Recovering
+        }
+        EventKind::LastWriterGone(action) => {
+            out.detail = format!("{action:?}");
+            K::LastWriterGone
+        }
+        EventKind::Lost(n) => {
+            out.counter = *n;
+            K::Lost
+        }
+    };
+    out.kind = kind as i32;
+    out
+}
+
+/// Polls the emergency history and publishes new records (by running
+/// number) as events, until the context's master stops answering for good.
+pub async fn watch_emergencies(ctx: Arc<Context>) {
+    let mut seen: Option<u16> = None;
+    let mut tick = tokio::time::interval(EMERGENCY_POLL);
+    loop {
+        tick.tick().await;
+        let Ok(records) = emergencies(&ctx.master, EMERGENCY_MAX, Some(Duration::from_secs(1))).await else { continue };
+        let newest = records.first().map(|r| r.number);
+        if let Some(last) = seen {
+            for r in records.iter().rev().filter(|r| r.number > last) {
+                let _ = ctx.emergencies.send(*r);
+            }
+        }
+        seen = newest.or(seen).or(Some(0));
+    }
+}
+
+#[tonic::async_trait]
+impl DiagnosticsApi for DiagnosticsService {
+    type StreamEventsStream = BoxStream<pb::Event>;
+
+    async fn stream_events(
+        &self,
+        request: Request<pb::StreamEventsRequest>,
+    ) -> Result<Response<Self::StreamEventsStream>, Status> {
+        self.0.authorize(&request, Role::Observer)?;
+        let mut events = self.0.master.events();
+        let mut emergencies = self.0.emergencies.subscribe();
+        let (tx, rx) = tokio::sync::mpsc::channel(64);
+        tokio::spawn(async move {
+            loop {
+                let msg = tokio::select! {
+                    e = events.recv() => match e {
+                        Ok(e) => event_pb(&e),
+                        Err(RecvError::Lagged(n)) => pb::Event { kind: pb::EventKind::Lost as i32, counter: n, text: format!("{n} events missed"), ..Default::default() },
+                        Err(RecvError::Closed) => break,
+                    },
+                    e = emergencies.recv() => match e {
+                        Ok(r) => pb::Event {
+                            kind: pb::EventKind::Emergency as i32,
+                            text: format!("emergency {:#06x} from slave {} (register {:#04x})", r.error_code, r.slave, r.error_register),
+                            emergency: Some(emergency_pb(&r)),
+                            ..Default::default()
+                        },
+                        Err(RecvError::Lagged(n)) => pb::Event { kind: pb::EventKind::Lost as i32, counter: n, text: format!("{n} emergencies missed"), ..Default::default() },
+                        Err(RecvError::Closed) => break,
+                    },
+                };
+                if tx.send(Ok(msg)).await.is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx))))
+    }
+
+    async fn get_emergencies(
+        &self,
+        request: Request<pb::GetEmergenciesRequest>,
+    ) -> Result<Response<pb::GetEmergenciesResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let n = match request.get_ref().count {
+            0 => EMERGENCY_MAX,
+            c @ 1..=8 => c as u8,
+            c => return Err(bad_argument("count", format!("{c} records; the chip keeps 1..=8"))),
+        };
+        let t = deadline(&request);
+        let records = as_client(caller.client_id, emergencies(&self.0.master, n, t)).await?;
+        Ok(Response::new(pb::GetEmergenciesResponse { emergencies: records.iter().map(emergency_pb).collect() }))
+    }
+
+    async fn get_counters(
+        &self,
+        request: Request<pb::GetCountersRequest>,
+    ) -> Result<Response<pb::GetCountersResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let list = as_client(caller.client_id, list_slaves(&self.0, false)).await?;
+        let slaves = list
+            .slaves
+            .into_iter()
+            .map(|s| pb::SlaveDiagnosis {
+                position: s.position,
+                name: s.name,
+                state: s.state,
+                al_status_code: s.al_status_code,
+                al_status_text: s.al_status_text,
+            })
+            .collect();
+        Ok(Response::new(pb::GetCountersResponse { counters: Some(counters_pb(&self.0.master)), slaves }))
+    }
+}

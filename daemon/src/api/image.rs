@@ -1,0 +1,251 @@
+//! The process image as clients see it: every mapped PDO entry with a
+//! name, its place in the output or input image in bits, and a type. Built
+//! from each slave's PDO assignment as the slave reports it (cmds 8/9) and
+//! the offsets bring-up found; rebuilt when a new configuration is applied.
+//! Also the bit-level get/put of entry values.
+
+use std::collections::HashMap;
+use std::sync::Arc;
+
+use ecmxf_proto::v1 as pb;
+use ecmxf_wire::payload::pdo::{PdoConfig, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
+
+use super::convert::{decode_value, type_for_bits};
+use super::objects::{entry_name, lookup};
+use crate::engine::error::EngineError;
+use crate::master::Master;
+
+/// One entry.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Entry {
+    /// Unique name.
+    pub name: String,
+    /// Slave position.
+    pub slave: u8,
+    /// Object index (0: a gap in the mapping).
+    pub index: u16,
+    /// Subindex.
+    pub subindex: u8,
+    /// Output (true) or input.
+    pub output: bool,
+    /// From the start of its image, bits.
+    pub bit_offset: u32,
+    /// Size, bits.
+    pub bit_length: u32,
+    /// Type.
+    pub data_type: pb::DataType,
+}
+
+/// The whole image.
+#[derive(Clone, Debug, Default)]
+pub struct Image {
+    /// Output image bytes.
+    pub output_bytes: u32,
+    /// Input image bytes.
+    pub input_bytes: u32,
+    /// Entries, outputs then inputs, slave order.
+    pub entries: Vec<Entry>,
+    by_name: HashMap<String, usize>,
+    /// The configuration generation it was built for.
+    pub generation: u64,
+    /// Cycle, us.
+    pub cycle_us: u32,
+}
+
+impl Image {
+    /// Reads the mapping of every slave with process data.
+    pub async fn build(master: &Master) -> Result<Self, EngineError> {
+        let generation = master.status().config_generation;
+        let layout = master.layout();
+        let mut image = Image {
+            output_bytes: layout.rx_size as u32,
+            input_bytes: layout.tx_size as u32,
+            generation,
+            cycle_us: master.config().cycle.sync0_us,
+            ..Image::default()
+        };
+        for output in [true, false] {
+            for (i, s) in layout.slaves.iter().enumerate() {
+                let (bytes, offset, assign) = if output {
+                    (s.rx_bytes, s.rx_offset, RX_PDO_ASSIGN)
+                } else {
+                    (s.tx_bytes, s.tx_offset, TX_PDO_ASSIGN)
+                };
+                if bytes == 0 {
+                    continue;
+                }
+                let slave = i as u8;
+                let config = master.pdo_config_read(slave, assign, None).await?;
+                image.add_slave(slave, output, (offset * 8) as u32, (bytes * 8) as u32, &config);
+            }
+        }
+        Ok(image)
+    }
+
+    fn add_slave(&mut self, slave: u8, output: bool, start: u32, bits: u32, config: &PdoConfig) {
+        let mut at = start;
+        let count = usize::from(config.pdo_count).min(config.pdos.len());
+        for pdo in &config.pdos[..count] {
+            for e in pdo.used() {
+                let len = u32::from(e.bits);
+                if e.index != 0 && at + len <= start + bits {
+                    let data_type =
+                        lookup(e.index, e.subindex).map_or_else(|| type_for_bits(len, false), |(k, _)| k.data_type);
+                    self.push(Entry {
+                        name: entry_name(slave, e.index, e.subindex),
+                        slave,
+                        index: e.index,
+                        subindex: e.subindex,
+                        output,
+                        bit_offset: at,
+                        bit_length: len,
+                        data_type,
+                    });
+                }
+                at += len;
+            }
+        }
+        // What the chip reports may be cut (3 PDOs x 8 entries are carried):
+        // the rest of the slave's bytes stay reachable by offset, as one entry.
+        if at < start + bits {
+            let dir = if output { "outputs" } else { "inputs" };
+            self.push(Entry {
+                name: format!("{slave}.more_{dir}"),
+                slave,
+                index: 0,
+                subindex: 0,
+                output,
+                bit_offset: at,
+                bit_length: start + bits - at,
+                data_type: pb::DataType::OctetString,
+            });
+        }
+    }
+
+    fn push(&mut self, mut e: Entry) {
+        let mut n = 2;
+        let base = e.name.clone();
+        while self.by_name.contains_key(&e.name) {
+            e.name = format!("{base}#{n}");
+            n += 1;
+        }
+        self.by_name.insert(e.name.clone(), self.entries.len());
+        self.entries.push(e);
+    }
+
+    /// An entry by name.
+    pub fn get(&self, name: &str) -> Option<&Entry> {
+        self.by_name.get(name).map(|&i| &self.entries[i])
+    }
+
+    /// The input entry of `slave` for CiA 402 object `index`.
+    pub fn find(&self, slave: u8, index: u16, output: bool) -> Option<&Entry> {
+        self.entries.iter().find(|e| e.slave == slave && e.index == index && e.subindex == 0 && e.output == output)
+    }
+
+    /// The message form.
+    pub fn to_pb(&self) -> pb::ProcessImage {
+        pb::ProcessImage {
+            output_bytes: self.output_bytes,
+            input_bytes: self.input_bytes,
+            cycle_us: self.cycle_us,
+            entries: self
+                .entries
+                .iter()
+                .map(|e| pb::ImageEntry {
+                    name: e.name.clone(),
+                    slave: e.slave.into(),
+                    index: e.index.into(),
+                    subindex: e.subindex.into(),
+                    direction: if e.output { pb::Direction::Output } else { pb::Direction::Input } as i32,
+                    bit_offset: e.bit_offset,
+                    bit_length: e.bit_length,
+                    data_type: e.data_type as i32,
+                })
+                .collect(),
+        }
+    }
+}
+
+/// Reads `bits` bits at bit `offset` of `image` (little-endian, LSB first).
+pub fn read_bits(image: &[u8], offset: u32, bits: u32) -> Vec<u8> {
+    let mut out = vec![0u8; bits.div_ceil(8) as usize];
+    for i in 0..bits {
+        let src = offset + i;
+        let Some(byte) = image.get((src / 8) as usize) else { break };
+        if byte >> (src % 8) & 1 == 1 {
+            out[(i / 8) as usize] |= 1 << (i % 8);
+        }
+    }
+    out
+}
+
+/// Writes `bits` bits of `value` at bit `offset` of `image`.
+pub fn write_bits(image: &mut [u8], offset: u32, bits: u32, value: &[u8]) {
+    for i in 0..bits {
+        let dst = offset + i;
+        let bit = value.get((i / 8) as usize).is_some_and(|b| b >> (i % 8) & 1 == 1);
+        if let Some(byte) = image.get_mut((dst / 8) as usize) {
+            if bit {
+                *byte |= 1 << (dst % 8);
+            } else {
+                *byte &= !(1 << (dst % 8));
+            }
+        }
+    }
+}
+
+/// An entry's value in an image.
+pub fn entry_value(e: &Entry, image: &[u8]) -> pb::Value {
+    let raw = read_bits(image, e.bit_offset, e.bit_length);
+    decode_value(e.data_type, &raw).ok().flatten().unwrap_or(pb::Value { kind: Some(pb::value::Kind::Raw(raw)) })
+}
+
+/// A shared, lazily built image (rebuilt when the configuration changes).
+#[derive(Debug, Default)]
+pub struct ImageCache {
+    image: tokio::sync::Mutex<Option<Arc<Image>>>,
+}
+
+impl ImageCache {
+    /// The image for the configuration in force.
+    pub async fn get(&self, master: &Master) -> Result<Arc<Image>, EngineError> {
+        let mut slot = self.image.lock().await;
+        let generation = master.status().config_generation;
+        if let Some(i) = slot.as_ref().filter(|i| i.generation == generation) {
+            return Ok(Arc::clone(i));
+        }
+        let image = Arc::new(Image::build(master).await?);
+        *slot = Some(Arc::clone(&image));
+        Ok(image)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn bits_round_trip_at_any_offset() {
+        for offset in 0..20 {
+            for bits in [1, 3, 8, 13, 16, 32] {
+                let mut image = vec![0xA5u8; 8];
+                let before = image.clone();
+                let value = 0x1234_5678u32.to_le_bytes();
+                write_bits(&mut image, offset, bits, &value);
+                let back = read_bits(&image, offset, bits);
+                let mask = if bits == 32 { u32::MAX } else { (1 << bits) - 1 };
+                let mut b = [0u8; 4];
+                b[..back.len()].copy_from_slice(&back);
+                assert_eq!(u32::from_le_bytes(b), 0x1234_5678 & mask, "offset {offset} bits {bits}");
+                // Bits outside the entry are untouched.
+                for i in 0..64 {
+                    if i < offset || i >= offset + bits {
+                        let bit = |img: &[u8]| img[(i / 8) as usize] >> (i % 8) & 1;
+                        assert_eq!(bit(&image), bit(&before));
+                    }
+                }
+            }
+        }
+    }
+}

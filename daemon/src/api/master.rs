@@ -1,0 +1,325 @@
+//! `Master`, `Slaves` and `State` services: the chip and engine, the slaves
+//! found, their EtherCAT states.
+
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use ecmxf_proto::v1 as pb;
+use ecmxf_proto::v1::master_server::Master as MasterApi;
+use ecmxf_proto::v1::slaves_server::Slaves as SlavesApi;
+use ecmxf_proto::v1::state_server::State as StateApi;
+use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
+use ecmxf_wire::payload::state::SlaveSelector;
+use ecmxf_wire::{EcatState, al_status_text};
+use tonic::{Request, Response, Status};
+
+use super::auth::Role;
+use super::convert::{phase_to_pb, slave, state_from_pb, state_to_pb};
+use super::status::to_status;
+use super::{Context, deadline, wait_budget};
+use crate::config::SlaveConfig;
+use crate::master::{Master, as_client};
+
+/// The `Master` service.
+#[derive(Debug, Clone)]
+pub struct MasterService(pub Arc<Context>);
+
+/// The status message from the engine's snapshot.
+pub fn status_pb(m: &Master) -> pb::MasterStatus {
+    let s = m.status();
+    let errors = ecmxf_wire::flags::ErrorFlags::from_bits_retain(s.error_byte);
+    let status = ecmxf_wire::flags::StatusFlags::from_bits_retain(s.status_byte);
+    pb::MasterStatus {
+        phase: phase_to_pb(s.phase) as i32,
+        ecat_state: state_to_pb(s.ecat_state) as i32,
+        error_flags: s.error_byte.into(),
+        status_flags: s.status_byte.into(),
+        link_pin: errors.contains(ecmxf_wire::flags::ErrorFlags::LINK_PIN),
+        dc_stable: status.contains(ecmxf_wire::flags::StatusFlags::DC_STABLE),
+        blocking_busy: status.contains(ecmxf_wire::flags::StatusFlags::BLOCKING_BUSY),
+        rx_fifo_level: s.rx_fifo.into(),
+        tx_fifo_level: s.tx_fifo.into(),
+        counters: Some(counters_pb(m)),
+        last_error: m.last_error().unwrap_or_default(),
+        output_writers: m.output_writers() as u32,
+        config_generation: s.config_generation,
+    }
+}
+
+/// The counters from the engine's snapshot.
+pub fn counters_pb(m: &Master) -> pb::Counters {
+    let s = m.status();
+    pb::Counters {
+        crc_errors: s.crc_errors.into(),
+        wkc_errors: s.wkc_errors.into(),
+        exchanges: s.exchanges,
+        corrupt_answers: s.corrupt,
+        not_ready_answers: s.not_ready,
+        input_batches_lost: s.input_batches_lost,
+        transactions: s.transactions,
+        input_frames: s.input_frames,
+        output_frames: s.output_frames,
+        fifo_alarms: s.fifo_alarms,
+        recoveries: s.recoveries,
+        max_fifo_gap_us: s.max_fifo_gap_us,
+    }
+}
+
+fn target_state(name: &str) -> pb::EcatState {
+    match name {
+        "preop" => pb::EcatState::PreOp,
+        "safeop" => pb::EcatState::SafeOp,
+        _ => pb::EcatState::Op,
+    }
+}
+
+#[tonic::async_trait]
+impl MasterApi for MasterService {
+    async fn get_info(&self, request: Request<pb::GetInfoRequest>) -> Result<Response<pb::MasterInfo>, Status> {
+        self.0.authorize(&request, Role::Observer)?;
+        let m = &self.0.master;
+        let layout = m.layout();
+        let config = m.config();
+        Ok(Response::new(pb::MasterInfo {
+            firmware_version: layout.firmware.into(),
+            data_size_bytes: config.chip.data_size as u32,
+            packet_bytes: config.chip.data_size as u32 + 32,
+            check_type: if config.chip.crc32 { pb::CheckType::Crc32 } else { pb::CheckType::Fixed } as i32,
+            sync0_us: config.cycle.sync0_us,
+            fifo_rx_depth: layout.fifo_rx_depth.into(),
+            fifo_low: layout.fifo_low.into(),
+            fifo_high: layout.fifo_high.into(),
+            output_image_bytes: layout.rx_size as u32,
+            input_image_bytes: layout.tx_size as u32,
+            slave_count: layout.slaves.len() as u32,
+            target_state: target_state(&config.cycle.target_state) as i32,
+            config_generation: m.status().config_generation,
+            daemon_version: env!("CARGO_PKG_VERSION").into(),
+        }))
+    }
+
+    async fn get_status(&self, request: Request<pb::GetStatusRequest>) -> Result<Response<pb::MasterStatus>, Status> {
+        self.0.authorize(&request, Role::Observer)?;
+        Ok(Response::new(status_pb(&self.0.master)))
+    }
+
+    async fn reinit(&self, request: Request<pb::ReinitRequest>) -> Result<Response<pb::ReinitResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Admin)?;
+        tracing::info!(who = %caller.who, "re-init requested");
+        let t = deadline(&request).or(Some(Duration::from_secs(30)));
+        as_client(caller.client_id, self.0.master.reinit(t)).await.map_err(to_status)?;
+        Ok(Response::new(pb::ReinitResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
+    }
+
+    async fn warm_reset(
+        &self,
+        request: Request<pb::WarmResetRequest>,
+    ) -> Result<Response<pb::WarmResetResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Admin)?;
+        tracing::info!(who = %caller.who, "warm reset requested");
+        let t = deadline(&request).or(Some(Duration::from_secs(30)));
+        as_client(caller.client_id, self.0.master.warm_reset(t)).await.map_err(to_status)?;
+        Ok(Response::new(pb::WarmResetResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
+    }
+}
+
+/// The `Slaves` service.
+#[derive(Debug, Clone)]
+pub struct SlavesService(pub Arc<Context>);
+
+/// One numeric item of slave information, read live (SLV_INFO_GET 15).
+async fn number(m: &Master, slave: u8, item: SlaveInfoCode) -> Result<u64, Status> {
+    let raw = m.slave_info(slave, item).await.map_err(to_status)?;
+    let decoded =
+        SlaveInfo::decode(item, &raw).map_err(|e| Status::internal(format!("slave {slave} {item:?}: {e}")))?;
+    Ok(match decoded {
+        SlaveInfo::VendorId(v) | SlaveInfo::ProductCode(v) | SlaveInfo::Revision(v) | SlaveInfo::DcCycle(v) => v.into(),
+        SlaveInfo::ConfiguredAddress(v) | SlaveInfo::Alias(v) | SlaveInfo::AlStatus(v) => v.into(),
+        SlaveInfo::OutputBytes(v) | SlaveInfo::InputBytes(v) => v.into(),
+        SlaveInfo::HasDc(v) | SlaveInfo::DcActive(v) => v.into(),
+        SlaveInfo::DcShift(v) => u64::from(v as u32),
+        SlaveInfo::State(s) => s.to_u8().into(),
+        SlaveInfo::Name(_) => 0,
+    })
+}
+
+/// What differs between a found slave and its expectation ("" if nothing).
+fn mismatch(found: &pb::Slave, expected: &SlaveConfig) -> String {
+    let mut out = Vec::new();
+    for (what, want, got) in [
+        ("vendor id", expected.vendor_id, found.vendor_id),
+        ("product code", expected.product_code, found.product_code),
+        ("revision", expected.revision, found.revision),
+    ] {
+        if let Some(w) = want {
+            if w != got {
+                out.push(format!("{what} {got:#010x}, expected {w:#010x}"));
+            }
+        }
+    }
+    out.join("; ")
+}
+
+/// Every slave, read live from the chip, compared with the configuration.
+pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::ListSlavesResponse, Status> {
+    let m = &ctx.master;
+    let layout = m.layout();
+    let config = m.config();
+    let mut slaves = Vec::with_capacity(layout.slaves.len());
+    for (i, s) in layout.slaves.iter().enumerate() {
+        let p = i as u8;
+        let state = EcatState::from_u8(number(m, p, SlaveInfoCode::State).await? as u8);
+        let al = number(m, p, SlaveInfoCode::AlStatus).await? as u16;
+        let (vendor_id, product_code, revision, name) = if fresh_identity {
+            let name = m.slave_info(p, SlaveInfoCode::Name).await.map_err(to_status)?;
+            let end = name.iter().position(|&c| c == 0).unwrap_or(name.len());
+            (
+                number(m, p, SlaveInfoCode::VendorId).await? as u32,
+                number(m, p, SlaveInfoCode::ProductCode).await? as u32,
+                number(m, p, SlaveInfoCode::Revision).await? as u32,
+                String::from_utf8_lossy(&name[..end]).into_owned(),
+            )
+        } else {
+            (s.vendor_id, s.product_code, s.revision, s.name.clone())
+        };
+        let mut slave = pb::Slave {
+            position: i as u32,
+            alias: number(m, p, SlaveInfoCode::Alias).await? as u32,
+            configured_address: number(m, p, SlaveInfoCode::ConfiguredAddress).await? as u32,
+            vendor_id,
+            product_code,
+            revision,
+            name,
+            state: state_to_pb(state) as i32,
+            al_status_code: al.into(),
+            al_status_text: al_status_text(al).into(),
+            output_bytes: s.rx_bytes as u32,
+            output_offset: s.rx_offset as u32,
+            input_bytes: s.tx_bytes as u32,
+            input_offset: s.tx_offset as u32,
+            dc: Some(pb::DcInfo {
+                supported: number(m, p, SlaveInfoCode::HasDc).await? != 0,
+                active: number(m, p, SlaveInfoCode::DcActive).await? != 0,
+                cycle_ns: number(m, p, SlaveInfoCode::DcCycle).await? as u32,
+                shift_ns: number(m, p, SlaveInfoCode::DcShift).await? as u32 as i32,
+            }),
+            expected: None,
+            mismatch: String::new(),
+        };
+        if let Some(e) = config.slaves.get(i) {
+            slave.mismatch = mismatch(&slave, e);
+            slave.expected = Some(pb::ExpectedSlave {
+                name: e.name.clone().unwrap_or_default(),
+                vendor_id: e.vendor_id.unwrap_or(0),
+                product_code: e.product_code.unwrap_or(0),
+                revision: e.revision.unwrap_or(0),
+            });
+        }
+        slaves.push(slave);
+    }
+    let missing: Vec<u32> = (slaves.len()..config.slaves.len()).map(|i| i as u32).collect();
+    let matches_config = missing.is_empty() && slaves.iter().all(|s| s.mismatch.is_empty());
+    Ok(pb::ListSlavesResponse { slaves, missing, matches_config })
+}
+
+#[tonic::async_trait]
+impl SlavesApi for SlavesService {
+    async fn list_slaves(
+        &self,
+        request: Request<pb::ListSlavesRequest>,
+    ) -> Result<Response<pb::ListSlavesResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        Ok(Response::new(as_client(caller.client_id, list_slaves(&self.0, false)).await?))
+    }
+
+    async fn scan(&self, request: Request<pb::ScanRequest>) -> Result<Response<pb::ScanResponse>, Status> {
+        let needed = if request.get_ref().reinit { Role::Admin } else { Role::Observer };
+        let caller = self.0.authorize(&request, needed)?;
+        let ctx = &self.0;
+        let reinit = request.get_ref().reinit;
+        let r = as_client(caller.client_id, async {
+            if reinit {
+                ctx.master.reinit(Some(Duration::from_secs(30))).await.map_err(to_status)?;
+            }
+            list_slaves(ctx, true).await
+        })
+        .await?;
+        Ok(Response::new(pb::ScanResponse { slaves: r.slaves, missing: r.missing, matches_config: r.matches_config }))
+    }
+}
+
+/// The `State` service.
+#[derive(Debug, Clone)]
+pub struct StateService(pub Arc<Context>);
+
+fn selector(slave_field: Option<u32>, count: usize) -> Result<SlaveSelector, Status> {
+    match slave_field {
+        None => Ok(SlaveSelector::All),
+        Some(v) => {
+            let s = slave(v)?;
+            if usize::from(s) >= count {
+                return Err(super::status::bad_argument("slave", format!("slave {s} does not exist ({count} found)")));
+            }
+            Ok(SlaveSelector::One(s))
+        }
+    }
+}
+
+#[tonic::async_trait]
+impl StateApi for StateService {
+    async fn get_state(&self, request: Request<pb::GetStateRequest>) -> Result<Response<pb::GetStateResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let m = &self.0.master;
+        let target = selector(request.get_ref().slave, m.layout().slaves.len())?;
+        let t = deadline(&request);
+        let out = as_client(caller.client_id, async {
+            let state = m.get_state(target, t).await.map_err(to_status)?;
+            let mut slaves = Vec::new();
+            if target == SlaveSelector::All {
+                for i in 0..m.layout().slaves.len() as u8 {
+                    let s = EcatState::from_u8(number(m, i, SlaveInfoCode::State).await? as u8);
+                    let al = number(m, i, SlaveInfoCode::AlStatus).await? as u16;
+                    slaves.push(pb::SlaveState {
+                        position: i.into(),
+                        state: state_to_pb(s) as i32,
+                        al_status_code: al.into(),
+                        al_status_text: al_status_text(al).into(),
+                    });
+                }
+            }
+            Ok::<_, Status>(pb::GetStateResponse { state: state_to_pb(state) as i32, slaves })
+        })
+        .await?;
+        Ok(Response::new(out))
+    }
+
+    async fn set_state(&self, request: Request<pb::SetStateRequest>) -> Result<Response<pb::SetStateResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let m = &self.0.master;
+        let r = request.get_ref();
+        let target = selector(r.slave, m.layout().slaves.len())?;
+        let state = state_from_pb(r.state, "state")?;
+        let budget = wait_budget(&request, r.timeout_ms, m.default_timeout);
+        let wait = r.wait;
+        tracing::info!(who = %caller.who, ?target, %state, "state requested");
+        let reached = as_client(caller.client_id, async {
+            let end = Instant::now() + budget;
+            m.set_state(target, state, Some(budget)).await.map_err(to_status)?;
+            loop {
+                let left = end.saturating_duration_since(Instant::now());
+                let now = m.get_state(target, Some(left.max(Duration::from_millis(1)))).await.map_err(to_status)?;
+                if !wait || now == state {
+                    return Ok::<_, Status>(now);
+                }
+                if Instant::now() >= end {
+                    return Err(Status::deadline_exceeded(format!(
+                        "{target:?} is {now}, not {state}, at the deadline"
+                    )));
+                }
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            }
+        })
+        .await?;
+        Ok(Response::new(pb::SetStateResponse { state: state_to_pb(reached) as i32 }))
+    }
+}

@@ -1,0 +1,134 @@
+//! The gRPC API (`ecmxf.v1`, see `proto/`): one service module per
+//! concern, all sharing a [`Context`] — the master, the authenticator, the
+//! process-image cache, the output leases. Every call identifies its caller
+//! (see `auth`), runs its chip work as that caller's turn on the blocking
+//! slot (`master::as_client`), with the client's deadline, and maps engine
+//! errors once (`status`).
+//!
+//! Served on a Unix socket (default) and optionally on TCP with TLS, plus
+//! gRPC health (SERVING only while the bus runs) and reflection (v1 and
+//! v1alpha).
+
+use std::sync::{Arc, Mutex};
+use std::time::Duration;
+
+use tonic::{Request, Status};
+
+use crate::master::{InputFrame, Master};
+
+pub mod admin;
+pub mod auth;
+pub mod cia402;
+pub mod config;
+pub mod convert;
+pub mod diagnostics;
+pub mod image;
+pub mod leases;
+pub mod master;
+pub mod objects;
+pub mod pdo;
+pub mod peripherals;
+pub mod sdo;
+pub mod server;
+pub mod sii;
+pub mod status;
+
+use auth::{Authenticator, Caller, Role};
+
+/// A server stream as the services return it.
+pub type BoxStream<T> = std::pin::Pin<Box<dyn tokio_stream::Stream<Item = Result<T, Status>> + Send>>;
+
+/// What every service shares.
+#[derive(Debug)]
+pub struct Context {
+    /// The engine.
+    pub master: Arc<Master>,
+    /// Roles.
+    pub auth: Authenticator,
+    /// The process image, named.
+    pub image: image::ImageCache,
+    /// Output leases.
+    pub leases: leases::Leases,
+    /// Default lease time-to-live.
+    pub lease_ttl: Duration,
+    /// The newest input frame (for CiA 402 actual values).
+    pub latest: Mutex<Option<Arc<InputFrame>>>,
+    /// The output image as the API last wrote it (bit-sized entries are
+    /// merged into it, so writing one bit keeps its neighbours).
+    pub shadow: Mutex<Vec<u8>>,
+    /// New CoE emergencies (polled; see `diagnostics::watch_emergencies`).
+    pub emergencies: tokio::sync::broadcast::Sender<ecmxf_wire::payload::emergency::EmergencyRecord>,
+}
+
+impl Context {
+    /// A context over `master`.
+    pub fn new(master: Arc<Master>, config: &config::ApiConfig, own_uid: u32) -> Arc<Self> {
+        Arc::new(Self {
+            master,
+            auth: Authenticator::new(config, own_uid),
+            image: image::ImageCache::default(),
+            leases: leases::Leases::default(),
+            lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
+            latest: Mutex::new(None),
+            shadow: Mutex::new(Vec::new()),
+            emergencies: tokio::sync::broadcast::channel(64).0,
+        })
+    }
+
+    /// Authorizes a call for `role`.
+    pub fn authorize<T>(&self, request: &Request<T>, role: Role) -> Result<Caller, Status> {
+        self.auth.authorize(request, role)
+    }
+
+    /// The newest input frame, if any arrived.
+    pub fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
+        self.latest.lock().unwrap_or_else(|e| e.into_inner()).clone()
+    }
+}
+
+/// The time left of the client's deadline (`grpc-timeout`), less a small
+/// margin so the engine's own deadline answers first with a proper
+/// DEADLINE_EXCEEDED; `None` when the client gave none.
+pub fn deadline<T>(request: &Request<T>) -> Option<Duration> {
+    let v = request.metadata().get("grpc-timeout")?.to_str().ok()?;
+    let (digits, unit) = v.split_at(v.len().checked_sub(1)?);
+    let n: u64 = digits.parse().ok()?;
+    let d = match unit {
+        "H" => Duration::from_secs(n.saturating_mul(3600)),
+        "M" => Duration::from_secs(n.saturating_mul(60)),
+        "S" => Duration::from_secs(n),
+        "m" => Duration::from_millis(n),
+        "u" => Duration::from_micros(n),
+        "n" => Duration::from_nanos(n),
+        _ => return None,
+    };
+    Some(d.saturating_sub(Duration::from_millis(2)).max(Duration::from_millis(1)))
+}
+
+/// The shorter of the client's deadline and `timeout_ms` (0: none).
+pub fn wait_budget<T>(request: &Request<T>, timeout_ms: u32, default: Duration) -> Duration {
+    let asked = (timeout_ms > 0).then(|| Duration::from_millis(timeout_ms.into()));
+    match (deadline(request), asked) {
+        (Some(a), Some(b)) => a.min(b),
+        (Some(a), None) => a,
+        (None, Some(b)) => b,
+        (None, None) => default,
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn grpc_timeout_units_are_read() {
+        for (v, ms) in [("5S", 4998), ("100m", 98), ("1M", 59_998), ("2000000u", 1998)] {
+            let mut r = Request::new(());
+            r.metadata_mut().insert("grpc-timeout", v.parse().unwrap());
+            assert_eq!(deadline(&r), Some(Duration::from_millis(ms)), "{v}");
+        }
+        let mut r = Request::new(());
+        r.metadata_mut().insert("grpc-timeout", "x".parse().unwrap());
+        assert_eq!(deadline(&r), None);
+    }
+}

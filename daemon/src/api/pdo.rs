@@ -1,0 +1,320 @@
+//! `ProcessData` service: mapping, the named image, streamed inputs and
+//! leased output writes.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use ecmxf_proto::v1 as pb;
+use ecmxf_proto::v1::process_data_server::ProcessData as ProcessDataApi;
+use ecmxf_wire::payload::pdo::{PdoConfig as WirePdoConfig, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
+use tokio::sync::broadcast::error::RecvError;
+use tokio_stream::StreamExt;
+use tonic::{Request, Response, Status, Streaming};
+
+use super::auth::Role;
+use super::convert::{encode_value, slave};
+use super::image::{Entry, Image, entry_value, write_bits};
+use super::status::{bad_argument, to_status};
+use super::{Context, deadline};
+use crate::config::PdoConfig;
+use crate::master::as_client;
+
+/// The `ProcessData` service.
+#[derive(Debug, Clone)]
+pub struct ProcessDataService(pub Arc<Context>);
+
+fn mapping_pb(c: &WirePdoConfig) -> Vec<pb::Pdo> {
+    let count = usize::from(c.pdo_count).min(c.pdos.len());
+    c.pdos[..count]
+        .iter()
+        .map(|p| pb::Pdo {
+            index: p.index.into(),
+            entries: p
+                .used()
+                .iter()
+                .map(|e| pb::PdoEntry { index: e.index.into(), subindex: e.subindex.into(), bit_length: e.bits.into() })
+                .collect(),
+        })
+        .collect()
+}
+
+fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>, Status> {
+    if list.len() > 3 {
+        return Err(bad_argument(field, format!("{} PDOs; PDO_CONFIG_SET carries 3", list.len())));
+    }
+    list.iter()
+        .map(|p| {
+            let index = u16::try_from(p.index).map_err(|_| bad_argument(field, format!("PDO index {:#x}", p.index)))?;
+            if p.entries.len() > 8 {
+                return Err(bad_argument(field, format!("PDO {index:#06x} has {} entries; 8 fit", p.entries.len())));
+            }
+            let entries = p
+                .entries
+                .iter()
+                .map(|e| {
+                    if e.index > 0xFFFF || e.subindex > 0xFF || e.bit_length == 0 || e.bit_length > 64 {
+                        return Err(bad_argument(
+                            field,
+                            format!("entry {:#x}:{:#x} of {} bits is out of range", e.index, e.subindex, e.bit_length),
+                        ));
+                    }
+                    Ok([e.index, e.subindex, e.bit_length])
+                })
+                .collect::<Result<Vec<_>, _>>()?;
+            Ok(PdoConfig { index, entries })
+        })
+        .collect()
+}
+
+/// Applies client writes to the shadow image and sends the touched span as
+/// one write under the lease (so it reaches the slaves in one frame). A bad
+/// write rejects the whole request and changes nothing.
+pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::OutputWrite]) -> Result<(), Status> {
+    if writes.is_empty() {
+        return Ok(());
+    }
+    let layout = ctx.master.layout();
+    let size = image.output_bytes as usize;
+    let mut shadow = ctx.shadow.lock().unwrap_or_else(|e| e.into_inner());
+    shadow.resize(size, 0);
+    let mut staged = shadow.clone();
+    let (mut lo, mut hi) = (usize::MAX, 0usize);
+    for w in writes {
+        let value = w.value.as_ref().ok_or_else(|| bad_argument("writes.value", "no value given"))?;
+        match &w.target {
+            Some(pb::output_write::Target::Entry(name)) => {
+                let e: &Entry = image.get(name).ok_or_else(|| {
+                    bad_argument("writes.entry", format!("no entry {name:?} (see GetLayout for the names)"))
+                })?;
+                if !e.output {
+                    return Err(bad_argument("writes.entry", format!("{name:?} is an input")));
+                }
+                let bytes = encode_value(e.data_type, value)?;
+                if (bytes.len() as u32) * 8 < e.bit_length {
+                    return Err(bad_argument(
+                        "writes.value",
+                        format!("{} bytes given for the {}-bit entry {name:?}", bytes.len(), e.bit_length),
+                    ));
+                }
+                write_bits(&mut staged, e.bit_offset, e.bit_length, &bytes);
+                lo = lo.min((e.bit_offset / 8) as usize);
+                hi = hi.max((e.bit_offset + e.bit_length).div_ceil(8) as usize);
+            }
+            Some(pb::output_write::Target::Offset(o)) => {
+                let Some(pb::value::Kind::Raw(bytes)) = &value.kind else {
+                    return Err(bad_argument("writes.value", "a write by offset takes raw bytes"));
+                };
+                let o = *o as usize;
+                if o + bytes.len() > size {
+                    return Err(bad_argument(
+                        "writes.offset",
+                        format!("{} bytes at {o} exceed the {size}-byte output image", bytes.len()),
+                    ));
+                }
+                staged[o..o + bytes.len()].copy_from_slice(bytes);
+                lo = lo.min(o);
+                hi = hi.max(o + bytes.len());
+            }
+            None => return Err(bad_argument("writes.target", "give an entry name or an offset")),
+        }
+    }
+    if lo >= hi {
+        return Ok(());
+    }
+    let slave_of =
+        |b: usize| layout.slaves.iter().position(|s| b >= s.rx_offset && b < s.rx_offset + s.rx_bytes).map(|p| p as u8);
+    ctx.leases.write(lease_id, lo, &staged[lo..hi], slave_of)?;
+    *shadow = staged;
+    Ok(())
+}
+
+type SampleStream = super::BoxStream<pb::InputSample>;
+
+#[tonic::async_trait]
+impl ProcessDataApi for ProcessDataService {
+    async fn get_mapping(
+        &self,
+        request: Request<pb::GetMappingRequest>,
+    ) -> Result<Response<pb::GetMappingResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let m = &self.0.master;
+        let count = m.layout().slaves.len();
+        let which: Vec<u8> = match request.get_ref().slave {
+            Some(s) => {
+                let s = slave(s)?;
+                if usize::from(s) >= count {
+                    return Err(bad_argument("slave", format!("slave {s} does not exist ({count} found)")));
+                }
+                vec![s]
+            }
+            None => (0..count as u8).collect(),
+        };
+        let t = deadline(&request);
+        let slaves = as_client(caller.client_id, async {
+            let mut out = Vec::new();
+            for s in which {
+                let rx = m.pdo_config_read(s, RX_PDO_ASSIGN, t).await.map_err(to_status)?;
+                let tx = m.pdo_config_read(s, TX_PDO_ASSIGN, t).await.map_err(to_status)?;
+                out.push(pb::SlaveMapping { slave: s.into(), rx_pdos: mapping_pb(&rx), tx_pdos: mapping_pb(&tx) });
+            }
+            Ok::<_, Status>(out)
+        })
+        .await?;
+        Ok(Response::new(pb::GetMappingResponse { slaves }))
+    }
+
+    async fn set_mapping(
+        &self,
+        request: Request<pb::SetMappingRequest>,
+    ) -> Result<Response<pb::SetMappingResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let mapping = request.get_ref().mapping.clone().ok_or_else(|| bad_argument("mapping", "no mapping given"))?;
+        let s = usize::from(slave(mapping.slave)?);
+        let m = &self.0.master;
+        let count = m.layout().slaves.len();
+        if s >= count {
+            return Err(bad_argument("mapping.slave", format!("slave {s} does not exist ({count} found)")));
+        }
+        let rx = pdos_from_pb(&mapping.rx_pdos, "mapping.rx_pdos")?;
+        let tx = pdos_from_pb(&mapping.tx_pdos, "mapping.tx_pdos")?;
+        let mut config = m.config();
+        if config.slaves.len() <= s {
+            config.slaves.resize_with(s + 1, Default::default);
+        }
+        config.slaves[s].rx_pdos = rx;
+        config.slaves[s].tx_pdos = tx;
+        tracing::info!(who = %caller.who, slave = s, "PDO mapping change");
+        let t = deadline(&request).or(Some(Duration::from_secs(30)));
+        as_client(caller.client_id, m.apply_config(config, t)).await.map_err(to_status)?;
+        let image = self.0.image.get(m).await.map_err(to_status)?;
+        Ok(Response::new(pb::SetMappingResponse { image: Some(image.to_pb()) }))
+    }
+
+    async fn get_layout(&self, request: Request<pb::GetLayoutRequest>) -> Result<Response<pb::ProcessImage>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        Ok(Response::new(image.to_pb()))
+    }
+
+    type StreamInputsStream = SampleStream;
+
+    async fn stream_inputs(
+        &self,
+        request: Request<pb::StreamInputsRequest>,
+    ) -> Result<Response<Self::StreamInputsStream>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let r = request.into_inner();
+        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let mut selected: Vec<Entry> = Vec::with_capacity(r.entries.len());
+        for name in &r.entries {
+            let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;
+            selected.push(e.clone());
+        }
+        let mut rx = self.0.master.subscribe();
+        let (tx, out) = tokio::sync::mpsc::channel(256);
+        let decimation = u64::from(r.decimation.max(1));
+        let on_change = r.on_change;
+        tokio::spawn(async move {
+            let mut n = 0u64;
+            let mut lost = 0u64;
+            let mut last: Option<Vec<u8>> = None;
+            loop {
+                let frame = match rx.recv().await {
+                    Ok(f) => f,
+                    Err(RecvError::Lagged(k)) => {
+                        lost += k;
+                        continue;
+                    }
+                    Err(RecvError::Closed) => break,
+                };
+                n += 1;
+                if n % decimation != 0 {
+                    continue;
+                }
+                let input = &frame.data;
+                let (image_bytes, values) = if selected.is_empty() {
+                    (input.clone(), Vec::new())
+                } else {
+                    let values: Vec<pb::EntryValue> = selected
+                        .iter()
+                        .map(|e| pb::EntryValue { name: e.name.clone(), value: Some(entry_value(e, input)) })
+                        .collect();
+                    (Vec::new(), values)
+                };
+                if on_change {
+                    let key = if selected.is_empty() {
+                        image_bytes.clone()
+                    } else {
+                        selected
+                            .iter()
+                            .flat_map(|e| super::image::read_bits(input, e.bit_offset, e.bit_length))
+                            .collect()
+                    };
+                    if last.as_ref() == Some(&key) {
+                        continue;
+                    }
+                    last = Some(key);
+                }
+                let sample =
+                    pb::InputSample { seq: frame.seq, time_ns: frame.time_ns, image: image_bytes, values, lost };
+                lost = 0;
+                if tx.send(Ok(sample)).await.is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(out))))
+    }
+
+    async fn acquire_lease(&self, request: Request<pb::AcquireLeaseRequest>) -> Result<Response<pb::Lease>, Status> {
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let r = request.get_ref();
+        let ttl = match r.ttl_ms {
+            0 => self.0.lease_ttl,
+            100..=60_000 => Duration::from_millis(r.ttl_ms.into()),
+            v => return Err(bad_argument("ttl_ms", format!("{v} ms is outside 100..=60000"))),
+        };
+        Ok(Response::new(self.0.leases.acquire(&self.0.master, &r.slaves, ttl, &caller.who)?))
+    }
+
+    async fn keep_alive(&self, request: Request<pb::KeepAliveRequest>) -> Result<Response<pb::Lease>, Status> {
+        self.0.authorize(&request, Role::Operator)?;
+        Ok(Response::new(self.0.leases.keep_alive(&request.get_ref().lease_id)?))
+    }
+
+    async fn release_lease(
+        &self,
+        request: Request<pb::ReleaseLeaseRequest>,
+    ) -> Result<Response<pb::ReleaseLeaseResponse>, Status> {
+        self.0.authorize(&request, Role::Operator)?;
+        self.0.leases.release(&request.get_ref().lease_id)?;
+        Ok(Response::new(pb::ReleaseLeaseResponse {}))
+    }
+
+    async fn write_outputs(
+        &self,
+        request: Request<pb::WriteOutputsRequest>,
+    ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let r = request.get_ref();
+        apply_writes(&self.0, &image, &r.lease_id, &r.writes)?;
+        Ok(Response::new(pb::WriteOutputsResponse { applied: 1 }))
+    }
+
+    async fn stream_outputs(
+        &self,
+        request: Request<Streaming<pb::WriteOutputsRequest>>,
+    ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let mut stream = request.into_inner();
+        let mut applied = 0;
+        while let Some(msg) = stream.next().await {
+            let msg = msg?;
+            apply_writes(&self.0, &image, &msg.lease_id, &msg.writes)?;
+            applied += 1;
+        }
+        Ok(Response::new(pb::WriteOutputsResponse { applied }))
+    }
+}

@@ -1,0 +1,158 @@
+//! `Sdo` service: typed uploads and downloads, and the object listing.
+
+use std::sync::Arc;
+
+use ecmxf_proto::v1 as pb;
+use ecmxf_proto::v1::sdo_server::Sdo as SdoApi;
+use tonic::{Request, Response, Status};
+
+use super::auth::Role;
+use super::convert::{data_type, decode_value, encode_value, index, slave, subindex};
+use super::objects::{KNOWN, axis_index, lookup};
+use super::status::to_status;
+use super::{Context, deadline};
+use crate::engine::error::EngineError;
+use crate::master::{Master, as_client};
+
+/// The `Sdo` service.
+#[derive(Debug, Clone)]
+pub struct SdoService(pub Arc<Context>);
+
+/// The type to use for an object: the caller's, else the known one.
+fn effective_type(asked: pb::DataType, index: u16, subindex: u8, complete: bool) -> pb::DataType {
+    if asked != pb::DataType::Unspecified || complete {
+        return asked;
+    }
+    lookup(index, subindex).map_or(pb::DataType::Unspecified, |(k, _)| k.data_type)
+}
+
+#[tonic::async_trait]
+impl SdoApi for SdoService {
+    async fn upload(&self, request: Request<pb::SdoUploadRequest>) -> Result<Response<pb::SdoUploadResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let r = request.get_ref();
+        let (s, i, sub) = (slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
+        let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
+        let raw = as_client(caller.client_id, self.0.master.sdo_read(s, i, sub, r.complete_access, deadline(&request)))
+            .await
+            .map_err(to_status)?;
+        let value = decode_value(t, &raw)
+            .map_err(|e| Status::invalid_argument(format!("data_type: object {i:#06x}:{sub:02x} of slave {s}: {e}")))?;
+        Ok(Response::new(pb::SdoUploadResponse { raw, value, data_type: t as i32 }))
+    }
+
+    async fn download(
+        &self,
+        request: Request<pb::SdoDownloadRequest>,
+    ) -> Result<Response<pb::SdoDownloadResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let r = request.get_ref();
+        let (s, i, sub) = (slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
+        let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
+        let value = r.value.as_ref().ok_or_else(|| super::status::bad_argument("value", "no value given"))?;
+        let bytes = encode_value(t, value)?;
+        let n = bytes.len() as u32;
+        tracing::debug!(who = %caller.who, slave = s, object = format_args!("{i:#06x}:{sub:02x}"), "SDO download");
+        as_client(caller.client_id, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, deadline(&request)))
+            .await
+            .map_err(to_status)?;
+        Ok(Response::new(pb::SdoDownloadResponse { bytes_written: n }))
+    }
+
+    async fn list_objects(
+        &self,
+        request: Request<pb::ListObjectsRequest>,
+    ) -> Result<Response<pb::ListObjectsResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let s = slave(request.get_ref().slave)?;
+        if usize::from(s) >= self.0.master.layout().slaves.len() {
+            return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
+        }
+        let entries = as_client(caller.client_id, probe(&self.0.master, s)).await?;
+        Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Probe as i32, entries }))
+    }
+}
+
+/// Uploads `index:subindex`; `None` when the slave aborts (the object is
+/// not there), other errors pass.
+async fn try_read(m: &Master, s: u8, index: u16, subindex: u8) -> Result<Option<Vec<u8>>, Status> {
+    match m.sdo_read(s, index, subindex, false, None).await {
+        Ok(v) => Ok(Some(v)),
+        Err(EngineError::SdoAbort { .. }) => Ok(None),
+        Err(e) => Err(to_status(e)),
+    }
+}
+
+fn entry(
+    index: u16,
+    subindex: u8,
+    name: String,
+    t: pb::DataType,
+    bits: u32,
+    access: &str,
+    value: Vec<u8>,
+) -> pb::ObjectEntry {
+    pb::ObjectEntry {
+        index: index.into(),
+        subindex: subindex.into(),
+        name,
+        data_type: t as i32,
+        bit_length: bits,
+        access: access.into(),
+        pdo_mappable: (0x6000..0xA000).contains(&index),
+        value,
+    }
+}
+
+/// Lists the standard objects a slave answers: CiA 301 identity and
+/// communication objects, the PDO assignment and every assigned PDO's
+/// mapping, and the CiA 402 objects of each axis found (axis n exists when
+/// its statusword does).
+async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
+    let mut out = Vec::new();
+    for k in KNOWN.iter().filter(|k| !k.per_axis) {
+        if let Some(v) = try_read(m, s, k.index, k.subindex).await? {
+            let bits = super::convert::type_size(k.data_type).map_or(v.len() * 8, |n| n * 8) as u32;
+            out.push(entry(k.index, k.subindex, k.name.into(), k.data_type, bits, k.access, v));
+        }
+    }
+    for assign in [0x1C12u16, 0x1C13] {
+        let Some(count) = try_read(m, s, assign, 0).await? else { continue };
+        for sub in 1..=count.first().copied().unwrap_or(0) {
+            let Some(pdo) = try_read(m, s, assign, sub).await? else { continue };
+            let pdo_index = u16::from_le_bytes([pdo[0], *pdo.get(1).unwrap_or(&0)]);
+            let name = format!("{}.{sub}", if assign == 0x1C12 { "rx_pdo_assign" } else { "tx_pdo_assign" });
+            out.push(entry(assign, sub, name, pb::DataType::Unsigned16, 16, "rw", pdo.clone()));
+            let Some(n) = try_read(m, s, pdo_index, 0).await? else { continue };
+            out.push(entry(
+                pdo_index,
+                0,
+                format!("pdo_{pdo_index:#06x}.count"),
+                pb::DataType::Unsigned8,
+                8,
+                "rw",
+                n.clone(),
+            ));
+            for e in 1..=n.first().copied().unwrap_or(0) {
+                if let Some(v) = try_read(m, s, pdo_index, e).await? {
+                    let name = format!("pdo_{pdo_index:#06x}.entry{e}");
+                    out.push(entry(pdo_index, e, name, pb::DataType::Unsigned32, 32, "rw", v));
+                }
+            }
+        }
+    }
+    for axis in 0..8u8 {
+        if try_read(m, s, axis_index(0x6041, axis), 0).await?.is_none() {
+            break;
+        }
+        for k in KNOWN.iter().filter(|k| k.per_axis) {
+            let i = axis_index(k.index, axis);
+            if let Some(v) = try_read(m, s, i, 0).await? {
+                let bits = super::convert::type_size(k.data_type).map_or(v.len() * 8, |n| n * 8) as u32;
+                let name = if axis == 0 { k.name.to_string() } else { format!("axis{axis}.{}", k.name) };
+                out.push(entry(i, 0, name, k.data_type, bits, k.access, v));
+            }
+        }
+    }
+    Ok(out)
+}

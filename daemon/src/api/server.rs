@@ -1,0 +1,232 @@
+//! Serving: the Unix socket (created with the configured mode and group;
+//! a stale socket file from a crash is replaced, a live one is an error),
+//! optional TCP with TLS, health and reflection, and the background tasks
+//! the services rely on (lease expiry, newest inputs, emergency polling,
+//! health from bus state).
+
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use std::time::Duration;
+
+use ecmxf_proto::v1 as pb;
+use tokio::net::UnixListener;
+use tokio::sync::watch;
+use tokio_stream::wrappers::UnixListenerStream;
+use tonic::server::NamedService;
+use tonic::service::Routes;
+use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
+use tonic_health::ServingStatus;
+use tonic_health::server::HealthReporter;
+
+use super::Context;
+use super::admin::{FoeService, RegistersService};
+use super::cia402::Cia402Service;
+use super::config::ApiConfig;
+use super::diagnostics::{DiagnosticsService, watch_emergencies};
+use super::master::{MasterService, SlavesService, StateService};
+use super::pdo::ProcessDataService;
+use super::peripherals::PeripheralsService;
+use super::sdo::SdoService;
+use super::sii::SiiService;
+use crate::engine::telemetry::Phase;
+use crate::master::Master;
+
+/// Why the API could not be served.
+#[derive(Debug)]
+pub enum ServeError {
+    /// The socket could not be set up; what and why.
+    Socket(PathBuf, String),
+    /// TLS files unreadable or invalid.
+    Tls(String),
+    /// The server failed.
+    Transport(String),
+}
+
+impl std::fmt::Display for ServeError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Socket(p, why) => write!(f, "API socket {}: {why}", p.display()),
+            Self::Tls(why) => write!(f, "API TLS: {why}"),
+            Self::Transport(why) => write!(f, "API server: {why}"),
+        }
+    }
+}
+
+impl std::error::Error for ServeError {}
+
+/// Every service name, for health.
+const SERVICES: [&str; 12] = [
+    "",
+    <pb::master_server::MasterServer<MasterService> as NamedService>::NAME,
+    <pb::slaves_server::SlavesServer<SlavesService> as NamedService>::NAME,
+    <pb::state_server::StateServer<StateService> as NamedService>::NAME,
+    <pb::sdo_server::SdoServer<SdoService> as NamedService>::NAME,
+    <pb::sii_server::SiiServer<SiiService> as NamedService>::NAME,
+    <pb::process_data_server::ProcessDataServer<ProcessDataService> as NamedService>::NAME,
+    <pb::cia402_server::Cia402Server<Cia402Service> as NamedService>::NAME,
+    <pb::peripherals_server::PeripheralsServer<PeripheralsService> as NamedService>::NAME,
+    <pb::foe_server::FoeServer<FoeService> as NamedService>::NAME,
+    <pb::registers_server::RegistersServer<RegistersService> as NamedService>::NAME,
+    <pb::diagnostics_server::DiagnosticsServer<DiagnosticsService> as NamedService>::NAME,
+];
+
+fn routes(
+    ctx: &Arc<Context>,
+    health: tonic_health::pb::health_server::HealthServer<impl tonic_health::pb::health_server::Health>,
+) -> Result<Routes, ServeError> {
+    let reflection = |b: tonic_reflection::server::Builder<'static>| {
+        b.register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    let v1 = reflection(tonic_reflection::server::Builder::configure())
+        .build_v1()
+        .map_err(|e| ServeError::Transport(format!("reflection: {e}")))?;
+    let v1alpha = reflection(tonic_reflection::server::Builder::configure())
+        .build_v1alpha()
+        .map_err(|e| ServeError::Transport(format!("reflection: {e}")))?;
+    let c = || Arc::clone(ctx);
+    Ok(Routes::new(health)
+        .add_service(v1)
+        .add_service(v1alpha)
+        .add_service(pb::master_server::MasterServer::new(MasterService(c())))
+        .add_service(pb::slaves_server::SlavesServer::new(SlavesService(c())))
+        .add_service(pb::state_server::StateServer::new(StateService(c())))
+        .add_service(pb::sdo_server::SdoServer::new(SdoService(c())))
+        .add_service(pb::sii_server::SiiServer::new(SiiService(c())))
+        .add_service(pb::process_data_server::ProcessDataServer::new(ProcessDataService(c())))
+        .add_service(pb::cia402_server::Cia402Server::new(Cia402Service(c())))
+        .add_service(pb::peripherals_server::PeripheralsServer::new(PeripheralsService(c())))
+        .add_service(pb::foe_server::FoeServer::new(FoeService(c())))
+        .add_service(pb::registers_server::RegistersServer::new(RegistersService(c())))
+        .add_service(pb::diagnostics_server::DiagnosticsServer::new(DiagnosticsService(c()))))
+}
+
+/// Binds the Unix socket: parent folder created if missing, a stale file
+/// replaced, mode and group applied.
+fn bind_socket(path: &Path, config: &ApiConfig) -> Result<UnixListener, ServeError> {
+    let err = |why: String| ServeError::Socket(path.to_owned(), why);
+    if let Some(dir) = path.parent() {
+        std::fs::create_dir_all(dir).map_err(|e| err(format!("cannot create its folder: {e}")))?;
+    }
+    if path.exists() {
+        if std::os::unix::net::UnixStream::connect(path).is_ok() {
+            return Err(err("another daemon is serving it (stop it, or give another api.socket)".into()));
+        }
+        std::fs::remove_file(path).map_err(|e| err(format!("cannot remove the stale socket: {e}")))?;
+    }
+    let listener = UnixListener::bind(path).map_err(|e| err(format!("cannot bind: {e}")))?;
+    use std::os::unix::fs::PermissionsExt;
+    std::fs::set_permissions(path, std::fs::Permissions::from_mode(config.socket_mode))
+        .map_err(|e| err(format!("cannot set mode {:#o}: {e}", config.socket_mode)))?;
+    if let Some(group) = &config.socket_group {
+        let gid = match group.parse::<u32>() {
+            Ok(g) => nix::unistd::Gid::from_raw(g),
+            Err(_) => match nix::unistd::Group::from_name(group) {
+                Ok(Some(g)) => g.gid,
+                _ => return Err(err(format!("api.socket_group {group:?} does not exist"))),
+            },
+        };
+        nix::unistd::chown(path, None, Some(gid)).map_err(|e| err(format!("cannot give it to group {group}: {e}")))?;
+    }
+    Ok(listener)
+}
+
+fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
+    let read = |p: &Option<PathBuf>, what: &str| -> Result<Vec<u8>, ServeError> {
+        let p = p.as_ref().ok_or_else(|| ServeError::Tls(format!("api.{what} is not set")))?;
+        std::fs::read(p).map_err(|e| ServeError::Tls(format!("api.{what} {}: {e}", p.display())))
+    };
+    let mut tls = ServerTlsConfig::new()
+        .identity(Identity::from_pem(read(&config.tls_cert, "tls_cert")?, read(&config.tls_key, "tls_key")?));
+    if config.client_ca.is_some() {
+        tls =
+            tls.client_ca_root(Certificate::from_pem(read(&config.client_ca, "client_ca")?)).client_auth_optional(true);
+    }
+    Ok(tls)
+}
+
+/// Health follows the bus: SERVING while the engine runs in its target
+/// state, NOT_SERVING otherwise.
+async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
+    let mut last = None;
+    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    loop {
+        tick.tick().await;
+        let s = master.status();
+        let serving = s.phase == Phase::Running;
+        if last != Some(serving) {
+            last = Some(serving);
+            let status = if serving { ServingStatus::Serving } else { ServingStatus::NotServing };
+            for name in SERVICES {
+                reporter.set_service_status(name, status).await;
+            }
+        }
+    }
+}
+
+/// Keeps the newest input frame for the services.
+async fn track_inputs(ctx: Arc<Context>) {
+    let mut rx = ctx.master.subscribe();
+    loop {
+        match rx.recv().await {
+            Ok(f) => *ctx.latest.lock().unwrap_or_else(|e| e.into_inner()) = Some(f),
+            Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
+            Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
+        }
+    }
+}
+
+/// Serves the API until `shutdown` changes; removes the socket file after.
+pub async fn serve(
+    master: Arc<Master>,
+    config: ApiConfig,
+    mut shutdown: watch::Receiver<()>,
+) -> Result<(), ServeError> {
+    let own_uid = nix::unistd::getuid().as_raw();
+    let ctx = Context::new(master, &config, own_uid);
+    let (reporter, health) = tonic_health::server::health_reporter();
+    for name in SERVICES {
+        reporter.set_service_status(name, ServingStatus::NotServing).await;
+    }
+    let routes = routes(&ctx, health)?;
+    let path = config.socket_path();
+    let listener = bind_socket(&path, &config)?;
+    tracing::info!(socket = %path.display(), mode = format_args!("{:#o}", config.socket_mode), "API listening");
+
+    let mut tasks = tokio::task::JoinSet::new();
+    tasks.spawn(track_health(Arc::clone(&ctx.master), reporter));
+    tasks.spawn(track_inputs(Arc::clone(&ctx)));
+    tasks.spawn(watch_emergencies(Arc::clone(&ctx)));
+    let sweeper = Arc::clone(&ctx);
+    tasks.spawn(async move {
+        let mut tick = tokio::time::interval(Duration::from_millis(50));
+        loop {
+            tick.tick().await;
+            sweeper.leases.sweep();
+        }
+    });
+
+    let mut stop = shutdown.clone();
+    let unix = Server::builder().add_routes(routes.clone()).serve_with_incoming_shutdown(
+        UnixListenerStream::new(listener),
+        async move {
+            let _ = stop.changed().await;
+        },
+    );
+    let result = if let Some(addr) = config.tcp {
+        let tcp = Server::builder()
+            .tls_config(tls(&config)?)
+            .map_err(|e| ServeError::Tls(e.to_string()))?
+            .add_routes(routes)
+            .serve_with_shutdown(addr, async move {
+                let _ = shutdown.changed().await;
+            });
+        tracing::info!(%addr, "API listening on TCP (TLS)");
+        tokio::try_join!(unix, tcp).map(|_| ())
+    } else {
+        unix.await
+    };
+    tasks.abort_all();
+    let _ = std::fs::remove_file(&path);
+    result.map_err(|e| ServeError::Transport(e.to_string()))
+}

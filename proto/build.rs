@@ -1,0 +1,28 @@
+//! Compiles the .proto files with protox (pure Rust: no system `protoc`),
+//! generates the tonic services and prost messages, and writes the encoded
+//! file descriptor set that the daemon's reflection service serves.
+
+use std::path::PathBuf;
+
+use prost::Message;
+
+const FILES: [&str; 7] = [
+    "ecmxf/v1/common.proto",
+    "ecmxf/v1/master.proto",
+    "ecmxf/v1/sdo.proto",
+    "ecmxf/v1/pdo.proto",
+    "ecmxf/v1/cia402.proto",
+    "ecmxf/v1/admin.proto",
+    "ecmxf/v1/peripherals.proto",
+];
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    for f in FILES {
+        println!("cargo:rerun-if-changed={f}");
+    }
+    let fds = protox::compile(FILES, ["."])?;
+    let out = PathBuf::from(std::env::var("OUT_DIR")?);
+    std::fs::write(out.join("ecmxf_descriptor.bin"), fds.encode_to_vec())?;
+    tonic_prost_build::configure().compile_fds(fds)?;
+    Ok(())
+}

@@ -1,0 +1,171 @@
+//! `Master`, `Slaves`, `State`, health and reflection against `ecmxfd --sim`.
+
+use ecmxf_e2e::{Daemon, run};
+use ecmxf_proto::v1 as pb;
+use pb::master_client::MasterClient;
+use pb::slaves_client::SlavesClient;
+use pb::state_client::StateClient;
+use tonic::Code;
+
+#[test]
+fn master_slaves_and_states() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let mut master = MasterClient::new(ch.clone());
+        let info = master.get_info(pb::GetInfoRequest {}).await.unwrap().into_inner();
+        assert_eq!(info.firmware_version, 0x24);
+        assert_eq!(info.slave_count, 3);
+        assert_eq!(info.check_type, pb::CheckType::Crc32 as i32);
+        assert_eq!(info.packet_bytes, info.data_size_bytes + 32);
+        assert!(info.output_image_bytes > 0 && info.input_image_bytes > 0, "{info:?}");
+        assert_eq!(info.target_state, pb::EcatState::Op as i32);
+
+        let status = master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+        assert_eq!(status.phase, pb::EnginePhase::Running as i32);
+        assert_eq!(status.ecat_state, pb::EcatState::Op as i32);
+        let counters = status.counters.unwrap();
+        assert!(counters.exchanges > 0 && counters.input_frames > 0, "{counters:?}");
+
+        let mut slaves = SlavesClient::new(ch.clone());
+        let list = slaves.list_slaves(pb::ListSlavesRequest {}).await.unwrap().into_inner();
+        assert_eq!(list.slaves.len(), 3);
+        assert!(list.matches_config, "{list:?}");
+        let ti = &list.slaves[1];
+        assert_eq!((ti.vendor_id, ti.product_code), (0x59D, 0x402));
+        assert_eq!(ti.state, pb::EcatState::Op as i32);
+        assert_eq!((ti.al_status_code, ti.al_status_text.as_str()), (0, "no error"));
+        assert_eq!(ti.alias, 2);
+        assert!(ti.dc.unwrap().supported && ti.output_bytes > 0);
+        assert!(!list.slaves[2].dc.unwrap().active, "the IO slave has no DC");
+        let scan = slaves.scan(pb::ScanRequest { reinit: false }).await.unwrap().into_inner();
+        assert_eq!(
+            scan.slaves.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(),
+            list.slaves.iter().map(|s| s.name.as_str()).collect::<Vec<_>>()
+        );
+
+        let mut state = StateClient::new(ch.clone());
+        let all = state.get_state(pb::GetStateRequest { slave: None }).await.unwrap().into_inner();
+        assert_eq!(all.state, pb::EcatState::Op as i32);
+        assert_eq!(all.slaves.len(), 3);
+        let r = state
+            .set_state(pb::SetStateRequest {
+                slave: Some(2),
+                state: pb::EcatState::SafeOp as i32,
+                wait: true,
+                timeout_ms: 3000,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(r.state, pb::EcatState::SafeOp as i32);
+        let one = state.get_state(pb::GetStateRequest { slave: Some(2) }).await.unwrap().into_inner();
+        assert_eq!(one.state, pb::EcatState::SafeOp as i32);
+        let r = state
+            .set_state(pb::SetStateRequest {
+                slave: Some(2),
+                state: pb::EcatState::Op as i32,
+                wait: true,
+                timeout_ms: 3000,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(r.state, pb::EcatState::Op as i32);
+
+        // Errors name the field.
+        let e = state.get_state(pb::GetStateRequest { slave: Some(9) }).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+        assert!(e.message().contains("slave"), "{e:?}");
+        let e = state
+            .set_state(pb::SetStateRequest { slave: None, state: 0, wait: false, timeout_ms: 0 })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+        assert!(e.message().contains("state"), "{e:?}");
+        let e = state
+            .set_state(pb::SetStateRequest { slave: Some(200), state: 8, wait: false, timeout_ms: 0 })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+
+        // Re-init and warm reset come back running.
+        let r = master.reinit(pb::ReinitRequest {}).await.unwrap().into_inner();
+        assert_eq!(r.state, pb::EcatState::Op as i32);
+        let r = master.warm_reset(pb::WarmResetRequest {}).await.unwrap().into_inner();
+        assert_eq!(r.state, pb::EcatState::Op as i32);
+        let scan = slaves.scan(pb::ScanRequest { reinit: true }).await.unwrap().into_inner();
+        assert_eq!(scan.slaves.len(), 3);
+        assert_eq!(d.stop(), Some(0), "{}", d.log());
+    });
+}
+
+#[test]
+fn health_follows_the_bus_and_reflection_lists_the_services() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let mut health = tonic_health::pb::health_client::HealthClient::new(ch.clone());
+        let start = std::time::Instant::now();
+        loop {
+            let r = health.check(tonic_health::pb::HealthCheckRequest { service: String::new() }).await.unwrap();
+            if r.get_ref().status == tonic_health::pb::health_check_response::ServingStatus::Serving as i32 {
+                break;
+            }
+            assert!(start.elapsed().as_secs() < 5, "health never SERVING");
+            tokio::time::sleep(std::time::Duration::from_millis(50)).await;
+        }
+        let r = health.check(tonic_health::pb::HealthCheckRequest { service: "ecmxf.v1.Sdo".into() }).await.unwrap();
+        assert_eq!(r.get_ref().status, tonic_health::pb::health_check_response::ServingStatus::Serving as i32);
+
+        // Reflection, both versions, via the raw protocol (what grpcurl does).
+        for path in [
+            "/grpc.reflection.v1.ServerReflection/ServerReflectionInfo",
+            "/grpc.reflection.v1alpha.ServerReflection/ServerReflectionInfo",
+        ] {
+            let services = reflection_list(ch.clone(), path).await;
+            for s in
+                ["ecmxf.v1.Master", "ecmxf.v1.Sdo", "ecmxf.v1.ProcessData", "ecmxf.v1.Cia402", "grpc.health.v1.Health"]
+            {
+                assert!(services.iter().any(|x| x == s), "{path}: {s} missing from {services:?}");
+            }
+        }
+    });
+}
+
+/// ServerReflectionRequest { list_services = 7 } / response
+/// { list_services_response = 6 { service = 1 { name = 1 } } }: the same
+/// wire format in v1 and v1alpha.
+async fn reflection_list(ch: tonic::transport::Channel, path: &'static str) -> Vec<String> {
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct Req {
+        #[prost(string, tag = "7")]
+        list_services: String,
+    }
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct Name {
+        #[prost(string, tag = "1")]
+        name: String,
+    }
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct List {
+        #[prost(message, repeated, tag = "1")]
+        service: Vec<Name>,
+    }
+    #[derive(Clone, PartialEq, prost::Message)]
+    struct Resp {
+        #[prost(message, optional, tag = "6")]
+        list_services_response: Option<List>,
+    }
+    let mut client = tonic::client::Grpc::new(ch);
+    client.ready().await.unwrap();
+    let codec = tonic_prost::ProstCodec::<Req, Resp>::default();
+    let req = tokio_stream::iter(vec![Req { list_services: "*".into() }]);
+    let mut stream = client
+        .streaming(tonic::Request::new(req), tonic::codegen::http::uri::PathAndQuery::from_static(path), codec)
+        .await
+        .unwrap()
+        .into_inner();
+    let first = stream.message().await.unwrap().unwrap();
+    first.list_services_response.unwrap().service.into_iter().map(|s| s.name).collect()
+}
