@@ -11,11 +11,11 @@ use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead};
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::slave;
-use super::status::{bad_argument, to_status};
+use super::status::bad_argument;
 use super::{BoxStream, Context, deadline};
 use crate::engine::job::TransferProgress;
-use crate::master::as_client;
 
 /// FoE transfers may take long: the default deadline when the client sets none.
 const FOE_TIMEOUT: Duration = Duration::from_secs(120);
@@ -84,10 +84,9 @@ impl FoeApi for FoeService {
         let ctx = Arc::clone(&self.0);
         let p = Arc::clone(&progress);
         let work = async move {
-            as_client(caller.client_id, ctx.master.foe_write(s, &r.name, r.password, r.data, Some(p), Some(t)))
+            bounded(&caller, ctx.master.foe_write(s, &r.name, r.password, r.data, Some(p), Some(t)))
                 .await
                 .map(|()| Vec::new())
-                .map_err(to_status)
         };
         Ok(Response::new(stream_transfer(progress, work)))
     }
@@ -104,9 +103,7 @@ impl FoeApi for FoeService {
         let ctx = Arc::clone(&self.0);
         let p = Arc::clone(&progress);
         let work = async move {
-            as_client(caller.client_id, ctx.master.foe_read(s, &r.name, r.password, r.max_bytes, Some(p), Some(t)))
-                .await
-                .map_err(to_status)
+            bounded(&caller, ctx.master.foe_read(s, &r.name, r.password, r.max_bytes, Some(p), Some(t))).await
         };
         Ok(Response::new(stream_transfer(progress, work)))
     }
@@ -129,7 +126,7 @@ impl RegistersService {
     ) -> Result<pb::DatagramResponse, Status> {
         let caller = self.0.authorize(request, Role::Admin)?;
         let t = deadline(request);
-        let a = as_client(caller.client_id, self.0.master.raw_datagram(head, data, t)).await.map_err(to_status)?;
+        let a = bounded(&caller, self.0.master.raw_datagram(head, data, t)).await?;
         Ok(pb::DatagramResponse { working_counter: a.working_counter.into(), data: a.data })
     }
 }

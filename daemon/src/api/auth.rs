@@ -45,6 +45,8 @@ pub struct Caller {
     /// A stable number per peer (pid, or TCP address) so that one peer's
     /// requests take turns with others' on the chip's blocking slot.
     pub client_id: u64,
+    /// The time left of the call's deadline (`grpc-timeout`), if it has one.
+    pub deadline: Option<std::time::Duration>,
 }
 
 /// The rules from `[api]`.
@@ -88,7 +90,9 @@ impl Authenticator {
                 .and_then(|v| v.strip_prefix("Bearer "))
                 .ok_or_else(|| Status::unauthenticated("the authorization header must be \"Bearer <token>\""))?;
             return match self.tokens.get(&fingerprint(token.trim().as_bytes())) {
-                Some((Some(role), name)) => Ok(Caller { role: *role, who: format!("token {name}"), client_id }),
+                Some((Some(role), name)) => {
+                    Ok(Caller { role: *role, who: format!("token {name}"), client_id, deadline: None })
+                }
                 Some((None, name)) => Err(Status::permission_denied(format!("token {name} has no access"))),
                 None => Err(Status::unauthenticated("unknown bearer token")),
             };
@@ -98,7 +102,7 @@ impl Authenticator {
                 let fp = fingerprint(cert.as_ref());
                 return match self.certs.get(&fp) {
                     Some((Some(role), name)) => {
-                        Ok(Caller { role: *role, who: format!("certificate {name}"), client_id })
+                        Ok(Caller { role: *role, who: format!("certificate {name}"), client_id, deadline: None })
                     }
                     Some((None, name)) => Err(Status::permission_denied(format!("certificate {name} has no access"))),
                     None => {
@@ -124,7 +128,7 @@ impl Authenticator {
                 self.default_role
             };
             return match role {
-                Some(role) => Ok(Caller { role, who: format!("uid {uid}"), client_id }),
+                Some(role) => Ok(Caller { role, who: format!("uid {uid}"), client_id, deadline: None }),
                 None => Err(Status::permission_denied(format!("uid {uid} (gid {gid}) has no access"))),
             };
         }
@@ -133,7 +137,8 @@ impl Authenticator {
 
     /// Identifies the caller and checks they have `needed`.
     pub fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
-        let caller = self.identify(request)?;
+        let mut caller = self.identify(request)?;
+        caller.deadline = super::deadline(request);
         if caller.role < needed {
             return Err(Status::permission_denied(format!(
                 "{} has role {}; this call needs {needed}",

@@ -11,6 +11,7 @@ use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::decode_value;
 use super::image::{Image, entry_value};
 use super::objects::axis_index;
@@ -18,8 +19,8 @@ use super::status::{bad_argument, to_status};
 use super::{Context, deadline, wait_budget};
 use crate::config::AxisConfig;
 use crate::engine::error::EngineError;
+use crate::master::Master;
 use crate::master::transactions::Immediate;
-use crate::master::{Master, as_client};
 
 /// The `Cia402` service.
 #[derive(Debug, Clone)]
@@ -121,7 +122,7 @@ impl Cia402Service {
 impl Cia402Api for Cia402Service {
     async fn list_axes(&self, request: Request<pb::ListAxesRequest>) -> Result<Response<pb::ListAxesResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
         let axes = self
             .0
             .master
@@ -145,7 +146,7 @@ impl Cia402Api for Cia402Service {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let (axis, a) = self.axis(request.get_ref().axis)?;
         let t = deadline(&request);
-        Ok(Response::new(as_client(caller.client_id, self.status(axis, &a, t)).await?))
+        Ok(Response::new(bounded(&caller, self.status(axis, &a, t)).await?))
     }
 
     async fn command(&self, request: Request<pb::AxisCommandRequest>) -> Result<Response<pb::AxisStatus>, Status> {
@@ -162,7 +163,7 @@ impl Cia402Api for Cia402Service {
         let budget = wait_budget(&request, r.timeout_ms, Duration::from_secs(5));
         let wait = r.wait;
         tracing::info!(who = %caller.who, axis, ?target, "axis command");
-        let status = as_client(caller.client_id, async {
+        let status = bounded(&caller, async {
             let end = Instant::now() + budget;
             let m = &self.0.master;
             m.immediate(Immediate::Cia402StateSet(Cia402StateSet { axis, state: target }), Some(budget))
@@ -203,8 +204,8 @@ impl Cia402Api for Cia402Service {
         let mode =
             i8::try_from(r.mode).map_err(|_| bad_argument("mode", format!("{} is outside -128..=127", r.mode)))?;
         let t = deadline(&request);
-        let status = as_client(caller.client_id, async {
-            let image = self.0.image.get(&self.0.master).await.map_err(to_status)?;
+        let status = bounded(&caller, async {
+            let image = self.0.image.get(&self.0.master).await?;
             let k = slave_axis(&image, &self.0.master, &a);
             self.0
                 .master
@@ -231,7 +232,7 @@ impl Cia402Api for Cia402Service {
             None => return Err(bad_argument("target", "give a position, velocity or torque")),
         };
         let t = deadline(&request);
-        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
         let k = slave_axis(&image, &self.0.master, &a);
         let index = axis_index(base, k);
         let ty = super::objects::lookup(index, 0).map_or(pb::DataType::Integer32, |(o, _)| o.data_type);
@@ -243,9 +244,7 @@ impl Cia402Api for Cia402Service {
             return Ok(Response::new(pb::SetTargetResponse { via_process_image: true }));
         }
         let bytes = super::convert::encode_value(ty, &v)?;
-        as_client(caller.client_id, self.0.master.sdo_write(a.slave, index, 0, false, bytes, t))
-            .await
-            .map_err(to_status)?;
+        bounded(&caller, self.0.master.sdo_write(a.slave, index, 0, false, bytes, t)).await?;
         Ok(Response::new(pb::SetTargetResponse { via_process_image: false }))
     }
 }

@@ -11,13 +11,14 @@ use tokio::sync::broadcast::error::RecvError;
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::{phase_to_pb, state_to_pb};
 use super::master::{counters_pb, list_slaves};
 use super::status::{bad_argument, to_status};
 use super::{BoxStream, Context, deadline};
 use crate::engine::events::{Event, EventKind};
+use crate::master::Master;
 use crate::master::transactions::Immediate;
-use crate::master::{Master, as_client};
 
 /// How often the emergency history is polled for the event stream.
 pub const EMERGENCY_POLL: Duration = Duration::from_millis(500);
@@ -166,7 +167,7 @@ impl DiagnosticsApi for DiagnosticsService {
             c => return Err(bad_argument("count", format!("{c} records; the chip keeps 1..=8"))),
         };
         let t = deadline(&request);
-        let records = as_client(caller.client_id, emergencies(&self.0.master, n, t)).await?;
+        let records = bounded(&caller, emergencies(&self.0.master, n, t)).await?;
         Ok(Response::new(pb::GetEmergenciesResponse { emergencies: records.iter().map(emergency_pb).collect() }))
     }
 
@@ -175,7 +176,7 @@ impl DiagnosticsApi for DiagnosticsService {
         request: Request<pb::GetCountersRequest>,
     ) -> Result<Response<pb::GetCountersResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let list = as_client(caller.client_id, list_slaves(&self.0, false)).await?;
+        let list = bounded(&caller, list_slaves(&self.0, false)).await?;
         let slaves = list
             .slaves
             .into_iter()

@@ -114,7 +114,11 @@ impl Leases {
     ) -> Result<(), Status> {
         let mut held = self.lock();
         self.expire(&mut held, Instant::now());
-        let h = held.get_mut(id).ok_or_else(|| not_found(id))?;
+        let h = held.get_mut(id).ok_or_else(|| {
+            Status::permission_denied(format!(
+                "writing outputs needs a lease: {id:?} is not one (released, expired, or never taken; see AcquireLease)"
+            ))
+        })?;
         for at in offset..offset + bytes.len() {
             match slave_of(at) {
                 Some(s) if h.slaves.contains(&s) => {}

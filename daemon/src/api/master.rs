@@ -14,11 +14,12 @@ use ecmxf_wire::{EcatState, al_status_text};
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::{phase_to_pb, slave, state_from_pb, state_to_pb};
 use super::status::to_status;
 use super::{Context, deadline, wait_budget};
 use crate::config::SlaveConfig;
-use crate::master::{Master, as_client};
+use crate::master::Master;
 
 /// The `Master` service.
 #[derive(Debug, Clone)]
@@ -107,7 +108,7 @@ impl MasterApi for MasterService {
         let caller = self.0.authorize(&request, Role::Admin)?;
         tracing::info!(who = %caller.who, "re-init requested");
         let t = deadline(&request).or(Some(Duration::from_secs(30)));
-        as_client(caller.client_id, self.0.master.reinit(t)).await.map_err(to_status)?;
+        bounded(&caller, self.0.master.reinit(t)).await?;
         Ok(Response::new(pb::ReinitResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
 
@@ -118,7 +119,7 @@ impl MasterApi for MasterService {
         let caller = self.0.authorize(&request, Role::Admin)?;
         tracing::info!(who = %caller.who, "warm reset requested");
         let t = deadline(&request).or(Some(Duration::from_secs(30)));
-        as_client(caller.client_id, self.0.master.warm_reset(t)).await.map_err(to_status)?;
+        bounded(&caller, self.0.master.warm_reset(t)).await?;
         Ok(Response::new(pb::WarmResetResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
 }
@@ -229,7 +230,7 @@ impl SlavesApi for SlavesService {
         request: Request<pb::ListSlavesRequest>,
     ) -> Result<Response<pb::ListSlavesResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        Ok(Response::new(as_client(caller.client_id, list_slaves(&self.0, false)).await?))
+        Ok(Response::new(bounded(&caller, list_slaves(&self.0, false)).await?))
     }
 
     async fn scan(&self, request: Request<pb::ScanRequest>) -> Result<Response<pb::ScanResponse>, Status> {
@@ -237,9 +238,9 @@ impl SlavesApi for SlavesService {
         let caller = self.0.authorize(&request, needed)?;
         let ctx = &self.0;
         let reinit = request.get_ref().reinit;
-        let r = as_client(caller.client_id, async {
+        let r = bounded(&caller, async {
             if reinit {
-                ctx.master.reinit(Some(Duration::from_secs(30))).await.map_err(to_status)?;
+                ctx.master.reinit(Some(Duration::from_secs(30))).await?;
             }
             list_slaves(ctx, true).await
         })
@@ -272,8 +273,8 @@ impl StateApi for StateService {
         let m = &self.0.master;
         let target = selector(request.get_ref().slave, m.layout().slaves.len())?;
         let t = deadline(&request);
-        let out = as_client(caller.client_id, async {
-            let state = m.get_state(target, t).await.map_err(to_status)?;
+        let out = bounded(&caller, async {
+            let state = m.get_state(target, t).await?;
             let mut slaves = Vec::new();
             if target == SlaveSelector::All {
                 for i in 0..m.layout().slaves.len() as u8 {
@@ -302,7 +303,7 @@ impl StateApi for StateService {
         let budget = wait_budget(&request, r.timeout_ms, m.default_timeout);
         let wait = r.wait;
         tracing::info!(who = %caller.who, ?target, %state, "state requested");
-        let reached = as_client(caller.client_id, async {
+        let reached = bounded(&caller, async {
             let end = Instant::now() + budget;
             m.set_state(target, state, Some(budget)).await.map_err(to_status)?;
             loop {

@@ -105,6 +105,25 @@ pub fn deadline<T>(request: &Request<T>) -> Option<Duration> {
     Some(d.saturating_sub(Duration::from_millis(2)).max(Duration::from_millis(1)))
 }
 
+/// Runs `work` for `caller`: as their turn on the chip's blocking slot,
+/// and bounded by their deadline as a whole (a multi-step call such as an
+/// SII range or a scan cannot outlive it). At the deadline `work` is
+/// dropped, which withdraws its requests from the engine, and the caller
+/// gets DEADLINE_EXCEEDED.
+pub async fn bounded<T, E: Into<Status>>(
+    caller: &Caller,
+    work: impl std::future::Future<Output = Result<T, E>>,
+) -> Result<T, Status> {
+    let work = crate::master::as_client(caller.client_id, work);
+    match caller.deadline {
+        None => work.await.map_err(Into::into),
+        Some(d) => match tokio::time::timeout(d, work).await {
+            Ok(r) => r.map_err(Into::into),
+            Err(_) => Err(Status::deadline_exceeded(format!("the call's deadline ({d:?} left) passed"))),
+        },
+    }
+}
+
 /// The shorter of the client's deadline and `timeout_ms` (0: none).
 pub fn wait_budget<T>(request: &Request<T>, timeout_ms: u32, default: Duration) -> Duration {
     let asked = (timeout_ms > 0).then(|| Duration::from_millis(timeout_ms.into()));

@@ -12,12 +12,12 @@ use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::{encode_value, slave};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
 use super::{Context, deadline};
 use crate::config::PdoConfig;
-use crate::master::as_client;
 
 /// The `ProcessData` service.
 #[derive(Debug, Clone)]
@@ -150,7 +150,7 @@ impl ProcessDataApi for ProcessDataService {
             None => (0..count as u8).collect(),
         };
         let t = deadline(&request);
-        let slaves = as_client(caller.client_id, async {
+        let slaves = bounded(&caller, async {
             let mut out = Vec::new();
             for s in which {
                 let rx = m.pdo_config_read(s, RX_PDO_ASSIGN, t).await.map_err(to_status)?;
@@ -177,22 +177,36 @@ impl ProcessDataApi for ProcessDataService {
         }
         let rx = pdos_from_pb(&mapping.rx_pdos, "mapping.rx_pdos")?;
         let tx = pdos_from_pb(&mapping.tx_pdos, "mapping.tx_pdos")?;
-        let mut config = m.config();
-        if config.slaves.len() <= s {
-            config.slaves.resize_with(s + 1, Default::default);
+        let previous = m.config();
+        let mut config = previous.clone();
+        // An expected-network list shorter than the ring would be read as
+        // "fewer slaves expected": pad it with "any slave" entries.
+        if config.slaves.len() < count {
+            config.slaves.resize_with(count, Default::default);
         }
         config.slaves[s].rx_pdos = rx;
         config.slaves[s].tx_pdos = tx;
         tracing::info!(who = %caller.who, slave = s, "PDO mapping change");
         let t = deadline(&request).or(Some(Duration::from_secs(30)));
-        as_client(caller.client_id, m.apply_config(config, t)).await.map_err(to_status)?;
+        if let Err(e) = bounded(&caller, m.apply_config(config, t)).await {
+            // Never leave the bus down on a mapping the slave refused: go
+            // back to the configuration that ran.
+            tracing::warn!(who = %caller.who, slave = s, "PDO mapping refused ({}); restoring the previous one", e.message());
+            let restored = m.apply_config(previous, Some(Duration::from_secs(30))).await;
+            let how = if restored.is_ok() {
+                "the previous mapping is back"
+            } else {
+                "restoring the previous mapping failed too"
+            };
+            return Err(Status::new(e.code(), format!("{}; {how}", e.message())));
+        }
         let image = self.0.image.get(m).await.map_err(to_status)?;
         Ok(Response::new(pb::SetMappingResponse { image: Some(image.to_pb()) }))
     }
 
     async fn get_layout(&self, request: Request<pb::GetLayoutRequest>) -> Result<Response<pb::ProcessImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
         Ok(Response::new(image.to_pb()))
     }
 
@@ -204,7 +218,7 @@ impl ProcessDataApi for ProcessDataService {
     ) -> Result<Response<Self::StreamInputsStream>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.into_inner();
-        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
         let mut selected: Vec<Entry> = Vec::with_capacity(r.entries.len());
         for name in &r.entries {
             let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;
@@ -296,7 +310,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::WriteOutputsRequest>,
     ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
         let r = request.get_ref();
         apply_writes(&self.0, &image, &r.lease_id, &r.writes)?;
         Ok(Response::new(pb::WriteOutputsResponse { applied: 1 }))
@@ -307,7 +321,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<Streaming<pb::WriteOutputsRequest>>,
     ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let image = as_client(caller.client_id, self.0.image.get(&self.0.master)).await.map_err(to_status)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
         let mut stream = request.into_inner();
         let mut applied = 0;
         while let Some(msg) = stream.next().await {

@@ -7,12 +7,13 @@ use ecmxf_proto::v1::sdo_server::Sdo as SdoApi;
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::{data_type, decode_value, encode_value, index, slave, subindex};
 use super::objects::{KNOWN, axis_index, lookup};
 use super::status::to_status;
 use super::{Context, deadline};
 use crate::engine::error::EngineError;
-use crate::master::{Master, as_client};
+use crate::master::Master;
 
 /// The `Sdo` service.
 #[derive(Debug, Clone)]
@@ -33,9 +34,7 @@ impl SdoApi for SdoService {
         let r = request.get_ref();
         let (s, i, sub) = (slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
         let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
-        let raw = as_client(caller.client_id, self.0.master.sdo_read(s, i, sub, r.complete_access, deadline(&request)))
-            .await
-            .map_err(to_status)?;
+        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, deadline(&request))).await?;
         let value = decode_value(t, &raw)
             .map_err(|e| Status::invalid_argument(format!("data_type: object {i:#06x}:{sub:02x} of slave {s}: {e}")))?;
         Ok(Response::new(pb::SdoUploadResponse { raw, value, data_type: t as i32 }))
@@ -53,9 +52,7 @@ impl SdoApi for SdoService {
         let bytes = encode_value(t, value)?;
         let n = bytes.len() as u32;
         tracing::debug!(who = %caller.who, slave = s, object = format_args!("{i:#06x}:{sub:02x}"), "SDO download");
-        as_client(caller.client_id, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, deadline(&request)))
-            .await
-            .map_err(to_status)?;
+        bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, deadline(&request))).await?;
         Ok(Response::new(pb::SdoDownloadResponse { bytes_written: n }))
     }
 
@@ -68,7 +65,7 @@ impl SdoApi for SdoService {
         if usize::from(s) >= self.0.master.layout().slaves.len() {
             return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
         }
-        let entries = as_client(caller.client_id, probe(&self.0.master, s)).await?;
+        let entries = bounded(&caller, probe(&self.0.master, s)).await?;
         Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Probe as i32, entries }))
     }
 }

@@ -9,10 +9,11 @@ use ecmxf_sim::net::sii::{MailboxArea, PdoRecord, Sii};
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
+use super::bounded;
 use super::convert::slave;
 use super::status::{bad_argument, to_status};
 use super::{Context, deadline};
-use crate::master::{Master, as_client};
+use crate::master::Master;
 
 /// Most words one Read or Write moves.
 pub const MAX_WORDS: u32 = 4096;
@@ -90,10 +91,7 @@ impl SiiApi for SiiService {
         if r.count == 0 || r.count > MAX_WORDS {
             return Err(bad_argument("count", format!("{} words; read 1..={MAX_WORDS} at a time", r.count)));
         }
-        let words =
-            as_client(caller.client_id, self.0.master.eeprom_read_words(s, w, r.count as u16, deadline(&request)))
-                .await
-                .map_err(to_status)?;
+        let words = bounded(&caller, self.0.master.eeprom_read_words(s, w, r.count as u16, deadline(&request))).await?;
         Ok(Response::new(pb::SiiReadResponse { data: bytes_of(&words) }))
     }
 
@@ -111,8 +109,8 @@ impl SiiApi for SiiService {
         tracing::warn!(who = %caller.who, slave = s, word = w, words = values.len(), "SII write");
         let m = &self.0.master;
         let t = deadline(&request);
-        let backup = as_client(caller.client_id, async {
-            let backup = m.eeprom_read_words(s, w, values.len() as u16, t).await.map_err(to_status)?;
+        let backup = bounded(&caller, async {
+            let backup = m.eeprom_read_words(s, w, values.len() as u16, t).await?;
             m.eeprom_write_words(s, w, &values, t).await.map_err(to_status)?;
             Ok::<_, Status>(backup)
         })
@@ -123,7 +121,7 @@ impl SiiApi for SiiService {
     async fn decode(&self, request: Request<pb::SiiDecodeRequest>) -> Result<Response<pb::SiiDecodeResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let s = slave(request.get_ref().slave)?;
-        let words = as_client(caller.client_id, read_image(&self.0.master, s)).await?;
+        let words = bounded(&caller, read_image(&self.0.master, s)).await?;
         let image = bytes_of(&words);
         let sii = Sii::parse(&image).map_err(|e| Status::internal(format!("slave {s}'s SII does not parse: {e}")))?;
         let text = |i: u8| sii.string(i).map(|b| String::from_utf8_lossy(b).into_owned()).unwrap_or_default();

@@ -73,6 +73,12 @@ fn error_info(reason: &str, metadata: &[(&str, &str)]) -> bytes::Bytes {
     RpcStatus { code: 0, message: String::new(), details: vec![any] }.encode_to_vec().into()
 }
 
+impl From<EngineError> for Status {
+    fn from(e: EngineError) -> Self {
+        to_status(e)
+    }
+}
+
 /// INVALID_ARGUMENT naming `field`, for checks made in the API layer.
 pub fn bad_argument(field: &'static str, reason: impl Into<String>) -> Status {
     to_status(EngineError::BadArgument { field, reason: reason.into() })

@@ -9,6 +9,7 @@ use std::time::{Duration, Instant};
 use super::Master;
 use crate::config::Config;
 use crate::engine::error::EngineError;
+use crate::engine::events::EventKind;
 use crate::engine::job::NetworkAction;
 use crate::engine::telemetry::{Phase, Snapshot};
 
@@ -52,12 +53,33 @@ impl Master {
             return Err(EngineError::Unavailable("engine stopped".into()));
         }
         let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
+        let mut events = self.events();
         self.reconfigure.try_send((generation, config.clone())).map_err(|e| match e {
             TrySendError::Full(_) => EngineError::QueueFull,
             TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
         })?;
         *self.config.lock().unwrap_or_else(|e| e.into_inner()) = config;
-        self.until(timeout, |s| s.config_generation >= generation && s.phase == Phase::Running).await
+        // The first bring-up failure with this configuration is the answer
+        // (the engine goes on retrying it meanwhile).
+        let failed = async {
+            loop {
+                match events.recv().await {
+                    Ok(e) => {
+                        if let EventKind::BringUpFailed(why) = e.kind {
+                            if self.status().config_generation >= generation {
+                                return EngineError::Failed(format!("bring-up with the new configuration: {why}"));
+                            }
+                        }
+                    }
+                    Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
+                    Err(tokio::sync::broadcast::error::RecvError::Closed) => std::future::pending::<()>().await,
+                }
+            }
+        };
+        tokio::select! {
+            r = self.until(timeout, |s| s.config_generation >= generation && s.phase == Phase::Running) => r,
+            e = failed => Err(e),
+        }
     }
 
     /// The configuration in force.

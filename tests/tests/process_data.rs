@@ -1,0 +1,215 @@
+//! `ProcessData` against `ecmxfd --sim`: mapping, the named layout, streamed
+//! inputs (whole, selected, decimated, on change), leases and output writes
+//! (unary and client-streamed), the digital-IO slave's loopback proving the
+//! outputs reach the bus.
+
+use std::time::{Duration, Instant};
+
+use ecmxf_e2e::{Daemon, run};
+use ecmxf_proto::v1 as pb;
+use pb::master_client::MasterClient;
+use pb::process_data_client::ProcessDataClient;
+use pb::value::Kind;
+use tokio_stream::StreamExt;
+use tonic::Code;
+
+fn raw(b: Vec<u8>) -> Option<pb::Value> {
+    Some(pb::Value { kind: Some(Kind::Raw(b)) })
+}
+
+fn by_entry(name: &str, kind: Kind) -> pb::OutputWrite {
+    pb::OutputWrite {
+        target: Some(pb::output_write::Target::Entry(name.into())),
+        value: Some(pb::Value { kind: Some(kind) }),
+    }
+}
+
+#[test]
+fn layout_streams_leases_and_outputs() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let mut pd = ProcessDataClient::new(ch.clone());
+
+        let mapping = pd.get_mapping(pb::GetMappingRequest { slave: None }).await.unwrap().into_inner();
+        assert_eq!(mapping.slaves.len(), 3);
+        assert!(!mapping.slaves[1].rx_pdos.is_empty() && !mapping.slaves[1].tx_pdos.is_empty());
+        let one = pd.get_mapping(pb::GetMappingRequest { slave: Some(1) }).await.unwrap().into_inner();
+        assert_eq!(one.slaves[0], mapping.slaves[1]);
+        let e = pd.get_mapping(pb::GetMappingRequest { slave: Some(5) }).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+
+        let image = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
+        let names: Vec<&str> = image.entries.iter().map(|e| e.name.as_str()).collect();
+        for want in ["1.statusword", "1.controlword", "1.position_actual"] {
+            assert!(names.contains(&want), "{want} missing from {names:?}");
+        }
+        // Entries tile each slave's part of the image exactly.
+        let out_bits: u32 =
+            image.entries.iter().filter(|e| e.direction == pb::Direction::Output as i32).map(|e| e.bit_length).sum();
+        assert!(out_bits <= image.output_bytes * 8, "{out_bits} bits in {} bytes", image.output_bytes);
+        let io_out: Vec<&pb::ImageEntry> =
+            image.entries.iter().filter(|e| e.slave == 2 && e.direction == pb::Direction::Output as i32).collect();
+        let io_in: Vec<&pb::ImageEntry> =
+            image.entries.iter().filter(|e| e.slave == 2 && e.direction == pb::Direction::Input as i32).collect();
+        assert!(!io_out.is_empty() && !io_in.is_empty(), "{image:?}");
+
+        // A lease on the IO slave; a second one is refused; writes outside it too.
+        let lease =
+            pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 1000 }).await.unwrap().into_inner();
+        let e = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 0 }).await.unwrap_err();
+        assert_eq!(e.code(), Code::PermissionDenied, "{e:?}");
+        assert!(e.message().contains("slave 2"), "{}", e.message());
+        let e = pd
+            .write_outputs(pb::WriteOutputsRequest {
+                lease_id: lease.id.clone(),
+                writes: vec![by_entry("1.controlword", Kind::Unsigned(6))],
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::PermissionDenied, "slave 1 is not leased: {e:?}");
+        let e = pd
+            .write_outputs(pb::WriteOutputsRequest {
+                lease_id: "nope".into(),
+                writes: vec![by_entry(&io_out[0].name, Kind::Unsigned(1))],
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::PermissionDenied, "no lease: {e:?}");
+        for (w, field) in [
+            (by_entry("no.such", Kind::Unsigned(1)), "writes.entry"),
+            (by_entry(&io_in[0].name, Kind::Unsigned(1)), "writes.entry"),
+            (
+                pb::OutputWrite { target: Some(pb::output_write::Target::Offset(100_000)), value: raw(vec![1]) },
+                "writes.offset",
+            ),
+            (pb::OutputWrite { target: None, value: raw(vec![1]) }, "writes.target"),
+        ] {
+            let e = pd
+                .write_outputs(pb::WriteOutputsRequest { lease_id: lease.id.clone(), writes: vec![w] })
+                .await
+                .unwrap_err();
+            assert_eq!(e.code(), Code::InvalidArgument, "{field}: {e:?}");
+            assert!(e.message().contains(field), "{field}: {}", e.message());
+        }
+
+        // Write the IO slave's outputs: the loopback shows them in its inputs.
+        let out0 = io_out[0].clone();
+        let in0 = io_in[0].clone();
+        let value = if out0.bit_length == 1 { Kind::Boolean(true) } else { Kind::Unsigned(0xA5) };
+        pd.write_outputs(pb::WriteOutputsRequest {
+            lease_id: lease.id.clone(),
+            writes: vec![by_entry(&out0.name, value)],
+        })
+        .await
+        .unwrap();
+        let mut stream = pd
+            .stream_inputs(pb::StreamInputsRequest { entries: vec![in0.name.clone()], decimation: 1, on_change: false })
+            .await
+            .unwrap()
+            .into_inner();
+        let start = Instant::now();
+        let want = if out0.bit_length == 1 { Kind::Boolean(true) } else { Kind::Unsigned(0xA5) };
+        loop {
+            let s = stream.next().await.unwrap().unwrap();
+            if s.values[0].value.as_ref().and_then(|v| v.kind.clone()) == Some(want.clone()) {
+                break;
+            }
+            assert!(start.elapsed() < Duration::from_secs(3), "loopback never showed {want:?}: {s:?}");
+        }
+        drop(stream);
+
+        // Whole-image stream, decimated: every 10th frame.
+        let mut stream = pd
+            .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 10, on_change: false })
+            .await
+            .unwrap()
+            .into_inner();
+        let a = stream.next().await.unwrap().unwrap();
+        let b = stream.next().await.unwrap().unwrap();
+        assert_eq!(a.image.len() as u32, image.input_bytes);
+        assert!(b.seq - a.seq >= 10, "{} -> {}", a.seq, b.seq);
+        drop(stream);
+
+        // On change: a quiet input sends once, then again when written.
+        let mut stream = pd
+            .stream_inputs(pb::StreamInputsRequest { entries: vec![in0.name.clone()], decimation: 0, on_change: true })
+            .await
+            .unwrap()
+            .into_inner();
+        let first = stream.next().await.unwrap().unwrap();
+        let quiet = tokio::time::timeout(Duration::from_millis(300), stream.next()).await;
+        assert!(quiet.is_err(), "nothing changed, yet a sample came: {quiet:?}");
+        let off = if out0.bit_length == 1 { Kind::Boolean(false) } else { Kind::Unsigned(0x5A) };
+        pd.write_outputs(pb::WriteOutputsRequest {
+            lease_id: lease.id.clone(),
+            writes: vec![by_entry(&out0.name, off)],
+        })
+        .await
+        .unwrap();
+        let changed = tokio::time::timeout(Duration::from_secs(2), stream.next()).await.unwrap().unwrap().unwrap();
+        assert!(changed.seq > first.seq && changed.values != first.values);
+        drop(stream);
+        let e = pd
+            .stream_inputs(pb::StreamInputsRequest { entries: vec!["x".into()], decimation: 0, on_change: false })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+
+        // Client streaming of outputs, by byte offset.
+        let offset = out0.bit_offset / 8;
+        let msgs: Vec<pb::WriteOutputsRequest> = (0..10u8)
+            .map(|i| pb::WriteOutputsRequest {
+                lease_id: lease.id.clone(),
+                writes: vec![pb::OutputWrite {
+                    target: Some(pb::output_write::Target::Offset(offset)),
+                    value: raw(vec![i]),
+                }],
+            })
+            .collect();
+        let r = pd.stream_outputs(tokio_stream::iter(msgs)).await.unwrap().into_inner();
+        assert_eq!(r.applied, 10);
+
+        // Keep-alive, release, and expiry without keep-alive.
+        let kept = pd.keep_alive(pb::KeepAliveRequest { lease_id: lease.id.clone() }).await.unwrap().into_inner();
+        assert_eq!(kept.slaves, vec![2]);
+        pd.release_lease(pb::ReleaseLeaseRequest { lease_id: lease.id.clone() }).await.unwrap();
+        let e = pd.keep_alive(pb::KeepAliveRequest { lease_id: lease.id.clone() }).await.unwrap_err();
+        assert_eq!(e.code(), Code::NotFound);
+        let short =
+            pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![], ttl_ms: 150 }).await.unwrap().into_inner();
+        assert_eq!(short.slaves, vec![0, 1, 2]);
+        let mut master = MasterClient::new(ch.clone());
+        assert_eq!(master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner().output_writers, 1);
+        tokio::time::sleep(Duration::from_millis(400)).await;
+        assert_eq!(
+            master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner().output_writers,
+            0,
+            "expired lease still counted"
+        );
+        let e = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![], ttl_ms: 50 }).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+
+        // Remapping: setting a slave's mapping to what it has re-runs the
+        // bring-up with it and comes back with the same image.
+        let m1 = mapping.slaves[1].clone();
+        let r = pd.set_mapping(pb::SetMappingRequest { mapping: Some(m1.clone()) }).await.unwrap().into_inner();
+        assert_eq!(r.image.unwrap().entries, image.entries);
+        let mut too_many = m1.clone();
+        too_many.rx_pdos = vec![m1.rx_pdos[0].clone(); 4];
+        let e = pd.set_mapping(pb::SetMappingRequest { mapping: Some(too_many) }).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+        assert!(e.message().contains("mapping.rx_pdos"), "{}", e.message());
+
+        // The fixed-mapping drive refuses a remap: the error says so and the
+        // previous mapping runs again.
+        let mut fixed = mapping.slaves[0].clone();
+        fixed.rx_pdos[0].entries.truncate(1);
+        let e = pd.set_mapping(pb::SetMappingRequest { mapping: Some(fixed) }).await.unwrap_err();
+        assert!(e.message().contains("previous mapping is back"), "{e:?}");
+        let status = master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+        assert_eq!(status.phase, pb::EnginePhase::Running as i32, "{status:?}");
+        let again = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
+        assert_eq!(again.entries, image.entries);
+    });
+}

@@ -1,0 +1,177 @@
+//! `Sdo` and `Sii` against `ecmxfd --sim`: typed values, aborts with their
+//! code, deadlines, the object listing, EEPROM read/write/decode.
+
+use std::time::Duration;
+
+use ecmxf_e2e::{Daemon, run};
+use ecmxf_proto::v1 as pb;
+use pb::sdo_client::SdoClient;
+use pb::sii_client::SiiClient;
+use pb::value::Kind;
+use tonic::Code;
+
+fn upload(slave: u32, index: u32, subindex: u32, data_type: pb::DataType) -> pb::SdoUploadRequest {
+    pb::SdoUploadRequest { slave, index, subindex, complete_access: false, data_type: data_type as i32 }
+}
+
+fn download(slave: u32, index: u32, subindex: u32, data_type: pb::DataType, kind: Kind) -> pb::SdoDownloadRequest {
+    pb::SdoDownloadRequest {
+        slave,
+        index,
+        subindex,
+        complete_access: false,
+        data_type: data_type as i32,
+        value: Some(pb::Value { kind: Some(kind) }),
+    }
+}
+
+#[test]
+fn sdo_typed_values_aborts_deadlines_and_listing() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let mut sdo = SdoClient::new(ch);
+
+        // Known objects are typed without being told.
+        let r = sdo.upload(upload(1, 0x1018, 1, pb::DataType::Unspecified)).await.unwrap().into_inner();
+        assert_eq!(r.value.unwrap().kind, Some(Kind::Unsigned(0x59D)));
+        assert_eq!(r.data_type, pb::DataType::Unsigned32 as i32);
+        assert_eq!(r.raw, 0x59Du32.to_le_bytes());
+        // A string.
+        let r = sdo.upload(upload(1, 0x1008, 0, pb::DataType::Unspecified)).await.unwrap().into_inner();
+        assert!(matches!(r.value.unwrap().kind, Some(Kind::Text(ref t)) if !t.is_empty()));
+
+        // Write then read back a signed 16-bit object (quick stop option
+        // code; 0x6060 would be overwritten by the process data in OP).
+        sdo.download(download(1, 0x605A, 0, pb::DataType::Unspecified, Kind::Integer(6))).await.unwrap();
+        let r = sdo.upload(upload(1, 0x605A, 0, pb::DataType::Unspecified)).await.unwrap().into_inner();
+        assert_eq!(r.value.unwrap().kind, Some(Kind::Integer(6)));
+        // An unknown object with an explicit type, and as raw bytes.
+        let w = sdo
+            .download(download(1, 0x6083, 0, pb::DataType::Unsigned32, Kind::Unsigned(1234)))
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(w.bytes_written, 4);
+        let r = sdo.upload(upload(1, 0x6083, 0, pb::DataType::Unsigned32)).await.unwrap().into_inner();
+        assert_eq!(r.value.unwrap().kind, Some(Kind::Unsigned(1234)));
+        sdo.download(download(1, 0x6083, 0, pb::DataType::Unspecified, Kind::Raw(vec![0x10, 0x27, 0, 0])))
+            .await
+            .unwrap();
+        let r = sdo.upload(upload(1, 0x6083, 0, pb::DataType::Unspecified)).await.unwrap().into_inner();
+        assert_eq!(r.raw, vec![0x10, 0x27, 0, 0]);
+        assert!(r.value.is_none(), "unknown object without a type: raw only");
+
+        // A missing object: ABORTED, with the abort code in the details.
+        let e = sdo.upload(upload(1, 0x2FFF, 0, pb::DataType::Unspecified)).await.unwrap_err();
+        assert_eq!(e.code(), Code::Aborted, "{e:?}");
+        assert!(e.message().contains("0x2fff:00"), "{}", e.message());
+        let details = String::from_utf8_lossy(e.details()).into_owned();
+        assert!(details.contains("0x06020000") && details.contains("does not exist"), "{details}");
+        // Read-only object.
+        let e = sdo.download(download(1, 0x1018, 1, pb::DataType::Unspecified, Kind::Unsigned(1))).await.unwrap_err();
+        assert_eq!(e.code(), Code::Aborted, "{e:?}");
+
+        // Bad arguments name the field and reach nothing.
+        for (req, field) in [
+            (download(1, 0x6060, 0, pb::DataType::Unspecified, Kind::Integer(300)), "value"),
+            (download(1, 0x6083, 0, pb::DataType::Unspecified, Kind::Integer(1)), "data_type"),
+            (download(1, 0x10000, 0, pb::DataType::Unsigned8, Kind::Unsigned(1)), "index"),
+            (download(1, 0x6060, 256, pb::DataType::Unsigned8, Kind::Unsigned(1)), "subindex"),
+            (download(300, 0x6060, 0, pb::DataType::Unsigned8, Kind::Unsigned(1)), "slave"),
+            (
+                pb::SdoDownloadRequest {
+                    value: None,
+                    ..download(1, 0x6060, 0, pb::DataType::Integer8, Kind::Integer(1))
+                },
+                "value",
+            ),
+        ] {
+            let e = sdo.download(req).await.unwrap_err();
+            assert_eq!(e.code(), Code::InvalidArgument, "{field}: {e:?}");
+            assert!(e.message().contains(field), "{field}: {}", e.message());
+        }
+        let e = sdo.upload(upload(1, 0x6060, 0, pb::DataType::Unsigned64)).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument, "1 byte is not a u64: {e:?}");
+
+        // The client's deadline bounds the call: DEADLINE_EXCEEDED, and the
+        // next call gets its own answer (no stale result).
+        let mut req = tonic::Request::new(upload(1, 0x1018, 1, pb::DataType::Unspecified));
+        req.set_timeout(Duration::from_millis(1));
+        let e = sdo.upload(req).await.unwrap_err();
+        assert!(matches!(e.code(), Code::DeadlineExceeded | Code::Cancelled), "{e:?}");
+        let r = sdo.upload(upload(1, 0x1018, 2, pb::DataType::Unspecified)).await.unwrap().into_inner();
+        assert_eq!(r.value.unwrap().kind, Some(Kind::Unsigned(0x402)));
+
+        // The object listing: identity, PDO assignment, the axes' objects.
+        let list = sdo.list_objects(pb::ListObjectsRequest { slave: 1 }).await.unwrap().into_inner();
+        assert_eq!(list.source, pb::DictionarySource::Probe as i32);
+        let names: Vec<&str> = list.entries.iter().map(|e| e.name.as_str()).collect();
+        for want in [
+            "identity.vendor_id",
+            "statusword",
+            "controlword",
+            "position_actual",
+            "axis1.statusword",
+            "rx_pdo_assign.count",
+        ] {
+            assert!(names.contains(&want), "{want} missing from {names:?}");
+        }
+        let e = sdo.list_objects(pb::ListObjectsRequest { slave: 7 }).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument);
+    });
+}
+
+#[test]
+fn sii_read_write_with_backup_and_decode() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let mut sii = SiiClient::new(ch);
+        let r = sii.read(pb::SiiReadRequest { slave: 1, word: 8, count: 4 }).await.unwrap().into_inner();
+        assert_eq!(r.data.len(), 8);
+        assert_eq!(u32::from_le_bytes(r.data[0..4].try_into().unwrap()), 0x59D, "vendor id at word 8");
+
+        // Write two words (serial number, word 0x0E) and get the old ones back.
+        let w = sii
+            .write(pb::SiiWriteRequest { slave: 1, word: 0x0E, data: vec![0x78, 0x56, 0x34, 0x12] })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(w.words_written, 2);
+        assert_eq!(w.backup.len(), 4);
+        let r = sii.read(pb::SiiReadRequest { slave: 1, word: 0x0E, count: 2 }).await.unwrap().into_inner();
+        assert_eq!(r.data, vec![0x78, 0x56, 0x34, 0x12]);
+        let dec = sii.decode(pb::SiiDecodeRequest { slave: 1 }).await.unwrap().into_inner();
+        assert_eq!((dec.vendor_id, dec.product_code, dec.serial), (0x59D, 0x402, 0x1234_5678));
+        assert!(dec.mailbox_protocols & 4 != 0, "CoE");
+        assert!(!dec.name.is_empty() && !dec.sync_managers.is_empty(), "{dec:?}");
+        // Restore.
+        sii.write(pb::SiiWriteRequest { slave: 1, word: 0x0E, data: w.backup.clone() }).await.unwrap();
+
+        for (req, field) in [
+            (pb::SiiWriteRequest { slave: 1, word: 0, data: vec![1] }, "data"),
+            (pb::SiiWriteRequest { slave: 1, word: 0x1_0000, data: vec![1, 2] }, "word"),
+        ] {
+            let e = sii.write(req).await.unwrap_err();
+            assert_eq!(e.code(), Code::InvalidArgument);
+            assert!(e.message().contains(field), "{}", e.message());
+        }
+        let e = sii.read(pb::SiiReadRequest { slave: 1, word: 0, count: 0 }).await.unwrap_err();
+        assert!(e.message().contains("count"), "{e:?}");
+        let e = sii.read(pb::SiiReadRequest { slave: 1, word: 0xFFFF, count: 4 }).await.unwrap_err();
+        assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+
+        // A long read (2048 transactions) with a 100 ms deadline: the whole
+        // call is bounded, the engine drops the rest, and the next call
+        // is served at once.
+        let mut req = tonic::Request::new(pb::SiiReadRequest { slave: 1, word: 0, count: 4096 });
+        req.set_timeout(Duration::from_millis(100));
+        let t = std::time::Instant::now();
+        let e = sii.read(req).await.unwrap_err();
+        assert_eq!(e.code(), Code::DeadlineExceeded, "{e:?}");
+        assert!(t.elapsed() < Duration::from_millis(600), "{:?}", t.elapsed());
+        let r = sii.read(pb::SiiReadRequest { slave: 1, word: 8, count: 2 }).await.unwrap().into_inner();
+        assert_eq!(u32::from_le_bytes(r.data[0..4].try_into().unwrap()), 0x59D);
+    });
+}
