@@ -116,23 +116,28 @@ impl Authenticator {
             let Some(cred) = uds.peer_cred else {
                 return Err(Status::unauthenticated("the peer's credentials could not be read"));
             };
-            let uid = cred.uid();
-            let gid = cred.gid();
-            let role = if uid == 0 || uid == self.own_uid {
-                Some(Role::Admin)
-            } else if let Some(r) = self.users.get(&uid) {
-                *r
-            } else if let Some(r) = self.groups.get(&gid) {
-                *r
-            } else {
-                self.default_role
-            };
-            return match role {
+            let (uid, gid) = (cred.uid(), cred.gid());
+            return match self.unix_role(uid, gid) {
                 Some(role) => Ok(Caller { role, who: format!("uid {uid}"), client_id, deadline: None }),
                 None => Err(Status::permission_denied(format!("uid {uid} (gid {gid}) has no access"))),
             };
         }
         Err(Status::unauthenticated("no identity: connect through the Unix socket or with TLS"))
+    }
+
+    /// The role of a Unix peer: root and the daemon's own user are admin;
+    /// then `[[api.user]]` by uid, `[[api.group]]` by gid, else
+    /// `api.default_role`. `None`: no access.
+    pub fn unix_role(&self, uid: u32, gid: u32) -> Option<Role> {
+        if uid == 0 || uid == self.own_uid {
+            Some(Role::Admin)
+        } else if let Some(r) = self.users.get(&uid) {
+            *r
+        } else if let Some(r) = self.groups.get(&gid) {
+            *r
+        } else {
+            self.default_role
+        }
     }
 
     /// Identifies the caller and checks they have `needed`.
@@ -159,4 +164,39 @@ fn client_id<T>(request: &Request<T>) -> u64 {
     }
     // Zero means "no client" to the engine.
     h.finish() | 1
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::api::config::{GroupRole, RoleName, UserRole};
+
+    #[test]
+    fn unix_peers_get_roles_by_uid_then_gid_then_default() {
+        let config = ApiConfig {
+            users: vec![UserRole { uid: 1000, role: RoleName::Operator }, UserRole { uid: 1002, role: RoleName::None }],
+            groups: vec![GroupRole { gid: 50, role: RoleName::Admin }],
+            default_role: RoleName::Observer,
+            ..ApiConfig::default()
+        };
+        let a = Authenticator::new(&config, 999);
+        assert_eq!(a.unix_role(0, 0), Some(Role::Admin), "root");
+        assert_eq!(a.unix_role(999, 7), Some(Role::Admin), "the daemon's own user");
+        assert_eq!(a.unix_role(1000, 50), Some(Role::Operator), "uid wins over gid");
+        assert_eq!(a.unix_role(1001, 50), Some(Role::Admin), "by group");
+        assert_eq!(a.unix_role(1002, 50), None, "explicitly refused");
+        assert_eq!(a.unix_role(1003, 7), Some(Role::Observer), "default");
+        let closed = Authenticator::new(&ApiConfig { default_role: RoleName::None, ..ApiConfig::default() }, 999);
+        assert_eq!(closed.unix_role(1003, 7), None);
+    }
+
+    #[test]
+    fn requests_without_any_identity_are_unauthenticated() {
+        let a = Authenticator::new(&ApiConfig::default(), 999);
+        let e = a.authorize(&Request::new(()), Role::Observer).unwrap_err();
+        assert_eq!(e.code(), tonic::Code::Unauthenticated);
+        let mut r = Request::new(());
+        r.metadata_mut().insert("authorization", "Basic abc".parse().unwrap());
+        assert_eq!(a.authorize(&r, Role::Observer).unwrap_err().code(), tonic::Code::Unauthenticated);
+    }
 }

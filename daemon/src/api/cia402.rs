@@ -55,6 +55,33 @@ fn slave_axis(image: &Image, master: &Master, a: &AxisConfig) -> u8 {
 }
 
 impl Cia402Service {
+    /// Writes CiA 402 object `base` (axis 0's index) of the axis: into the
+    /// process image when mapped (under `lease_id`), else by SDO, which a
+    /// mapped object would have overwritten. True when through the image.
+    async fn write_object(
+        &self,
+        a: &AxisConfig,
+        base: u16,
+        value: i64,
+        lease_id: &str,
+        t: Option<Duration>,
+    ) -> Result<bool, Status> {
+        let image = self.0.image.get(&self.0.master).await.map_err(to_status)?;
+        let k = slave_axis(&image, &self.0.master, a);
+        let index = axis_index(base, k);
+        let v = pb::Value { kind: Some(pb::value::Kind::Integer(value)) };
+        if let Some(e) = image.find(a.slave, index, true) {
+            let write =
+                pb::OutputWrite { target: Some(pb::output_write::Target::Entry(e.name.clone())), value: Some(v) };
+            super::pdo::apply_writes(&self.0, &image, lease_id, &[write])?;
+            return Ok(true);
+        }
+        let ty = super::objects::lookup(index, 0).map_or(pb::DataType::Integer32, |(o, _)| o.data_type);
+        let bytes = super::convert::encode_value(ty, &v)?;
+        self.0.master.sdo_write(a.slave, index, 0, false, bytes, t).await.map_err(to_status)?;
+        Ok(false)
+    }
+
     fn axis(&self, n: u32) -> Result<(u8, AxisConfig), Status> {
         let axes = self.0.master.config().axes;
         match axes.get(n as usize) {
@@ -205,14 +232,22 @@ impl Cia402Api for Cia402Service {
             i8::try_from(r.mode).map_err(|_| bad_argument("mode", format!("{} is outside -128..=127", r.mode)))?;
         let t = deadline(&request);
         let status = bounded(&caller, async {
-            let image = self.0.image.get(&self.0.master).await?;
-            let k = slave_axis(&image, &self.0.master, &a);
-            self.0
-                .master
-                .sdo_write(a.slave, axis_index(0x6060, k), 0, false, vec![mode as u8], t)
-                .await
-                .map_err(to_status)?;
-            self.status(axis, &a, t).await
+            self.write_object(&a, 0x6060, mode.into(), &r.lease_id, t).await?;
+            // The drive takes the mode over within a few cycles.
+            let end = Instant::now() + t.unwrap_or(Duration::from_secs(2));
+            loop {
+                let s = self.status(axis, &a, t).await?;
+                if s.mode_display == i32::from(mode) {
+                    return Ok::<_, Status>(s);
+                }
+                if Instant::now() >= end {
+                    return Err(Status::deadline_exceeded(format!(
+                        "axis {axis} shows mode {} (0x6061), not {mode}, at the deadline",
+                        s.mode_display
+                    )));
+                }
+                tokio::time::sleep(Duration::from_millis(5)).await;
+            }
         })
         .await?;
         Ok(Response::new(status))
@@ -232,19 +267,7 @@ impl Cia402Api for Cia402Service {
             None => return Err(bad_argument("target", "give a position, velocity or torque")),
         };
         let t = deadline(&request);
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
-        let k = slave_axis(&image, &self.0.master, &a);
-        let index = axis_index(base, k);
-        let ty = super::objects::lookup(index, 0).map_or(pb::DataType::Integer32, |(o, _)| o.data_type);
-        let v = pb::Value { kind: Some(pb::value::Kind::Integer(value)) };
-        if let Some(e) = image.find(a.slave, index, true) {
-            let write =
-                pb::OutputWrite { target: Some(pb::output_write::Target::Entry(e.name.clone())), value: Some(v) };
-            super::pdo::apply_writes(&self.0, &image, &r.lease_id, &[write])?;
-            return Ok(Response::new(pb::SetTargetResponse { via_process_image: true }));
-        }
-        let bytes = super::convert::encode_value(ty, &v)?;
-        bounded(&caller, self.0.master.sdo_write(a.slave, index, 0, false, bytes, t)).await?;
-        Ok(Response::new(pb::SetTargetResponse { via_process_image: false }))
+        let via_process_image = bounded(&caller, self.write_object(&a, base, value, &r.lease_id, t)).await?;
+        Ok(Response::new(pb::SetTargetResponse { via_process_image }))
     }
 }
