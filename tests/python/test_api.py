@@ -1,0 +1,166 @@
+"""The ecmxf.v1 API from Python, as a user would use it: stubs generated
+from proto/ with grpcio-tools, the daemon started on the simulator, then a
+scan, an SDO read and write, a CiA402 axis enabled, and one second of the
+input stream consumed.
+
+Run by tests/tests/python.rs (part of `cargo test --workspace`) with the
+venv .ci/run creates; by hand:
+    ECMXFD=target/debug/ecmxfd target/py-venv/bin/python tests/python/test_api.py
+"""
+
+import os
+import subprocess
+import sys
+import tempfile
+import time
+import unittest
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+REPO = os.path.dirname(os.path.dirname(HERE))
+
+CONFIG = """
+version = 1
+[link]
+backend = "sim"
+network = "{repo}/config/demo-network.toml"
+[realtime]
+priority = 0
+lock_memory = false
+[cycle]
+fifo_rx_depth = 255
+fifo_tx_depth = 40
+fifo_low = 128
+fifo_high = 240
+[[axis]]
+slave = 1
+controlword_offset = 0
+statusword_offset = 0
+"""
+
+
+def generate_stubs(out):
+    """Python stubs from the .proto files, as any user would make them."""
+    from grpc_tools import protoc
+
+    protos = [os.path.join("ecmxf", "v1", f) for f in sorted(os.listdir(os.path.join(REPO, "proto", "ecmxf", "v1")))]
+    include = os.path.join(os.path.dirname(protoc.__file__), "_proto")
+    rc = protoc.main(
+        ["protoc", "-I", os.path.join(REPO, "proto"), "-I", include, "--python_out", out, "--grpc_python_out", out]
+        + protos
+    )
+    if rc != 0:
+        raise RuntimeError("protoc failed: %d" % rc)
+    sys.path.insert(0, out)
+
+
+class ApiFromPython(unittest.TestCase):
+    @classmethod
+    def setUpClass(cls):
+        cls.tmp = tempfile.TemporaryDirectory(prefix="ecmxf-py-")
+        generate_stubs(cls.tmp.name)
+        config = os.path.join(cls.tmp.name, "ecmxfd.toml")
+        with open(config, "w") as f:
+            f.write(CONFIG.replace("{repo}", REPO))
+        cls.socket = os.path.join(cls.tmp.name, "ecmxfd.sock")
+        binary = os.environ.get("ECMXFD", os.path.join(REPO, "target", "debug", "ecmxfd"))
+        cls.log = open(os.path.join(cls.tmp.name, "ecmxfd.log"), "w")
+        cls.daemon = subprocess.Popen(
+            [binary, "--config", config, "--socket", cls.socket, "--status-every", "0"],
+            stdout=subprocess.DEVNULL,
+            stderr=cls.log,
+        )
+        import grpc
+        from ecmxf.v1 import master_pb2, master_pb2_grpc
+
+        # grpc-core sends the socket path as :authority, which the
+        # daemon's HTTP/2 stack (h2) rejects as not RFC 9113 conformant
+        # (hyperium/h2#487): name "localhost" like grpc-go and grpcurl do.
+        cls.channel = grpc.insecure_channel("unix:" + cls.socket, options=[("grpc.default_authority", "localhost")])
+        master = master_pb2_grpc.MasterStub(cls.channel)
+        deadline = time.time() + 30
+        while True:
+            if cls.daemon.poll() is not None:
+                raise RuntimeError("ecmxfd exited: " + open(cls.log.name).read())
+            try:
+                status = master.GetStatus(master_pb2.GetStatusRequest(), timeout=1)
+                if status.phase == master_pb2.ENGINE_PHASE_RUNNING:
+                    break
+            except grpc.RpcError:
+                pass
+            if time.time() > deadline:
+                raise RuntimeError("ecmxfd not running after 30 s: " + open(cls.log.name).read())
+            time.sleep(0.05)
+
+    @classmethod
+    def tearDownClass(cls):
+        cls.channel.close()
+        cls.daemon.terminate()
+        code = cls.daemon.wait(timeout=10)
+        cls.log.close()
+        cls.tmp.cleanup()
+        assert code == 0, "ecmxfd exit code %s" % code
+
+    def test_1_scan(self):
+        from ecmxf.v1 import common_pb2, master_pb2, master_pb2_grpc
+
+        scan = master_pb2_grpc.SlavesStub(self.channel).Scan(master_pb2.ScanRequest(), timeout=10)
+        self.assertEqual(len(scan.slaves), 3)
+        self.assertEqual(scan.slaves[1].vendor_id, 0x59D)
+        self.assertEqual(scan.slaves[1].state, common_pb2.ECAT_STATE_OP)
+        self.assertEqual(scan.slaves[1].al_status_text, "no error")
+
+    def test_2_sdo_read_and_write(self):
+        import grpc
+        from ecmxf.v1 import common_pb2, sdo_pb2, sdo_pb2_grpc
+
+        sdo = sdo_pb2_grpc.SdoStub(self.channel)
+        r = sdo.Upload(sdo_pb2.SdoUploadRequest(slave=1, index=0x1018, subindex=1), timeout=5)
+        self.assertEqual(r.value.unsigned, 0x59D)
+        sdo.Download(
+            sdo_pb2.SdoDownloadRequest(slave=1, index=0x605A, value=common_pb2.Value(integer=5)), timeout=5
+        )
+        r = sdo.Upload(sdo_pb2.SdoUploadRequest(slave=1, index=0x605A), timeout=5)
+        self.assertEqual(r.value.integer, 5)
+        with self.assertRaises(grpc.RpcError) as e:
+            sdo.Upload(sdo_pb2.SdoUploadRequest(slave=1, index=0x2FFF), timeout=5)
+        self.assertEqual(e.exception.code(), grpc.StatusCode.ABORTED)
+        self.assertIn("0x06020000", str(e.exception.trailing_metadata()))
+
+    def test_3_enable_an_axis(self):
+        from ecmxf.v1 import cia402_pb2, cia402_pb2_grpc
+
+        cia = cia402_pb2_grpc.Cia402Stub(self.channel)
+        s = cia.Command(
+            cia402_pb2.AxisCommandRequest(axis=0, command=cia402_pb2.AXIS_COMMAND_DISABLE, wait=True), timeout=5
+        )
+        self.assertEqual(s.state, cia402_pb2.DRIVE_STATE_SWITCH_ON_DISABLED)
+        s = cia.Command(
+            cia402_pb2.AxisCommandRequest(axis=0, command=cia402_pb2.AXIS_COMMAND_ENABLE, wait=True), timeout=5
+        )
+        self.assertEqual(s.state, cia402_pb2.DRIVE_STATE_OPERATION_ENABLED)
+        self.assertEqual(s.statusword & 0x6F, 0x27)
+
+    def test_4_one_second_of_inputs(self):
+        from ecmxf.v1 import pdo_pb2, pdo_pb2_grpc
+
+        pd = pdo_pb2_grpc.ProcessDataStub(self.channel)
+        layout = pd.GetLayout(pdo_pb2.GetLayoutRequest(), timeout=5)
+        stream = pd.StreamInputs(pdo_pb2.StreamInputsRequest(entries=["1.statusword", "1.position_actual"]))
+        count, last_seq, start = 0, None, time.time()
+        for sample in stream:
+            if last_seq is not None:
+                self.assertGreater(sample.seq, last_seq)
+            last_seq = sample.seq
+            self.assertEqual([v.name for v in sample.values], ["1.statusword", "1.position_actual"])
+            count += 1
+            if time.time() - start >= 1.0:
+                break
+        stream.cancel()
+        # 125 us cycle: 8000 frames a second; allow for a slow Python.
+        frames_per_s = 1e6 / layout.cycle_us
+        print("python: %d samples in 1 s (%.0f frames/s on the bus)" % (count, frames_per_s))
+        self.assertGreater(count, frames_per_s * 0.25)
+
+
+if __name__ == "__main__":
+    unittest.main(verbosity=2)
