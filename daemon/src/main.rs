@@ -171,7 +171,12 @@ fn main() -> ExitCode {
     if let Some(socket) = cli.socket {
         config.api.socket = Some(socket);
     }
-    let rt = match tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build() {
+    let rt = match tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .thread_stack_size(8 << 20)
+        .enable_all()
+        .build()
+    {
         Ok(rt) => rt,
         Err(e) => {
             eprintln!("ecmxfd: cannot start the async runtime: {e}");

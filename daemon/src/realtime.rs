@@ -63,6 +63,15 @@ pub fn apply(config: &RealtimeConfig) -> Applied {
     applied
 }
 
+/// The host's CLOCK_MONOTONIC in ns (what `Instant` reads on Linux), as a
+/// number other processes on the host can compare with.
+pub fn monotonic_ns() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
+        Ok(t) => (t.tv_sec() as u64).saturating_mul(1_000_000_000).saturating_add(t.tv_nsec() as u64),
+        Err(_) => 0,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -24,13 +24,18 @@ pub fn repo() -> PathBuf {
 /// only this package's tests are run).
 pub fn daemon_binary() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test> -> target/<profile>/ecmxfd
-    let dir = exe.parent().and_then(Path::parent).expect("target directory");
+    // target/<profile>/deps/<test> or target/<profile>/<bin> -> target/<profile>/ecmxfd
+    let mut dir = exe.parent().expect("target directory");
+    if dir.ends_with("deps") {
+        dir = dir.parent().expect("target directory");
+    }
     let bin = dir.join("ecmxfd");
     if !bin.exists() {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+        let profile: &[&str] = if cfg!(debug_assertions) { &[] } else { &["--release"] };
         let status = Command::new(cargo)
             .args(["build", "-p", "ecmxfd", "--bin", "ecmxfd"])
+            .args(profile)
             .current_dir(repo())
             .status()
             .expect("run cargo build");
@@ -66,6 +71,13 @@ impl Daemon {
         Self::start(&["--sim"], "sim")
     }
 
+    /// `ecmxfd --sim` with more arguments.
+    pub fn sim_with(args: &[&str]) -> Self {
+        let mut all = vec!["--sim"];
+        all.extend_from_slice(args);
+        Self::start(&all, "sim")
+    }
+
     /// `ecmxfd --config <text written to a file>`; `{dir}` in the text is
     /// replaced by the daemon's folder, `{repo}` by the workspace root.
     pub fn with_config(text: &str) -> Self {
@@ -92,6 +104,11 @@ impl Daemon {
             .spawn()
             .expect("start ecmxfd");
         Self { child, socket, dir, log }
+    }
+
+    /// Its process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
     }
 
     /// What the daemon logged so far.

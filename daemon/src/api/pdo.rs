@@ -7,7 +7,6 @@ use std::time::Duration;
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::process_data_server::ProcessData as ProcessDataApi;
 use ecmxf_wire::payload::pdo::{PdoConfig as WirePdoConfig, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
-use tokio::sync::broadcast::error::RecvError;
 use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 
@@ -224,60 +223,60 @@ impl ProcessDataApi for ProcessDataService {
             let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;
             selected.push(e.clone());
         }
-        let mut rx = self.0.master.subscribe();
-        let (tx, out) = tokio::sync::mpsc::channel(256);
+        // Straight from the broadcast channel to the HTTP/2 stream: no task
+        // and no queue in between, so a frame costs one wake-up per
+        // subscriber on its way out.
         let decimation = u64::from(r.decimation.max(1));
         let on_change = r.on_change;
-        tokio::spawn(async move {
-            let mut n = 0u64;
-            let mut lost = 0u64;
-            let mut last: Option<Vec<u8>> = None;
-            loop {
-                let frame = match rx.recv().await {
-                    Ok(f) => f,
-                    Err(RecvError::Lagged(k)) => {
-                        lost += k;
-                        continue;
-                    }
-                    Err(RecvError::Closed) => break,
-                };
-                n += 1;
-                if n % decimation != 0 {
-                    continue;
+        let epoch = self.0.master.epoch_monotonic_ns();
+        let mut n = 0u64;
+        let mut lost = 0u64;
+        let mut last: Option<Vec<u8>> = None;
+        let frames = tokio_stream::wrappers::BroadcastStream::new(self.0.master.subscribe());
+        let samples = frames.filter_map(move |frame| {
+            let frame = match frame {
+                Ok(f) => f,
+                Err(tokio_stream::wrappers::errors::BroadcastStreamRecvError::Lagged(k)) => {
+                    lost += k;
+                    return None;
                 }
-                let input = &frame.data;
-                let (image_bytes, values) = if selected.is_empty() {
-                    (input.clone(), Vec::new())
-                } else {
-                    let values: Vec<pb::EntryValue> = selected
-                        .iter()
-                        .map(|e| pb::EntryValue { name: e.name.clone(), value: Some(entry_value(e, input)) })
-                        .collect();
-                    (Vec::new(), values)
-                };
-                if on_change {
-                    let key = if selected.is_empty() {
-                        image_bytes.clone()
-                    } else {
-                        selected
-                            .iter()
-                            .flat_map(|e| super::image::read_bits(input, e.bit_offset, e.bit_length))
-                            .collect()
-                    };
-                    if last.as_ref() == Some(&key) {
-                        continue;
-                    }
-                    last = Some(key);
-                }
-                let sample =
-                    pb::InputSample { seq: frame.seq, time_ns: frame.time_ns, image: image_bytes, values, lost };
-                lost = 0;
-                if tx.send(Ok(sample)).await.is_err() {
-                    break;
-                }
+            };
+            n += 1;
+            if n % decimation != 0 {
+                return None;
             }
+            let input = &frame.data;
+            if on_change {
+                let key: Vec<u8> = if selected.is_empty() {
+                    input.clone()
+                } else {
+                    selected.iter().flat_map(|e| super::image::read_bits(input, e.bit_offset, e.bit_length)).collect()
+                };
+                if last.as_ref() == Some(&key) {
+                    return None;
+                }
+                last = Some(key);
+            }
+            let (image, values) = if selected.is_empty() {
+                (input.clone(), Vec::new())
+            } else {
+                let values = selected
+                    .iter()
+                    .map(|e| pb::EntryValue { name: e.name.clone(), value: Some(entry_value(e, input)) })
+                    .collect();
+                (Vec::new(), values)
+            };
+            let sample = pb::InputSample {
+                seq: frame.seq,
+                time_ns: frame.time_ns,
+                image,
+                values,
+                lost: std::mem::take(&mut lost),
+                monotonic_ns: epoch + frame.time_ns,
+            };
+            Some(Ok(sample))
         });
-        Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(out))))
+        Ok(Response::new(Box::pin(samples)))
     }
 
     async fn acquire_lease(&self, request: Request<pb::AcquireLeaseRequest>) -> Result<Response<pb::Lease>, Status> {

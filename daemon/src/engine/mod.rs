@@ -119,6 +119,7 @@ impl<L: Link> Engine<L> {
         let mut port = Port::new(p.link);
         port.set_ready_timeout(p.config.ready_timeout());
         let epoch = Instant::now();
+        p.telemetry.epoch_monotonic_ns.store(crate::realtime::monotonic_ns(), Relaxed);
         let events = EventSink::new(p.events, epoch, p.distributor.clone());
         Self {
             port,

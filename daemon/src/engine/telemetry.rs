@@ -74,6 +74,10 @@ pub struct Telemetry {
     /// The number of the last configuration a client applied that the
     /// engine has taken (0: the one it started with).
     pub config_generation: AtomicU64,
+    /// The engine's epoch (time 0 of every `time_ns`) on the host's
+    /// CLOCK_MONOTONIC, ns: lets a client on the same host measure how old
+    /// a frame is when it arrives.
+    pub epoch_monotonic_ns: AtomicU64,
     /// The last bring-up or recovery reason; written only when something
     /// fails, never on the cycle path.
     last_error: Mutex<Option<String>>,

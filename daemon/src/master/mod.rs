@@ -296,6 +296,12 @@ impl Master {
         self.telemetry.snapshot()
     }
 
+    /// The engine's epoch (time 0 of frame and event times) on the host's
+    /// CLOCK_MONOTONIC, ns.
+    pub fn epoch_monotonic_ns(&self) -> u64 {
+        self.telemetry.epoch_monotonic_ns.load(Ordering::Relaxed)
+    }
+
     /// Why bring-up last failed or recovery last started.
     pub fn last_error(&self) -> Option<String> {
         self.telemetry.last_error()

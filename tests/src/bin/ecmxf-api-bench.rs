@@ -1,0 +1,188 @@
+//! API benchmark: starts `ecmxfd --sim` (this build's profile; run it with
+//! `cargo run --release -p ecmxf-e2e --bin ecmxf-api-bench`) and measures
+//! over its Unix socket:
+//! - unary SDO upload latency, one client, then 16 concurrent clients
+//!   (each on its own connection);
+//! - input streaming to 16 concurrent subscribers: samples/s and the
+//!   frame-to-subscriber latency (host CLOCK_MONOTONIC when the sample
+//!   arrives minus when the engine received the frame);
+//! - both at once.
+//!
+//! Prints medians, p99 and max from this one run. `--secs N` sets each
+//! phase's length (default 5).
+
+use std::time::{Duration, Instant};
+
+use ecmxf_e2e::Daemon;
+use ecmxf_proto::v1 as pb;
+use pb::process_data_client::ProcessDataClient;
+use pb::sdo_client::SdoClient;
+use tokio_stream::StreamExt;
+use tonic::transport::Channel;
+
+const CLIENTS: usize = 16;
+
+fn monotonic_ns() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
+        Ok(t) => (t.tv_sec() as u64) * 1_000_000_000 + t.tv_nsec() as u64,
+        Err(_) => 0,
+    }
+}
+
+fn pct(sorted: &[u64], p: f64) -> u64 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+fn report(name: &str, mut us: Vec<u64>, secs: f64) {
+    us.sort_unstable();
+    println!(
+        "{name:<44} n={:>7} {:>8.0}/s  p50={:>6} us  p99={:>6} us  max={:>6} us",
+        us.len(),
+        us.len() as f64 / secs,
+        pct(&us, 0.5),
+        pct(&us, 0.99),
+        us.last().copied().unwrap_or(0)
+    );
+}
+
+async fn sdo_load(ch: Channel, until: Instant) -> Vec<u64> {
+    let mut sdo = SdoClient::new(ch);
+    let req = pb::SdoUploadRequest { slave: 1, index: 0x1018, subindex: 1, complete_access: false, data_type: 0 };
+    let mut out = Vec::new();
+    while Instant::now() < until {
+        let t = Instant::now();
+        sdo.upload(req.clone()).await.expect("SDO upload");
+        out.push(t.elapsed().as_micros() as u64);
+    }
+    out
+}
+
+/// (frame-to-subscriber latencies in us, samples, frames lost).
+async fn subscriber(ch: Channel, until: Instant) -> (Vec<u64>, u64) {
+    let mut pd = ProcessDataClient::new(ch);
+    let mut s = pd
+        .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
+        .await
+        .expect("stream")
+        .into_inner();
+    let mut lat = Vec::new();
+    let mut lost = 0;
+    while let Some(m) = s.next().await {
+        let m = m.expect("sample");
+        lat.push(monotonic_ns().saturating_sub(m.monotonic_ns) / 1000);
+        lost += m.lost;
+        if Instant::now() >= until {
+            break;
+        }
+    }
+    (lat, lost)
+}
+
+async fn channels(d: &Daemon, n: usize) -> Vec<Channel> {
+    let mut v = Vec::new();
+    for _ in 0..n {
+        v.push(ecmxf_proto::connect_unix(&d.socket).await.expect("connect"));
+    }
+    v
+}
+
+async fn streams(d: &Daemon, clients: usize, secs: u64, label: &str) {
+    let until = Instant::now() + Duration::from_secs(secs);
+    let tasks: Vec<_> = channels(d, clients).await.into_iter().map(|c| tokio::spawn(subscriber(c, until))).collect();
+    let mut all = Vec::new();
+    let mut lost = 0;
+    let mut per = Vec::new();
+    for t in tasks {
+        let (l, k) = t.await.expect("task");
+        per.push(l.len());
+        all.extend(l);
+        lost += k;
+    }
+    report(&format!("stream, {clients} subscriber(s){label}: frame->subscriber"), all, secs as f64);
+    println!(
+        "{:<44} per subscriber min {} max {} samples, lost {lost}",
+        "",
+        per.iter().min().unwrap_or(&0),
+        per.iter().max().unwrap_or(&0)
+    );
+}
+
+fn main() {
+    let secs: u64 = std::env::args().skip_while(|a| a != "--secs").nth(1).and_then(|v| v.parse().ok()).unwrap_or(5);
+    // The daemon of this very source, in this build's profile.
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let profile: &[&str] = if cfg!(debug_assertions) { &[] } else { &["--release"] };
+    let built = std::process::Command::new(cargo)
+        .args(["build", "-q", "-p", "ecmxfd", "--bin", "ecmxfd"])
+        .args(profile)
+        .current_dir(ecmxf_e2e::repo())
+        .status()
+        .expect("run cargo build");
+    assert!(built.success(), "building ecmxfd failed");
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().expect("runtime");
+    rt.block_on(async {
+        let started = Instant::now();
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let info = pb::master_client::MasterClient::new(ch.clone()).get_info(pb::GetInfoRequest {}).await.unwrap().into_inner();
+        println!(
+            "ecmxfd --sim ({} build of the bench), {} us cycle, {} B in / {} B out per frame, {} s per phase",
+            if cfg!(debug_assertions) { "debug" } else { "release" },
+            info.sync0_us,
+            info.input_image_bytes,
+            info.output_image_bytes,
+            secs
+        );
+        // Warm-up.
+        sdo_load(ch.clone(), Instant::now() + Duration::from_millis(300)).await;
+
+        let t = Instant::now();
+        let one = sdo_load(ch.clone(), Instant::now() + Duration::from_secs(secs)).await;
+        report("SDO upload, 1 client", one, t.elapsed().as_secs_f64());
+
+        let until = Instant::now() + Duration::from_secs(secs);
+        let t = Instant::now();
+        let tasks: Vec<_> = channels(&d, CLIENTS).await.into_iter().map(|c| tokio::spawn(sdo_load(c, until))).collect();
+        let mut all = Vec::new();
+        for task in tasks {
+            all.extend(task.await.expect("task"));
+        }
+        report(&format!("SDO upload, {CLIENTS} clients"), all, t.elapsed().as_secs_f64());
+
+        streams(&d, 1, secs, "").await;
+        streams(&d, CLIENTS, secs, "").await;
+
+        let until = Instant::now() + Duration::from_secs(secs);
+        let load: Vec<_> = channels(&d, CLIENTS).await.into_iter().map(|c| tokio::spawn(sdo_load(c, until))).collect();
+        streams(&d, CLIENTS, secs, " + 16 SDO clients").await;
+        let mut all = Vec::new();
+        for task in load {
+            all.extend(task.await.expect("task"));
+        }
+        report(&format!("SDO upload, {CLIENTS} clients, during streaming"), all, secs as f64);
+
+        let status = pb::master_client::MasterClient::new(ch).get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+        let c = status.counters.unwrap();
+        println!(
+            "engine: fifo_alarms={} input_batches_lost={} max_fifo_gap_us={} (the longest the engine thread itself stalled)",
+            c.fifo_alarms, c.input_batches_lost, c.max_fifo_gap_us
+        );
+        let cpu = |pid: u32| -> f64 {
+            let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+            let f: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+            let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0) + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+            ticks / 100.0
+        };
+        println!(
+            "cpu seconds: daemon {:.1}, bench client {:.1}, wall {:.1} s on {} cores",
+            cpu(d.pid()),
+            cpu(std::process::id()),
+            started.elapsed().as_secs_f64(),
+            std::thread::available_parallelism().map_or(0, |n| n.get())
+        );
+        d.stop();
+    });
+}
