@@ -54,7 +54,7 @@ async fn sdo_load(ch: Channel, until: Instant) -> Vec<u64> {
     let mut out = Vec::new();
     while Instant::now() < until {
         let t = Instant::now();
-        sdo.upload(req.clone()).await.expect("SDO upload");
+        sdo.upload(req).await.expect("SDO upload");
         out.push(t.elapsed().as_micros() as u64);
     }
     out
