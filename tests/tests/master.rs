@@ -59,7 +59,11 @@ fn master_slaves_and_states() {
             .unwrap()
             .into_inner();
         assert_eq!(r.state, pb::EcatState::SafeOp as i32);
-        let one = state.get_state(pb::GetStateRequest { slave: Some(2) }).await.unwrap().into_inner();
+        let one = state
+            .get_state(pb::GetStateRequest { slave: Some(2) })
+            .await
+            .unwrap_or_else(|e| panic!("{e:?}\n{}", d.log()))
+            .into_inner();
         assert_eq!(one.state, pb::EcatState::SafeOp as i32);
         let r = state
             .set_state(pb::SetStateRequest {
@@ -117,6 +121,38 @@ fn health_follows_the_bus_and_reflection_lists_the_services() {
         }
         let r = health.check(tonic_health::pb::HealthCheckRequest { service: "ecmxf.v1.Sdo".into() }).await.unwrap();
         assert_eq!(r.get_ref().status, tonic_health::pb::health_check_response::ServingStatus::Serving as i32);
+
+        // A slave out of OP: NOT_SERVING until the network is back.
+        let mut state = StateClient::new(ch.clone());
+        let set =
+            |s: pb::EcatState| pb::SetStateRequest { slave: Some(2), state: s as i32, wait: true, timeout_ms: 3000 };
+        state.set_state(set(pb::EcatState::SafeOp)).await.unwrap();
+        let wait_for = |want: tonic_health::pb::health_check_response::ServingStatus| {
+            let mut health = health.clone();
+            async move {
+                let start = std::time::Instant::now();
+                loop {
+                    let r =
+                        health.check(tonic_health::pb::HealthCheckRequest { service: String::new() }).await.unwrap();
+                    if r.get_ref().status == want as i32 {
+                        return;
+                    }
+                    assert!(start.elapsed().as_secs() < 5, "health never {want:?}");
+                    tokio::time::sleep(std::time::Duration::from_millis(20)).await;
+                }
+            }
+        };
+        wait_for(tonic_health::pb::health_check_response::ServingStatus::NotServing).await;
+        // Held there on purpose: no recovery undoes it.
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        let one = state
+            .get_state(pb::GetStateRequest { slave: Some(2) })
+            .await
+            .unwrap_or_else(|e| panic!("{e:?}\n{}", d.log()))
+            .into_inner();
+        assert_eq!(one.state, pb::EcatState::SafeOp as i32);
+        state.set_state(set(pb::EcatState::Op)).await.unwrap_or_else(|e| panic!("{e:?}\n{}", d.log()));
+        wait_for(tonic_health::pb::health_check_response::ServingStatus::Serving).await;
 
         // Reflection, both versions, via the raw protocol (what grpcurl does).
         for path in [

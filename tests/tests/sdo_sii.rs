@@ -169,7 +169,10 @@ fn sii_read_write_with_backup_and_decode() {
         req.set_timeout(Duration::from_millis(100));
         let t = std::time::Instant::now();
         let e = sii.read(req).await.unwrap_err();
-        assert_eq!(e.code(), Code::DeadlineExceeded, "{e:?}");
+        // Ours answers 10 ms early; only a host stall longer than that lets
+        // tonic's own deadline layer answer first (CANCELLED "Timeout expired").
+        let tonic_layer = e.code() == Code::Cancelled && e.message().contains("Timeout expired");
+        assert!(e.code() == Code::DeadlineExceeded || tonic_layer, "{e:?}");
         assert!(t.elapsed() < Duration::from_millis(600), "{:?}", t.elapsed());
         let r = sii.read(pb::SiiReadRequest { slave: 1, word: 8, count: 2 }).await.unwrap().into_inner();
         assert_eq!(u32::from_le_bytes(r.data[0..4].try_into().unwrap()), 0x59D);

@@ -86,9 +86,11 @@ impl Context {
     }
 }
 
-/// The time left of the client's deadline (`grpc-timeout`), less a small
-/// margin so the engine's own deadline answers first with a proper
-/// DEADLINE_EXCEEDED; `None` when the client gave none.
+/// The time left of the client's deadline (`grpc-timeout`), less a margin
+/// (a tenth, at most 20 ms) so that this daemon answers first with
+/// DEADLINE_EXCEEDED: tonic's own deadline layer, which fires at the exact
+/// deadline, answers CANCELLED "Timeout expired" (it still may, when the
+/// host stalls longer than the margin). `None` when the client gave none.
 pub fn deadline<T>(request: &Request<T>) -> Option<Duration> {
     let v = request.metadata().get("grpc-timeout")?.to_str().ok()?;
     let (digits, unit) = v.split_at(v.len().checked_sub(1)?);
@@ -102,7 +104,7 @@ pub fn deadline<T>(request: &Request<T>) -> Option<Duration> {
         "n" => Duration::from_nanos(n),
         _ => return None,
     };
-    Some(d.saturating_sub(Duration::from_millis(2)).max(Duration::from_millis(1)))
+    Some(d.saturating_sub((d / 10).min(Duration::from_millis(20))))
 }
 
 /// Runs `work` for `caller`: as their turn on the chip's blocking slot,
@@ -141,7 +143,7 @@ mod tests {
 
     #[test]
     fn grpc_timeout_units_are_read() {
-        for (v, ms) in [("5S", 4998), ("100m", 98), ("1M", 59_998), ("2000000u", 1998)] {
+        for (v, ms) in [("5S", 4980), ("100m", 90), ("1M", 59_980), ("2000000u", 1980), ("10m", 9)] {
             let mut r = Request::new(());
             r.metadata_mut().insert("grpc-timeout", v.parse().unwrap());
             assert_eq!(deadline(&r), Some(Duration::from_millis(ms)), "{v}");

@@ -30,6 +30,7 @@ use super::sdo::SdoService;
 use super::sii::SiiService;
 use crate::engine::telemetry::Phase;
 use crate::master::Master;
+use ecmxf_wire::EcatState;
 
 /// Why the API could not be served.
 #[derive(Debug)]
@@ -145,15 +146,21 @@ fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
     Ok(tls)
 }
 
-/// Health follows the bus: SERVING while the engine runs in its target
-/// state, NOT_SERVING otherwise.
+/// Health follows the bus: SERVING while the engine runs and the network
+/// is in the configured target state, NOT_SERVING otherwise (bringing up,
+/// recovering, a slave dropped out of OP...).
 async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
     let mut last = None;
-    let mut tick = tokio::time::interval(Duration::from_millis(200));
+    let mut tick = tokio::time::interval(Duration::from_millis(100));
     loop {
         tick.tick().await;
         let s = master.status();
-        let serving = s.phase == Phase::Running;
+        let target = match master.config().cycle.target_state.as_str() {
+            "preop" => EcatState::PreOp,
+            "safeop" => EcatState::SafeOp,
+            _ => EcatState::Op,
+        };
+        let serving = s.phase == Phase::Running && s.ecat_state == target;
         if last != Some(serving) {
             last = Some(serving);
             let status = if serving { ServingStatus::Serving } else { ServingStatus::NotServing };

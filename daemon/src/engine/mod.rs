@@ -61,6 +61,11 @@ enum Exit {
 pub struct Engine<L> {
     port: Port<L>,
     config: Config,
+    /// A client asked for a state below the configured target: the slaves
+    /// that left OP on purpose do not count working counters, and that is
+    /// not a fault to recover from. Cleared by a request for the target
+    /// state (or above) and by every bring-up.
+    held_below_target: bool,
     commands: Receiver<Command>,
     outputs: Receiver<OutputWrite>,
     telemetry: Arc<Telemetry>,
@@ -130,6 +135,7 @@ impl<L: Link> Engine<L> {
             layout: p.layout,
             ring: Some(p.ring),
             distributor: p.distributor,
+            held_below_target: false,
             writers: p.writers,
             action: p.action,
             reconfigure: p.reconfigure,
@@ -186,6 +192,7 @@ impl<L: Link> Engine<L> {
                 Cyclic::new(plan, self.port.data_size(), ring, self.epoch)
             });
             *self.layout.lock().unwrap_or_else(|e| e.into_inner()) = layout;
+            self.held_below_target = false;
             self.set_phase(Phase::Running);
             match self.running(cyclic) {
                 Exit::Stop => return self.stopped(),
@@ -255,7 +262,7 @@ impl<L: Link> Engine<L> {
 
     fn fail_all(&mut self, e: EngineError) {
         if let Some(a) = self.active.take() {
-            drop(a);
+            a.fail(e.clone());
         }
         for j in self.queue.drain() {
             let _ = j.reply.send(Err(e.clone()));

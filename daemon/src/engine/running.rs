@@ -17,7 +17,7 @@ use tracing::{debug, info, warn};
 
 use super::cyclic::Cyclic;
 use super::events::EventKind;
-use super::job::NetworkAction;
+use super::job::{NetworkAction, Request};
 use super::telemetry::Telemetry;
 use super::transaction::{Active, Progress};
 use super::{Command, Engine, Exit};
@@ -43,6 +43,15 @@ const CENSUS: Duration = Duration::from_secs(1);
 const POLL: Duration = Duration::from_micros(100);
 
 impl<L: Link> Engine<L> {
+    /// The state bring-up drives the network to.
+    fn target_state(&self) -> EcatState {
+        match self.config.cycle.target_state.as_str() {
+            "preop" => EcatState::PreOp,
+            "safeop" => EcatState::SafeOp,
+            _ => EcatState::Op,
+        }
+    }
+
     fn check_health(&self, h: &ResponseHeader) -> Result<(), String> {
         if h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) {
             return Err("chip reset (status back to power-up values)".into());
@@ -146,7 +155,12 @@ impl<L: Link> Engine<L> {
                 return Exit::Recover(why);
             }
             let now = Instant::now();
-            if h.wkc_errors != wkc_errors {
+            if self.held_below_target {
+                // Slaves held below the target on purpose miss the
+                // exchange; a streak counts from when the hold ends.
+                wkc_streak = None;
+                wkc_errors = h.wkc_errors;
+            } else if h.wkc_errors != wkc_errors {
                 debug!(count = h.wkc_errors, "working-counter errors");
                 wkc_errors = h.wkc_errors;
                 let first = wkc_streak.map_or(now, |(f, _)| f);
@@ -267,6 +281,9 @@ impl<L: Link> Engine<L> {
         let now = Instant::now();
         if self.active.is_none() {
             while let Some(j) = self.queue.pop() {
+                if let Request::SetState { state, .. } = &j.request {
+                    self.held_below_target = state.to_u8() < self.target_state().to_u8();
+                }
                 if let Some(a) = Active::new(j) {
                     self.active = Some(a);
                     break;

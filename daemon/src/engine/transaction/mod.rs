@@ -117,6 +117,11 @@ impl Active {
         })
     }
 
+    /// Ends it with `e` (the engine is leaving the running state).
+    pub fn fail(self, e: EngineError) {
+        let _ = self.finish(Err(e));
+    }
+
     fn orphaned(&self) -> bool {
         self.reply.is_none()
     }
