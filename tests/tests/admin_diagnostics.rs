@@ -16,7 +16,7 @@ fn foe_round_trip_with_progress() {
     run(async {
         let mut d = Daemon::sim();
         let ch = d.connect().await;
-        let mut foe = FoeClient::new(ch);
+        let mut foe = FoeClient::new(ch.clone());
         let file: Vec<u8> = (0..100_000u32).map(|i| (i * 7 % 251) as u8).collect();
         let mut s = foe
             .write(pb::FoeWriteRequest { slave: 1, name: "firmware.bin".into(), password: 0, data: file.clone() })

@@ -213,3 +213,79 @@ fn layout_streams_leases_and_outputs() {
         assert_eq!(again.entries, image.entries);
     });
 }
+
+/// Losing the lease (no keep-alive) applies `outputs.on_last_writer_gone`:
+/// here "zero", seen through the IO slave's loopback.
+#[test]
+fn a_lost_lease_applies_the_safe_action() {
+    run(async {
+        let config = r#"
+version = 1
+[link]
+backend = "sim"
+[realtime]
+priority = 0
+lock_memory = false
+[cycle]
+fifo_rx_depth = 255
+fifo_tx_depth = 40
+fifo_low = 128
+fifo_high = 240
+[outputs]
+on_last_writer_gone = "zero"
+"#;
+        let mut d = Daemon::with_config(config);
+        let ch = d.connect().await;
+        let mut pd = ProcessDataClient::new(ch.clone());
+        let image = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
+        let out =
+            image.entries.iter().find(|e| e.slave == 2 && e.direction == pb::Direction::Output as i32).unwrap().clone();
+        let inp =
+            image.entries.iter().find(|e| e.slave == 2 && e.direction == pb::Direction::Input as i32).unwrap().clone();
+        let on = if out.bit_length == 1 { Kind::Boolean(true) } else { Kind::Unsigned(0xFF) };
+        let off = if out.bit_length == 1 { Kind::Boolean(false) } else { Kind::Unsigned(0) };
+        let lease =
+            pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 200 }).await.unwrap().into_inner();
+        pd.write_outputs(pb::WriteOutputsRequest {
+            lease_id: lease.id.clone(),
+            writes: vec![by_entry(&out.name, on.clone())],
+        })
+        .await
+        .unwrap();
+        let mut stream = pd
+            .stream_inputs(pb::StreamInputsRequest { entries: vec![inp.name.clone()], decimation: 0, on_change: true })
+            .await
+            .unwrap()
+            .into_inner();
+        let value = |s: &pb::InputSample| s.values[0].value.as_ref().and_then(|v| v.kind.clone());
+        let start = Instant::now();
+        loop {
+            let s = stream.next().await.unwrap().unwrap();
+            if value(&s) == Some(on.clone()) {
+                break;
+            }
+            assert!(start.elapsed() < Duration::from_secs(3), "output never seen");
+        }
+        // No keep-alive: after 200 ms the lease lapses and the outputs go to zero.
+        let start = Instant::now();
+        loop {
+            let s = tokio::time::timeout(Duration::from_secs(3), stream.next())
+                .await
+                .expect("no zeroing")
+                .unwrap()
+                .unwrap();
+            if value(&s) == Some(off.clone()) {
+                break;
+            }
+        }
+        assert!(start.elapsed() >= Duration::from_millis(150), "zeroed before the lease lapsed: {:?}", start.elapsed());
+        let mut diag = pb::diagnostics_client::DiagnosticsClient::new(ch);
+        let c = diag.get_counters(pb::GetCountersRequest {}).await.unwrap().into_inner();
+        assert_eq!(c.slaves[2].state, pb::EcatState::Op as i32);
+        let e = pd
+            .write_outputs(pb::WriteOutputsRequest { lease_id: lease.id, writes: vec![by_entry(&out.name, on)] })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::PermissionDenied);
+    });
+}
