@@ -7,7 +7,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::cia402_server::Cia402 as Cia402Api;
-use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
+use ecmxf_wire::payload::cia402::{Cia402Control, Cia402CtlSet, Cia402State, Cia402StateSet};
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
@@ -88,6 +88,17 @@ impl Cia402Service {
             Some(a) => Ok((n as u8, a.clone())),
             None => Err(bad_argument("axis", format!("axis {n} is not configured ({} [[axis]] entries)", axes.len()))),
         }
+    }
+
+    /// One fault reset through the helper (402_CTL_SET with bit3; the
+    /// chip raises controlword bit7 once and clears the request itself).
+    async fn fault_reset(&self, axis: u8, a: &AxisConfig, t: Option<Duration>) -> Result<(), Status> {
+        let mut control = Cia402Control::ENABLE | Cia402Control::FAULT_RESET;
+        control.set(Cia402Control::AUTO_FAULT_RESET, a.auto_fault_reset);
+        let axis_count = self.0.master.config().axes.len() as u8;
+        let set = Cia402CtlSet { axis, control, axis_count, slave: a.slave };
+        self.0.master.immediate(Immediate::Cia402CtlSet(set), t).await.map_err(to_status)?;
+        Ok(())
     }
 
     async fn drive_state(&self, axis: u8, t: Option<Duration>) -> Result<Cia402State, Status> {
@@ -180,6 +191,7 @@ impl Cia402Api for Cia402Service {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let r = request.get_ref();
         let (axis, a) = self.axis(r.axis)?;
+        let command = pb::AxisCommand::try_from(r.command).unwrap_or(pb::AxisCommand::Unspecified);
         let target = match pb::AxisCommand::try_from(r.command) {
             Ok(pb::AxisCommand::Enable) => Cia402State::OperationEnabled,
             Ok(pb::AxisCommand::Disable | pb::AxisCommand::FaultReset) => Cia402State::SwitchOnDisabled,
@@ -193,6 +205,12 @@ impl Cia402Api for Cia402Service {
         let status = bounded(&caller, async {
             let end = Instant::now() + budget;
             let m = &self.0.master;
+            // Walking the FSA for the caller: from FAULT, enabling starts
+            // with a fault reset, as FAULT_RESET itself does.
+            let faulted = matches!(self.drive_state(axis, Some(budget)).await?, Cia402State::Fault);
+            if command == pb::AxisCommand::FaultReset || (command == pb::AxisCommand::Enable && faulted) {
+                self.fault_reset(axis, &a, Some(budget)).await?;
+            }
             m.immediate(Immediate::Cia402StateSet(Cia402StateSet { axis, state: target }), Some(budget))
                 .await
                 .map_err(to_status)?;
@@ -205,9 +223,12 @@ impl Cia402Api for Cia402Service {
                     if arrived {
                         break;
                     }
-                    if now == Cia402State::Fault && target != Cia402State::SwitchOnDisabled {
+                    if now == Cia402State::Fault && Instant::now() + budget / 2 >= end {
+                        let image = self.0.image.get(m).await.map_err(to_status)?;
+                        let k = slave_axis(&image, m, &a);
+                        let code = self.actual(&image, &a, k, 0x603F, Some(budget)).await?;
                         return Err(Status::failed_precondition(format!(
-                            "axis {axis} is in FAULT; send FAULT_RESET first (or configure auto_fault_reset)"
+                            "axis {axis} stays in FAULT (error code {code:#06x}): its cause is still there"
                         )));
                     }
                     if Instant::now() >= end {

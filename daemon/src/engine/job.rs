@@ -7,7 +7,7 @@ use std::sync::atomic::{AtomicBool, AtomicU8, AtomicU32, AtomicUsize, Ordering};
 use std::time::Instant;
 
 use ecmxf_wire::EcatState;
-use ecmxf_wire::payload::cia402::Cia402StateSet;
+use ecmxf_wire::payload::cia402::{Cia402CtlSet, Cia402StateSet};
 use ecmxf_wire::payload::gpio::{GpioConfig, GpioFunc};
 use ecmxf_wire::payload::periph::{AdcOp, DacOp, QeiOp};
 use ecmxf_wire::payload::raw::DatagramHead;
@@ -143,6 +143,8 @@ pub enum Immediate {
     Adc(AdcOp),
     /// 402_STATE_SET (27): the helper walks an axis to a state.
     Cia402StateSet(Cia402StateSet),
+    /// 402_CTL_SET (29): the helper's control byte (one fault reset...).
+    Cia402CtlSet(Cia402CtlSet),
     /// 402_STATE_GET (28) of an axis.
     Cia402StateGet(u8),
     /// 402_GET_STATUSWORD (74) of an axis.

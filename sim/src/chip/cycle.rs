@@ -154,9 +154,11 @@ impl Chip {
             let resetting = h.control.intersects(Cia402Control::FAULT_RESET | Cia402Control::AUTO_FAULT_RESET);
             if state == Cia402State::Fault && resetting {
                 // A rising edge of bit 7 every other cycle.
-                cw = (cw & !0x000F) | if old & 0x80 == 0 { 0x80 } else { 0 };
+                h.reset_bit = !h.reset_bit;
+                cw = (cw & !0x000F) | if h.reset_bit { 0x80 } else { 0 };
             } else if state != Cia402State::Fault && state != Cia402State::FaultReactionActive {
                 h.control.remove(Cia402Control::FAULT_RESET);
+                h.reset_bit = false;
             }
             self.master.outputs[cw_at..cw_at + 2].copy_from_slice(&cw.to_le_bytes());
             self.helper[i] = Some(h);

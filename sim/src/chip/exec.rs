@@ -216,6 +216,7 @@ impl Chip {
                     statusword_offset: c.statusword_offset,
                     control: c.control,
                     target,
+                    reset_bit: false,
                 });
                 value(0)
             }

@@ -71,6 +71,10 @@ pub struct HelperAxis {
     pub control: Cia402Control,
     /// State the helper drives the axis towards.
     pub target: Cia402State,
+    /// Whether the helper wrote controlword bit 7 in the last cycle (fault
+    /// resets need rising edges; the host's frames carry bit 7 clear, so the
+    /// helper's own last value is what the edge is made from).
+    pub reset_bit: bool,
 }
 
 /// Where a slave's images sit in the FIFO frames.

@@ -232,6 +232,7 @@ impl Active {
                     Immediate::Dac(c) => port.call(c)?,
                     Immediate::Adc(c) => port.call(c)?,
                     Immediate::Cia402StateSet(c) => port.call(c)?,
+                    Immediate::Cia402CtlSet(c) => port.call(c)?,
                     Immediate::Cia402StateGet(axis) => port.call(&Cia402StateGet(*axis))?,
                     Immediate::Cia402Statusword(axis) => port.call(&Cia402GetStatusword(*axis))?,
                     Immediate::Emergencies(n) => port.call(&CoeEmergencyGet(*n))?,

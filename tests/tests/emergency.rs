@@ -1,0 +1,157 @@
+//! A drive fault raised in the simulator (served on its own socket, the
+//! daemon attached with `backend = "sim-socket"`) reaches API clients as an
+//! EMERGENCY event and in the emergency history; the axis shows FAULT and
+//! comes back with FAULT_RESET once the cause is gone.
+
+use std::path::PathBuf;
+use std::process::{Child, Command, Stdio};
+use std::time::{Duration, Instant};
+
+use ecmxf_e2e::{Daemon, run};
+use ecmxf_proto::v1 as pb;
+use pb::cia402_client::Cia402Client;
+use pb::diagnostics_client::DiagnosticsClient;
+use tokio_stream::StreamExt;
+
+struct Sim {
+    child: Child,
+    bin: PathBuf,
+    socket: PathBuf,
+}
+
+impl Sim {
+    fn serve(dir: &std::path::Path) -> Self {
+        let bin = ecmxf_e2e::daemon_binary().with_file_name("ecmxf-sim");
+        if !bin.exists() {
+            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+            let ok =
+                Command::new(cargo).args(["build", "-p", "ecmxf-sim"]).current_dir(ecmxf_e2e::repo()).status().unwrap();
+            assert!(ok.success());
+        }
+        let socket = dir.join("sim.sock");
+        let child = Command::new(&bin)
+            .args(["serve", "--socket"])
+            .arg(&socket)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start ecmxf-sim");
+        let start = Instant::now();
+        while !socket.exists() {
+            assert!(start.elapsed() < Duration::from_secs(10), "ecmxf-sim did not create its socket");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        Self { child, bin, socket }
+    }
+
+    fn ctl(&self, words: &str) {
+        let out = Command::new(&self.bin)
+            .args(["ctl", "--socket"])
+            .arg(&self.socket)
+            .args(words.split(' '))
+            .output()
+            .unwrap();
+        assert!(out.status.success(), "ctl {words}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}
+
+impl Drop for Sim {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+}
+
+#[test]
+fn a_drive_fault_arrives_as_an_emergency_event() {
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("emcy");
+        let sim = Sim::serve(&dir);
+        let config = format!(
+            r#"
+version = 1
+[link]
+backend = "sim-socket"
+socket = "{}"
+[realtime]
+priority = 0
+lock_memory = false
+[cycle]
+fifo_rx_depth = 255
+fifo_tx_depth = 40
+fifo_low = 128
+fifo_high = 240
+[[axis]]
+slave = 1
+controlword_offset = 0
+statusword_offset = 0
+"#,
+            sim.socket.display()
+        );
+        let mut d = Daemon::with_config(&config);
+        let ch = d.connect().await;
+        let mut diag = DiagnosticsClient::new(ch.clone());
+        let mut events = diag.stream_events(pb::StreamEventsRequest {}).await.unwrap().into_inner();
+        // Let the poller learn the history as it is before the fault.
+        tokio::time::sleep(Duration::from_millis(700)).await;
+        sim.ctl("drive-fault 1 0 0x2310");
+        let start = Instant::now();
+        let emcy = loop {
+            let e =
+                tokio::time::timeout(Duration::from_secs(5), events.next()).await.expect("no event").unwrap().unwrap();
+            if e.kind == pb::EventKind::Emergency as i32 {
+                break e.emergency.unwrap();
+            }
+            assert!(start.elapsed() < Duration::from_secs(5), "no EMERGENCY event");
+        };
+        assert_eq!((emcy.slave, emcy.error_code), (1, 0x2310), "{emcy:?}");
+        let history = diag.get_emergencies(pb::GetEmergenciesRequest { count: 8 }).await.unwrap().into_inner();
+        assert_eq!(history.emergencies[0].error_code, 0x2310, "{history:?}");
+
+        let mut cia = Cia402Client::new(ch);
+        let s = cia.get_axis(pb::GetAxisRequest { axis: 0 }).await.unwrap().into_inner();
+        assert_eq!(s.state, pb::DriveState::Fault as i32, "{s:?}");
+        assert_eq!(s.error_code, 0x2310, "{s:?}");
+        let e = cia
+            .command(pb::AxisCommandRequest {
+                axis: 0,
+                command: pb::AxisCommand::Enable as i32,
+                wait: true,
+                timeout_ms: 1000,
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), tonic::Code::FailedPrecondition, "{e:?}");
+        assert!(e.message().contains("0x2310"), "{e:?}");
+        sim.ctl("clear-fault 1 0");
+        let s = cia
+            .command(pb::AxisCommandRequest {
+                axis: 0,
+                command: pb::AxisCommand::FaultReset as i32,
+                wait: true,
+                timeout_ms: 3000,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(s.state, pb::DriveState::SwitchOnDisabled as i32, "{s:?}");
+        // A second fault, then ENABLE walks through the fault reset itself.
+        sim.ctl("drive-fault 1 0 0x7500");
+        tokio::time::sleep(Duration::from_millis(100)).await;
+        sim.ctl("clear-fault 1 0");
+        let s = cia
+            .command(pb::AxisCommandRequest {
+                axis: 0,
+                command: pb::AxisCommand::Enable as i32,
+                wait: true,
+                timeout_ms: 3000,
+            })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(s.state, pb::DriveState::OperationEnabled as i32, "{s:?}");
+        drop(d);
+        drop(sim);
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}
