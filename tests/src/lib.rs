@@ -55,6 +55,19 @@ pub struct Daemon {
     log: PathBuf,
 }
 
+/// A daemon configuration for tests: `[link]` lines (e.g. `backend =
+/// "sim"`), the simulator-friendly real-time and cycle settings of
+/// `config/ecmxfd-sim.toml`, then `extra` (more sections).
+pub fn config(link: &str, extra: &str) -> String {
+    format!(
+        "version = 1\n[link]\n{link}\n[realtime]\npriority = 0\nlock_memory = false\n\
+         [cycle]\nfifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240\n{extra}"
+    )
+}
+
+/// The `[[axis]]` of the TI-like drive's first axis, as the tests use it.
+pub const TI_AXIS: &str = "[[axis]]\nslave = 1\ncontrolword_offset = 0\nstatusword_offset = 0\n";
+
 /// A fresh temporary folder.
 pub fn temp_dir(tag: &str) -> PathBuf {
     static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);

@@ -10,24 +10,9 @@ use pb::peripherals_client::PeripheralsClient;
 use pb::process_data_client::ProcessDataClient;
 use tonic::Code;
 
-pub const CONFIG: &str = r#"
-version = 1
-[link]
-backend = "sim"
-network = "{repo}/config/demo-network.toml"
-[realtime]
-priority = 0
-lock_memory = false
-[cycle]
-fifo_rx_depth = 255
-fifo_tx_depth = 40
-fifo_low = 128
-fifo_high = 240
-[[axis]]
-slave = 1
-controlword_offset = 0
-statusword_offset = 0
-"#;
+fn config() -> String {
+    ecmxf_e2e::config("backend = \"sim\"\nnetwork = \"{repo}/config/demo-network.toml\"", ecmxf_e2e::TI_AXIS)
+}
 
 fn command(axis: u32, c: pb::AxisCommand) -> pb::AxisCommandRequest {
     pb::AxisCommandRequest { axis, command: c as i32, wait: true, timeout_ms: 3000 }
@@ -36,7 +21,7 @@ fn command(axis: u32, c: pb::AxisCommand) -> pb::AxisCommandRequest {
 #[test]
 fn cia402_axis_walks_the_state_machine() {
     run(async {
-        let mut d = Daemon::with_config(CONFIG);
+        let mut d = Daemon::with_config(&config());
         let ch = d.connect().await;
         let mut cia = Cia402Client::new(ch.clone());
         let axes = cia.list_axes(pb::ListAxesRequest {}).await.unwrap().into_inner();

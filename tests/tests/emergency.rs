@@ -67,27 +67,8 @@ fn a_drive_fault_arrives_as_an_emergency_event() {
     run(async {
         let dir = ecmxf_e2e::temp_dir("emcy");
         let sim = Sim::serve(&dir);
-        let config = format!(
-            r#"
-version = 1
-[link]
-backend = "sim-socket"
-socket = "{}"
-[realtime]
-priority = 0
-lock_memory = false
-[cycle]
-fifo_rx_depth = 255
-fifo_tx_depth = 40
-fifo_low = 128
-fifo_high = 240
-[[axis]]
-slave = 1
-controlword_offset = 0
-statusword_offset = 0
-"#,
-            sim.socket.display()
-        );
+        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+        let config = ecmxf_e2e::config(&link, ecmxf_e2e::TI_AXIS);
         let mut d = Daemon::with_config(&config);
         let ch = d.connect().await;
         let mut diag = DiagnosticsClient::new(ch.clone());

@@ -219,22 +219,8 @@ fn layout_streams_leases_and_outputs() {
 #[test]
 fn a_lost_lease_applies_the_safe_action() {
     run(async {
-        let config = r#"
-version = 1
-[link]
-backend = "sim"
-[realtime]
-priority = 0
-lock_memory = false
-[cycle]
-fifo_rx_depth = 255
-fifo_tx_depth = 40
-fifo_low = 128
-fifo_high = 240
-[outputs]
-on_last_writer_gone = "zero"
-"#;
-        let mut d = Daemon::with_config(config);
+        let config = ecmxf_e2e::config("backend = \"sim\"", "[outputs]\non_last_writer_gone = \"zero\"\n");
+        let mut d = Daemon::with_config(&config);
         let ch = d.connect().await;
         let mut pd = ProcessDataClient::new(ch.clone());
         let image = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();

@@ -69,19 +69,8 @@ fn roles_tokens_tls_and_client_certificates() {
             write("ca.pem", ca.pem()),
         );
         let port = free_port();
-        let config = format!(
+        let api = format!(
             r#"
-version = 1
-[link]
-backend = "sim"
-[realtime]
-priority = 0
-lock_memory = false
-[cycle]
-fifo_rx_depth = 255
-fifo_tx_depth = 40
-fifo_low = 128
-fifo_high = 240
 [api]
 socket_mode = 0o600
 tcp = "127.0.0.1:{port}"
@@ -105,7 +94,7 @@ role = "admin"
             op = sha(b"operator-secret"),
             robot = sha(client.der()),
         );
-        let mut d = Daemon::with_config(&config);
+        let mut d = Daemon::with_config(&ecmxf_e2e::config("backend = \"sim\"", &api));
         let unix = d.connect().await;
         let mode = std::fs::metadata(&d.socket).unwrap().permissions().mode() & 0o777;
         assert_eq!(mode, 0o600, "socket mode from api.socket_mode");
