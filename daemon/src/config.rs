@@ -233,6 +233,10 @@ pub struct SlaveConfig {
     pub dc_assign_activate: Option<u16>,
     /// This slave's SYNC0 shift in ns when it differs from `cycle.shift_ns`.
     pub dc_shift_ns: Option<i32>,
+    /// The slave's ESI file: its object dictionary is what the API lists
+    /// (`Sdo.ListObjects`) instead of probing standard objects.
+    #[serde(default)]
+    pub esi: Option<PathBuf>,
 }
 
 /// One PDO of an assignment.
@@ -358,6 +362,11 @@ impl Config {
             _ => {}
         }
         c.api.resolve_paths(base);
+        for s in &mut c.slaves {
+            if let Some(p) = &mut s.esi {
+                resolve(p);
+            }
+        }
         Ok(c)
     }
 

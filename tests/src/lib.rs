@@ -20,8 +20,10 @@ pub fn repo() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().unwrap_or(Path::new("..")).to_path_buf()
 }
 
-/// The `ecmxfd` binary of this build (built first when missing, e.g. when
-/// only this package's tests are run).
+/// The `ecmxfd` binary of this build. `cargo test --workspace` builds it
+/// (fresh) before any test runs; `cargo test -p ecmxf-e2e` alone does not
+/// rebuild another package's binary, so run `cargo build -p ecmxfd` first
+/// there (a missing binary is built here, a stale one is not noticed).
 pub fn daemon_binary() -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
     // target/<profile>/deps/<test> or target/<profile>/<bin> -> target/<profile>/ecmxfd

@@ -178,3 +178,45 @@ fn sii_read_write_with_backup_and_decode() {
         assert_eq!(u32::from_le_bytes(r.data[0..4].try_into().unwrap()), 0x59D);
     });
 }
+
+/// With `[[slave]] esi = ...` the object listing comes from the slave's ESI
+/// (here the real SOES sample from ../shared/fixtures, simulated from the
+/// same file). Skipped without the fixtures unless ECMXF_REQUIRE_FIXTURES.
+#[test]
+fn object_listing_from_an_esi_file() {
+    let esi = ecmxf_e2e::repo().join("../shared/fixtures/esi_soes_lan9252_evb9252_dig.xml");
+    if !esi.exists() {
+        assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", esi.display());
+        eprintln!("skipped: {} missing", esi.display());
+        return;
+    }
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("esi");
+        let network = dir.join("net.toml");
+        std::fs::write(&network, format!("version = 1\n[[slave]]\nesi = \"{}\"\nproduct_code = 1234\n", esi.display()))
+            .unwrap();
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
+        let extra = format!("[[slave]]\nesi = \"{}\"\n", esi.display());
+        let mut d = Daemon::with_config(&ecmxf_e2e::config(&link, &extra));
+        let ch = d.connect().await;
+        let mut sdo = SdoClient::new(ch);
+        let list = sdo.list_objects(pb::ListObjectsRequest { slave: 0 }).await.unwrap().into_inner();
+        assert_eq!(list.source, pb::DictionarySource::Esi as i32);
+        let identity = list.entries.iter().find(|e| e.index == 0x1018 && e.subindex == 1).expect("0x1018:01 listed");
+        assert_eq!(identity.data_type, pb::DataType::Unsigned32 as i32);
+        assert_eq!(identity.access, "ro");
+        let param = list.entries.iter().find(|e| e.index == 0x8000 && e.subindex == 1).expect("0x8000:01 listed");
+        assert_eq!((param.name.as_str(), param.access.as_str()), ("Parameters.Multiplier", "rw"));
+        let name = list.entries.iter().find(|e| e.index == 0x1009).expect("0x1009 listed");
+        assert_eq!(name.bit_length, 8 * name.value.len() as u32, "a string's size is its value's");
+        // What the ESI lists, the slave answers.
+        let r = sdo
+            .upload(pb::SdoUploadRequest { slave: 0, index: 0x1018, subindex: 2, complete_access: false, data_type: 0 })
+            .await
+            .unwrap()
+            .into_inner();
+        assert_eq!(r.value.unwrap().kind, Some(Kind::Unsigned(1234)));
+        drop(d);
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}

@@ -65,6 +65,12 @@ impl SdoApi for SdoService {
         if usize::from(s) >= self.0.master.layout().slaves.len() {
             return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
         }
+        let esi = self.0.master.config().slaves.get(usize::from(s)).and_then(|c| c.esi.clone());
+        if let Some(path) = esi {
+            let found = &self.0.master.layout().slaves[usize::from(s)];
+            let entries = esi_objects(&path, found.vendor_id, found.product_code, found.revision)?;
+            return Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Esi as i32, entries }));
+        }
         let entries = bounded(&caller, probe(&self.0.master, s)).await?;
         Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Probe as i32, entries }))
     }
@@ -149,6 +155,55 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
                 let name = if axis == 0 { k.name.to_string() } else { format!("axis{axis}.{}", k.name) };
                 out.push(entry(i, 0, name, k.data_type, bits, k.access, v));
             }
+        }
+    }
+    Ok(out)
+}
+
+/// The object dictionary of the device in an ESI file that matches the
+/// slave found (vendor, product code, revision when the file has it).
+fn esi_objects(
+    path: &std::path::Path,
+    vendor: u32,
+    product: u32,
+    revision: u32,
+) -> Result<Vec<pb::ObjectEntry>, Status> {
+    use ecmxf_sim::net::esi::EsiFile;
+    let fail = |why: String| Status::failed_precondition(format!("ESI {}: {why}", path.display()));
+    let xml = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
+    let file = EsiFile::parse(&xml).map_err(|e| fail(e.to_string()))?;
+    if file.vendor_id != vendor {
+        return Err(fail(format!("vendor {:#010x}, the slave's is {vendor:#010x}", file.vendor_id)));
+    }
+    let device = file
+        .device(product, Some(revision))
+        .or_else(|_| file.device(product, None))
+        .map_err(|e| fail(e.to_string()))?;
+    let mut out = Vec::new();
+    for (index, object) in device.dictionary.objects() {
+        for (sub, e) in &object.entries {
+            let read = e.access.read.preop || e.access.read.safeop || e.access.read.op;
+            let write = e.access.write.preop || e.access.write.safeop || e.access.write.op;
+            let access = match (read, write) {
+                (true, true) => "rw",
+                (true, false) => "ro",
+                (false, true) => "wo",
+                (false, false) => "",
+            };
+            let name =
+                if object.entries.len() == 1 { object.name.clone() } else { format!("{}.{}", object.name, e.name) };
+            out.push(pb::ObjectEntry {
+                index: index.into(),
+                subindex: (*sub).into(),
+                name,
+                data_type: pb::DataType::try_from(i32::from(e.dtype.code())).unwrap_or(pb::DataType::OctetString)
+                    as i32,
+                // Strings have no fixed size: their default value's.
+                bit_length: if e.dtype.bits() == 0 { e.value.len() as u32 * 8 } else { e.dtype.bits() },
+                access: access.into(),
+                pdo_mappable: e.mappable != ecmxf_sim::net::od::Mappable::No,
+                value: e.value.clone(),
+            });
         }
     }
     Ok(out)
