@@ -69,6 +69,19 @@ class ApiFromPython(unittest.TestCase):
             stdout=subprocess.DEVNULL,
             stderr=cls.log,
         )
+        try:
+            cls.wait_running()
+        except BaseException:
+            # tearDownClass does not run when setUpClass fails: never leave
+            # a daemon behind.
+            cls.daemon.kill()
+            cls.daemon.wait()
+            cls.log.close()
+            cls.tmp.cleanup()
+            raise
+
+    @classmethod
+    def wait_running(cls):
         import grpc
         from ecmxf.v1 import master_pb2, master_pb2_grpc
 
