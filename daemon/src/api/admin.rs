@@ -10,7 +10,7 @@ use ecmxf_proto::v1::registers_server::Registers as RegistersApi;
 use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead};
 use tonic::{Request, Response, Status};
 
-use super::auth::Role;
+use super::auth::{Caller, Role};
 use super::bounded;
 use super::convert::slave;
 use super::status::bad_argument;
@@ -118,15 +118,8 @@ fn u16_field(v: u32, field: &'static str) -> Result<u16, Status> {
 }
 
 impl RegistersService {
-    async fn send<T>(
-        &self,
-        request: &Request<T>,
-        head: DatagramHead,
-        data: Vec<u8>,
-    ) -> Result<pb::DatagramResponse, Status> {
-        let caller = self.0.authorize(request, Role::Admin)?;
-        let t = deadline(request);
-        let a = bounded(&caller, self.0.master.raw_datagram(head, data, t)).await?;
+    async fn send(&self, caller: &Caller, head: DatagramHead, data: Vec<u8>) -> Result<pb::DatagramResponse, Status> {
+        let a = bounded(caller, self.0.master.raw_datagram(head, data, caller.deadline)).await?;
         Ok(pb::DatagramResponse { working_counter: a.working_counter.into(), data: a.data })
     }
 }
@@ -139,7 +132,8 @@ fn head(command: DatagramCommand, adp: u16, ado: u16, length: usize) -> Result<D
 #[tonic::async_trait]
 impl RegistersApi for RegistersService {
     async fn datagram(&self, request: Request<pb::DatagramRequest>) -> Result<Response<pb::DatagramResponse>, Status> {
-        let r = request.get_ref().clone();
+        let caller = self.0.authorize(&request, Role::Admin)?;
+        let r = request.into_inner();
         let command = match DatagramCommand::from_u8(u8::try_from(r.command).unwrap_or(0xFF)) {
             DatagramCommand::Other(c) => {
                 return Err(bad_argument("command", format!("{c} is not a datagram command the chip sends")));
@@ -154,13 +148,14 @@ impl RegistersApi for RegistersService {
             h.logical = (u32::from(adp) << 16) | u32::from(ado);
         }
         let data = if command.writes() { r.data } else { Vec::new() };
-        Ok(Response::new(self.send(&request, h, data).await?))
+        Ok(Response::new(self.send(&caller, h, data).await?))
     }
 
     async fn read_registers(
         &self,
         request: Request<pb::ReadRegistersRequest>,
     ) -> Result<Response<pb::DatagramResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Admin)?;
         let r = request.get_ref();
         let s = slave(r.slave)?;
         if r.length == 0 {
@@ -172,13 +167,14 @@ impl RegistersApi for RegistersService {
             u16_field(r.address, "address")?,
             r.length as usize,
         )?;
-        Ok(Response::new(self.send(&request, h, Vec::new()).await?))
+        Ok(Response::new(self.send(&caller, h, Vec::new()).await?))
     }
 
     async fn write_registers(
         &self,
         request: Request<pb::WriteRegistersRequest>,
     ) -> Result<Response<pb::DatagramResponse>, Status> {
+        let caller = self.0.authorize(&request, Role::Admin)?;
         let r = request.get_ref();
         let s = slave(r.slave)?;
         if r.data.is_empty() {
@@ -187,6 +183,6 @@ impl RegistersApi for RegistersService {
         let h =
             head(DatagramCommand::Apwr, 0u16.wrapping_sub(s.into()), u16_field(r.address, "address")?, r.data.len())?;
         let data = r.data.clone();
-        Ok(Response::new(self.send(&request, h, data).await?))
+        Ok(Response::new(self.send(&caller, h, data).await?))
     }
 }
