@@ -26,6 +26,7 @@ network = "{repo}/config/demo-network.toml"
 [realtime]
 priority = 0
 lock_memory = false
+spin_us = 0
 [cycle]
 fifo_rx_depth = 255
 fifo_tx_depth = 40
