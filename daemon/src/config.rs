@@ -189,6 +189,17 @@ pub struct CycleConfig {
     pub target_state: String,
 }
 
+impl CycleConfig {
+    /// `target_state` as a state (validated to be preop, safeop or op).
+    pub fn target(&self) -> ecmxf_wire::EcatState {
+        match self.target_state.as_str() {
+            "preop" => ecmxf_wire::EcatState::PreOp,
+            "safeop" => ecmxf_wire::EcatState::SafeOp,
+            _ => ecmxf_wire::EcatState::Op,
+        }
+    }
+}
+
 impl Default for CycleConfig {
     fn default() -> Self {
         Self {

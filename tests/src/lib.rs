@@ -70,6 +70,25 @@ pub fn config(link: &str, extra: &str) -> String {
 /// The `[[axis]]` of the TI-like drive's first axis, as the tests use it.
 pub const TI_AXIS: &str = "[[axis]]\nslave = 1\ncontrolword_offset = 0\nstatusword_offset = 0\n";
 
+/// `msg` with `authorization: Bearer <token>`.
+pub fn with_token<T>(msg: T, token: &str) -> tonic::Request<T> {
+    let mut r = tonic::Request::new(msg);
+    r.metadata_mut().insert("authorization", format!("Bearer {token}").parse().expect("ASCII token"));
+    r
+}
+
+/// A harmless SDO write (the TI drive's quick stop option code := 2).
+pub fn sdo_write() -> pb::SdoDownloadRequest {
+    pb::SdoDownloadRequest {
+        slave: 1,
+        index: 0x605A,
+        subindex: 0,
+        complete_access: false,
+        data_type: 0,
+        value: Some(pb::Value { kind: Some(pb::value::Kind::Integer(2)) }),
+    }
+}
+
 /// A fresh temporary folder.
 pub fn temp_dir(tag: &str) -> PathBuf {
     static N: std::sync::atomic::AtomicU32 = std::sync::atomic::AtomicU32::new(0);

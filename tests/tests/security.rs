@@ -4,7 +4,7 @@
 
 use std::os::unix::fs::PermissionsExt;
 
-use ecmxf_e2e::{Daemon, run};
+use ecmxf_e2e::{Daemon, run, sdo_write, with_token};
 use ecmxf_proto::v1 as pb;
 use pb::master_client::MasterClient;
 use pb::registers_client::RegistersClient;
@@ -20,23 +20,6 @@ fn sha(b: &[u8]) -> String {
 
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
-}
-
-fn with_token<T>(msg: T, token: &str) -> tonic::Request<T> {
-    let mut r = tonic::Request::new(msg);
-    r.metadata_mut().insert("authorization", format!("Bearer {token}").parse().unwrap());
-    r
-}
-
-fn sdo_write() -> pb::SdoDownloadRequest {
-    pb::SdoDownloadRequest {
-        slave: 1,
-        index: 0x605A,
-        subindex: 0,
-        complete_access: false,
-        data_type: 0,
-        value: Some(pb::Value { kind: Some(pb::value::Kind::Integer(2)) }),
-    }
 }
 
 fn reg_read() -> pb::ReadRegistersRequest {

@@ -14,7 +14,7 @@ use super::auth::{Caller, Role};
 use super::bounded;
 use super::convert::slave;
 use super::status::bad_argument;
-use super::{BoxStream, Context, deadline};
+use super::{BoxStream, Context};
 use crate::engine::job::TransferProgress;
 
 /// FoE transfers may take long: the default deadline when the client sets none.
@@ -76,7 +76,7 @@ impl FoeApi for FoeService {
 
     async fn write(&self, request: Request<pb::FoeWriteRequest>) -> Result<Response<ProgressStream>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
-        let t = deadline(&request).unwrap_or(FOE_TIMEOUT);
+        let t = caller.deadline.unwrap_or(FOE_TIMEOUT);
         let r = request.into_inner();
         let s = slave(r.slave)?;
         tracing::warn!(who = %caller.who, slave = s, name = %r.name, bytes = r.data.len(), "FoE write");
@@ -93,7 +93,7 @@ impl FoeApi for FoeService {
 
     async fn read(&self, request: Request<pb::FoeReadRequest>) -> Result<Response<ProgressStream>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
-        let t = deadline(&request).unwrap_or(FOE_TIMEOUT);
+        let t = caller.deadline.unwrap_or(FOE_TIMEOUT);
         let r = request.into_inner();
         let s = slave(r.slave)?;
         if r.max_bytes == 0 {

@@ -16,7 +16,7 @@ use super::convert::decode_value;
 use super::image::{Image, entry_value};
 use super::objects::axis_index;
 use super::status::{bad_argument, to_status};
-use super::{Context, deadline, wait_budget};
+use super::{Context, wait_budget};
 use crate::config::AxisConfig;
 use crate::engine::error::EngineError;
 use crate::master::Master;
@@ -183,7 +183,7 @@ impl Cia402Api for Cia402Service {
     async fn get_axis(&self, request: Request<pb::GetAxisRequest>) -> Result<Response<pb::AxisStatus>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let (axis, a) = self.axis(request.get_ref().axis)?;
-        let t = deadline(&request);
+        let t = caller.deadline;
         Ok(Response::new(bounded(&caller, self.status(axis, &a, t)).await?))
     }
 
@@ -251,7 +251,7 @@ impl Cia402Api for Cia402Service {
         let (axis, a) = self.axis(r.axis)?;
         let mode =
             i8::try_from(r.mode).map_err(|_| bad_argument("mode", format!("{} is outside -128..=127", r.mode)))?;
-        let t = deadline(&request);
+        let t = caller.deadline;
         let status = bounded(&caller, async {
             self.write_object(&a, 0x6060, mode.into(), &r.lease_id, t).await?;
             // The drive takes the mode over within a few cycles.
@@ -287,7 +287,7 @@ impl Cia402Api for Cia402Service {
             Some(pb::set_target_request::Target::Torque(v)) => (0x6071, v),
             None => return Err(bad_argument("target", "give a position, velocity or torque")),
         };
-        let t = deadline(&request);
+        let t = caller.deadline;
         let via_process_image = bounded(&caller, self.write_object(&a, base, value, &r.lease_id, t)).await?;
         Ok(Response::new(pb::SetTargetResponse { via_process_image }))
     }

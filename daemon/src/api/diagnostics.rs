@@ -15,7 +15,7 @@ use super::bounded;
 use super::convert::{phase_to_pb, state_to_pb};
 use super::master::{counters_pb, list_slaves};
 use super::status::{bad_argument, to_status};
-use super::{BoxStream, Context, deadline};
+use super::{BoxStream, Context};
 use crate::engine::events::{Event, EventKind};
 use crate::master::Master;
 use crate::master::transactions::Immediate;
@@ -166,7 +166,7 @@ impl DiagnosticsApi for DiagnosticsService {
             c @ 1..=8 => c as u8,
             c => return Err(bad_argument("count", format!("{c} records; the chip keeps 1..=8"))),
         };
-        let t = deadline(&request);
+        let t = caller.deadline;
         let records = bounded(&caller, emergencies(&self.0.master, n, t)).await?;
         Ok(Response::new(pb::GetEmergenciesResponse { emergencies: records.iter().map(emergency_pb).collect() }))
     }

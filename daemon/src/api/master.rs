@@ -17,7 +17,7 @@ use super::auth::Role;
 use super::bounded;
 use super::convert::{phase_to_pb, slave, state_from_pb, state_to_pb};
 use super::status::to_status;
-use super::{Context, deadline, wait_budget};
+use super::{Context, wait_budget};
 use crate::config::SlaveConfig;
 use crate::master::Master;
 
@@ -66,14 +66,6 @@ pub fn counters_pb(m: &Master) -> pb::Counters {
     }
 }
 
-fn target_state(name: &str) -> pb::EcatState {
-    match name {
-        "preop" => pb::EcatState::PreOp,
-        "safeop" => pb::EcatState::SafeOp,
-        _ => pb::EcatState::Op,
-    }
-}
-
 #[tonic::async_trait]
 impl MasterApi for MasterService {
     async fn get_info(&self, request: Request<pb::GetInfoRequest>) -> Result<Response<pb::MasterInfo>, Status> {
@@ -93,7 +85,7 @@ impl MasterApi for MasterService {
             output_image_bytes: layout.rx_size as u32,
             input_image_bytes: layout.tx_size as u32,
             slave_count: layout.slaves.len() as u32,
-            target_state: target_state(&config.cycle.target_state) as i32,
+            target_state: state_to_pb(config.cycle.target()) as i32,
             config_generation: m.status().config_generation,
             daemon_version: env!("CARGO_PKG_VERSION").into(),
         }))
@@ -107,7 +99,7 @@ impl MasterApi for MasterService {
     async fn reinit(&self, request: Request<pb::ReinitRequest>) -> Result<Response<pb::ReinitResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         tracing::info!(who = %caller.who, "re-init requested");
-        let t = deadline(&request).or(Some(Duration::from_secs(30)));
+        let t = caller.deadline.or(Some(Duration::from_secs(30)));
         bounded(&caller, self.0.master.reinit(t)).await?;
         Ok(Response::new(pb::ReinitResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
@@ -118,7 +110,7 @@ impl MasterApi for MasterService {
     ) -> Result<Response<pb::WarmResetResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         tracing::info!(who = %caller.who, "warm reset requested");
-        let t = deadline(&request).or(Some(Duration::from_secs(30)));
+        let t = caller.deadline.or(Some(Duration::from_secs(30)));
         bounded(&caller, self.0.master.warm_reset(t)).await?;
         Ok(Response::new(pb::WarmResetResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
@@ -272,7 +264,7 @@ impl StateApi for StateService {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let m = &self.0.master;
         let target = selector(request.get_ref().slave, m.layout().slaves.len())?;
-        let t = deadline(&request);
+        let t = caller.deadline;
         let out = bounded(&caller, async {
             let state = m.get_state(target, t).await?;
             let mut slaves = Vec::new();

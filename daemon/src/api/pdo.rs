@@ -10,12 +10,12 @@ use ecmxf_wire::payload::pdo::{PdoConfig as WirePdoConfig, RX_PDO_ASSIGN, TX_PDO
 use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 
+use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::convert::{encode_value, slave};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
-use super::{Context, deadline};
 use crate::config::PdoConfig;
 
 /// The `ProcessData` service.
@@ -148,7 +148,7 @@ impl ProcessDataApi for ProcessDataService {
             }
             None => (0..count as u8).collect(),
         };
-        let t = deadline(&request);
+        let t = caller.deadline;
         let slaves = bounded(&caller, async {
             let mut out = Vec::new();
             for s in which {
@@ -186,7 +186,7 @@ impl ProcessDataApi for ProcessDataService {
         config.slaves[s].rx_pdos = rx;
         config.slaves[s].tx_pdos = tx;
         tracing::info!(who = %caller.who, slave = s, "PDO mapping change");
-        let t = deadline(&request).or(Some(Duration::from_secs(30)));
+        let t = caller.deadline.or(Some(Duration::from_secs(30)));
         if let Err(e) = bounded(&caller, m.apply_config(config, t)).await {
             // Never leave the bus down on a mapping the slave refused: go
             // back to the configuration that ran.

@@ -10,10 +10,10 @@ use ecmxf_wire::payload::gpio::{GpioConfig, GpioFunc, GpioMode, GpioPull};
 use ecmxf_wire::payload::periph::{AdcInput, AdcOp, DacOp, DacTrigger, QeiMode, QeiOp};
 use tonic::{Request, Response, Status};
 
+use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::status::{bad_argument, to_status};
-use super::{Context, deadline};
 
 use crate::master::transactions::Immediate;
 
@@ -72,7 +72,7 @@ impl PeripheralsApi for PeripheralsService {
             Ok(pb::GpioPull::Down) => GpioPull::Down,
             Err(_) => return Err(bad_argument("pull", format!("{} is not a GpioPull", r.pull))),
         };
-        let t = deadline(&request);
+        let t = caller.deadline;
         bounded(&caller, async {
             if l & 0xFFFF != 0 {
                 self.call(Immediate::GpioConfig(GpioConfig::SetMode { lines: l as u16, mode, pull }), t).await?;
@@ -90,7 +90,7 @@ impl PeripheralsApi for PeripheralsService {
     async fn set_gpio(&self, request: Request<pb::SetGpioRequest>) -> Result<Response<pb::GpioLevels>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let l = lines(request.get_ref().levels, "levels")?;
-        let t = deadline(&request);
+        let t = caller.deadline;
         let out = bounded(&caller, async {
             self.call(Immediate::Gpio(GpioFunc::ExtSetValue { values: GpioMask(l) }), t).await?;
             self.levels(t).await
@@ -101,14 +101,14 @@ impl PeripheralsApi for PeripheralsService {
 
     async fn get_gpio(&self, request: Request<pb::GetGpioRequest>) -> Result<Response<pb::GpioLevels>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let t = deadline(&request);
+        let t = caller.deadline;
         Ok(Response::new(bounded(&caller, self.levels(t)).await?))
     }
 
     async fn read_adc(&self, request: Request<pb::ReadAdcRequest>) -> Result<Response<pb::ReadAdcResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let input = if request.get_ref().differential { AdcInput::Differential } else { AdcInput::SingleEnded };
-        let t = deadline(&request);
+        let t = caller.deadline;
         let value = bounded(&caller, async {
             self.call(Immediate::Adc(AdcOp::Open(input)), t).await?;
             self.call(Immediate::Adc(AdcOp::ConfigSampleModule), t).await?;
@@ -131,7 +131,7 @@ impl PeripheralsApi for PeripheralsService {
         if v > 4095 {
             return Err(bad_argument("value", format!("{v} is outside 0..=4095")));
         }
-        let t = deadline(&request);
+        let t = caller.deadline;
         bounded(&caller, async {
             self.call(Immediate::Dac(DacOp::Open(DacTrigger::OnSetData)), t).await?;
             self.call(Immediate::Dac(DacOp::SetData(v as u16)), t).await
@@ -145,7 +145,7 @@ impl PeripheralsApi for PeripheralsService {
             .map_err(|_| bad_argument("action", format!("{} is not a QeiAction", request.get_ref().action)))?;
         let role = if action == pb::QeiAction::Read { Role::Observer } else { Role::Operator };
         let caller = self.0.authorize(&request, role)?;
-        let t = deadline(&request);
+        let t = caller.deadline;
         let count = bounded(&caller, async {
             match action {
                 pb::QeiAction::Start => {

@@ -6,12 +6,12 @@ use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::sdo_server::Sdo as SdoApi;
 use tonic::{Request, Response, Status};
 
+use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::convert::{data_type, decode_value, encode_value, index, slave, subindex};
 use super::objects::{KNOWN, axis_index, lookup};
 use super::status::to_status;
-use super::{Context, deadline};
 use crate::engine::error::EngineError;
 use crate::master::Master;
 
@@ -34,7 +34,7 @@ impl SdoApi for SdoService {
         let r = request.get_ref();
         let (s, i, sub) = (slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
         let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
-        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, deadline(&request))).await?;
+        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await?;
         let value = decode_value(t, &raw)
             .map_err(|e| Status::invalid_argument(format!("data_type: object {i:#06x}:{sub:02x} of slave {s}: {e}")))?;
         Ok(Response::new(pb::SdoUploadResponse { raw, value, data_type: t as i32 }))
@@ -52,7 +52,7 @@ impl SdoApi for SdoService {
         let bytes = encode_value(t, value)?;
         let n = bytes.len() as u32;
         tracing::debug!(who = %caller.who, slave = s, object = format_args!("{i:#06x}:{sub:02x}"), "SDO download");
-        bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, deadline(&request))).await?;
+        bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, caller.deadline)).await?;
         Ok(Response::new(pb::SdoDownloadResponse { bytes_written: n }))
     }
 

@@ -30,7 +30,6 @@ use super::sdo::SdoService;
 use super::sii::SiiService;
 use crate::engine::telemetry::Phase;
 use crate::master::Master;
-use ecmxf_wire::EcatState;
 
 /// Why the API could not be served.
 #[derive(Debug)]
@@ -155,12 +154,7 @@ async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
     loop {
         tick.tick().await;
         let s = master.status();
-        let target = match master.config().cycle.target_state.as_str() {
-            "preop" => EcatState::PreOp,
-            "safeop" => EcatState::SafeOp,
-            _ => EcatState::Op,
-        };
-        let serving = s.phase == Phase::Running && s.ecat_state == target;
+        let serving = s.phase == Phase::Running && s.ecat_state == master.config().cycle.target();
         if last != Some(serving) {
             last = Some(serving);
             let status = if serving { ServingStatus::Serving } else { ServingStatus::NotServing };

@@ -8,11 +8,11 @@ use ecmxf_proto::v1::sii_server::Sii as SiiApi;
 use ecmxf_sim::net::sii::{MailboxArea, PdoRecord, Sii};
 use tonic::{Request, Response, Status};
 
+use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::convert::slave;
 use super::status::{bad_argument, to_status};
-use super::{Context, deadline};
 use crate::master::Master;
 
 /// Most words one Read or Write moves.
@@ -91,7 +91,7 @@ impl SiiApi for SiiService {
         if r.count == 0 || r.count > MAX_WORDS {
             return Err(bad_argument("count", format!("{} words; read 1..={MAX_WORDS} at a time", r.count)));
         }
-        let words = bounded(&caller, self.0.master.eeprom_read_words(s, w, r.count as u16, deadline(&request))).await?;
+        let words = bounded(&caller, self.0.master.eeprom_read_words(s, w, r.count as u16, caller.deadline)).await?;
         Ok(Response::new(pb::SiiReadResponse { data: bytes_of(&words) }))
     }
 
@@ -108,7 +108,7 @@ impl SiiApi for SiiService {
         let values: Vec<u16> = r.data.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect();
         tracing::warn!(who = %caller.who, slave = s, word = w, words = values.len(), "SII write");
         let m = &self.0.master;
-        let t = deadline(&request);
+        let t = caller.deadline;
         let backup = bounded(&caller, async {
             let backup = m.eeprom_read_words(s, w, values.len() as u16, t).await?;
             m.eeprom_write_words(s, w, &values, t).await.map_err(to_status)?;

@@ -43,15 +43,6 @@ const CENSUS: Duration = Duration::from_secs(1);
 const POLL: Duration = Duration::from_micros(100);
 
 impl<L: Link> Engine<L> {
-    /// The state bring-up drives the network to.
-    fn target_state(&self) -> EcatState {
-        match self.config.cycle.target_state.as_str() {
-            "preop" => EcatState::PreOp,
-            "safeop" => EcatState::SafeOp,
-            _ => EcatState::Op,
-        }
-    }
-
     fn check_health(&self, h: &ResponseHeader) -> Result<(), String> {
         if h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) {
             return Err("chip reset (status back to power-up values)".into());
@@ -282,7 +273,7 @@ impl<L: Link> Engine<L> {
         if self.active.is_none() {
             while let Some(j) = self.queue.pop() {
                 if let Request::SetState { state, .. } = &j.request {
-                    self.held_below_target = state.to_u8() < self.target_state().to_u8();
+                    self.held_below_target = state.to_u8() < self.config.cycle.target().to_u8();
                 }
                 if let Some(a) = Active::new(j) {
                     self.active = Some(a);
