@@ -119,6 +119,18 @@ fn layout_streams_leases_and_outputs() {
         }
         drop(stream);
 
+        // ReadOutputs: the written entry reads back; inputs and unknown names are refused.
+        let outs =
+            pd.read_outputs(pb::ReadOutputsRequest { entries: vec![out0.name.clone()] }).await.unwrap().into_inner();
+        assert_eq!(outs.image.len() as u32, image.output_bytes);
+        assert_eq!(outs.values[0].name, out0.name);
+        assert_eq!(outs.values[0].value.as_ref().and_then(|v| v.kind.clone()), Some(want.clone()));
+        for bad in [in0.name.clone(), "no.such".to_string()] {
+            let e = pd.read_outputs(pb::ReadOutputsRequest { entries: vec![bad.clone()] }).await.unwrap_err();
+            assert_eq!(e.code(), Code::InvalidArgument, "{bad}: {e:?}");
+            assert!(e.message().contains(&bad), "{}", e.message());
+        }
+
         // Whole-image stream, decimated: every 10th frame.
         let mut stream = pd
             .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 10, on_change: false })

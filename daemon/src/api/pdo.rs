@@ -203,6 +203,29 @@ impl ProcessDataApi for ProcessDataService {
         Ok(Response::new(pb::SetMappingResponse { image: Some(image.to_pb()) }))
     }
 
+    async fn read_outputs(
+        &self,
+        request: Request<pb::ReadOutputsRequest>,
+    ) -> Result<Response<pb::OutputImage>, Status> {
+        let caller = self.0.authorize(&request, Role::Observer)?;
+        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        let mut selected: Vec<&Entry> = Vec::with_capacity(request.get_ref().entries.len());
+        for name in &request.get_ref().entries {
+            let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;
+            if !e.output {
+                return Err(bad_argument("entries", format!("{name:?} is an input (see StreamInputs)")));
+            }
+            selected.push(e);
+        }
+        let mut bytes = self.0.shadow.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        bytes.resize(image.output_bytes as usize, 0);
+        let values = selected
+            .into_iter()
+            .map(|e| pb::EntryValue { name: e.name.clone(), value: Some(super::image::entry_value(e, &bytes)) })
+            .collect();
+        Ok(Response::new(pb::OutputImage { image: bytes, values }))
+    }
+
     async fn get_layout(&self, request: Request<pb::GetLayoutRequest>) -> Result<Response<pb::ProcessImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
