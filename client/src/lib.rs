@@ -1,4 +1,152 @@
-//! `ecmxfctl`: command-line diagnostics over the ecmxf gRPC API.
+//! `ecmxfctl`: command-line diagnostics for ecmxfd, a thin client of the
+//! `ecmxf.v1` gRPC API.
 //!
-//! Not built yet (issue #6). Nothing here pretends to work: the crate exists
-//! so the workspace layout is in place.
+//! - [`cli`]: the command line (clap), source of completions and man pages.
+//! - [`connect`]: Unix socket or TCP+TLS, token or client certificate.
+//! - [`commands`]: one module per command, each with its report types.
+//! - [`top`]: the live terminal view.
+//! - [`output`]: tables or JSON from the same report value.
+//! - [`schema`]: the JSON schemas of every report.
+//! - [`values`]: names and number formats shared by all commands.
+//! - [`error`]: errors, messages and exit codes.
+
+pub mod cli;
+pub mod commands;
+pub mod connect;
+pub mod error;
+pub mod output;
+pub mod schema;
+pub mod top;
+pub mod values;
+
+use clap::CommandFactory;
+use schemars::JsonSchema;
+use serde::Serialize;
+
+use cli::{Cli, Command};
+use commands::{cia402, data, diag, foe, master, pdo, peripherals, reg, sdo, sii, slaves, states};
+use error::CliError;
+use output::Out;
+
+/// What `--json` prints on standard error when a command fails.
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct ErrorReport {
+    pub error: ErrorBody,
+}
+
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct ErrorBody {
+    /// gRPC code name (PERMISSION_DENIED, ABORTED, ...) or a local kind:
+    /// UNREACHABLE, USAGE, FILE, OUTPUT, UNHEALTHY.
+    pub kind: String,
+    /// The message ecmxfctl prints without --json.
+    pub message: String,
+    /// The process's exit code.
+    pub exit_code: u8,
+    /// The daemon's error details (e.g. abort_code, meaning, field).
+    pub details: std::collections::BTreeMap<String, String>,
+    /// What to try next, if there is an obvious step.
+    pub hint: Option<String>,
+}
+
+impl ErrorReport {
+    /// The report for `e`.
+    pub fn of(e: &CliError) -> Self {
+        Self {
+            error: ErrorBody {
+                kind: e.kind(),
+                message: e.to_string(),
+                exit_code: e.exit_code(),
+                details: e.details().into_iter().collect(),
+                hint: e.hint().map(str::to_owned),
+            },
+        }
+    }
+}
+
+/// Runs a parsed command line.
+pub async fn run(cli: Cli) -> Result<(), CliError> {
+    let out = Out { json: cli.json };
+    // Commands that need no daemon.
+    match &cli.command {
+        Command::Completions { shell } => {
+            clap_complete::generate(*shell, &mut Cli::command(), "ecmxfctl", &mut std::io::stdout());
+            return Ok(());
+        }
+        Command::Man { dir } => return write_man_pages(dir),
+        Command::JsonSchema { command } => {
+            let doc = schema::document();
+            let v = if command.is_empty() {
+                doc
+            } else {
+                let name = command.join(" ");
+                doc["commands"].get(&name).cloned().ok_or_else(|| {
+                    let names: Vec<&str> = schema::all().iter().map(|(n, _)| *n).collect();
+                    CliError::Usage(format!("no schema for {name:?}; commands: {}", names.join(", ")))
+                })?
+            };
+            println!("{}", serde_json::to_string_pretty(&v).map_err(std::io::Error::other)?);
+            return Ok(());
+        }
+        _ => {}
+    }
+    let api = connect::connect(&cli.connect, cli.timeout).await?;
+    match &cli.command {
+        Command::Master => out.report(&master::fetch(&api).await?)?,
+        Command::Slaves { position, verbose, scan } => {
+            let mut r = slaves::fetch(&api, *position, *scan).await?;
+            r.verbose = *verbose;
+            out.report(&r)?;
+        }
+        Command::States { args, no_wait } => out.report(&states::run(&api, args, *no_wait).await?)?,
+        Command::Upload(u) => out.report(&sdo::upload(&api, u).await?)?,
+        Command::Download(d) => out.report(&sdo::download(&api, d).await?)?,
+        Command::Sdos { slave } => out.report(&sdo::sdos(&api, slave.position).await?)?,
+        Command::Sii(c) => sii::run(&api, out, c).await?,
+        Command::Pdos { position } => out.report(&pdo::fetch(&api, *position).await?)?,
+        Command::Data { entries, raw } => out.report(&data::data(&api, entries, *raw).await?)?,
+        Command::Watch(w) => data::watch(&api, out, w).await?,
+        Command::Cia402(c) => cia402::run(&api, out, c).await?,
+        Command::Gpio(c) => peripherals::gpio(&api, out, c).await?,
+        Command::Adc { differential } => out.report(&peripherals::adc(&api, *differential).await?)?,
+        Command::Dac { value } => out.report(&peripherals::dac(&api, *value).await?)?,
+        Command::Qei { action } => out.report(&peripherals::qei(&api, *action).await?)?,
+        Command::Foe(c) => foe::run(&api, out, c).await?,
+        Command::Reg(c) => reg::run(&api, out, c).await?,
+        Command::Emergencies { count } => out.report(&diag::emergencies(&api, *count).await?)?,
+        Command::Events { count, duration } => diag::events(&api, out, *count, *duration).await?,
+        Command::Diag => {
+            let r = diag::diag(&api).await?;
+            out.report(&r)?;
+            if !r.healthy {
+                return Err(CliError::Unhealthy(format!("{} problem(s) found", r.problems.len())));
+            }
+        }
+        Command::Top(t) => top::run(&api, out, t).await?,
+        Command::Completions { .. } | Command::Man { .. } | Command::JsonSchema { .. } => {}
+    }
+    Ok(())
+}
+
+fn write_man_pages(dir: &std::path::Path) -> Result<(), CliError> {
+    let file_err = |path: std::path::PathBuf| move |error| CliError::File { path, error };
+    std::fs::create_dir_all(dir).map_err(file_err(dir.to_owned()))?;
+    let cmd = Cli::command();
+    let mut written = Vec::new();
+    let mut page = |c: &clap::Command, name: String| -> Result<(), CliError> {
+        let path = dir.join(format!("{name}.1"));
+        let mut buf = Vec::new();
+        clap_mangen::Man::new(c.clone().name(name.clone())).render(&mut buf).map_err(CliError::Output)?;
+        std::fs::write(&path, buf).map_err(file_err(path.clone()))?;
+        written.push(path);
+        Ok(())
+    };
+    page(&cmd, "ecmxfctl".into())?;
+    for sub in cmd.get_subcommands().filter(|s| !s.is_hide_set()) {
+        page(sub, format!("ecmxfctl-{}", sub.get_name()))?;
+    }
+    for p in written {
+        println!("{}", p.display());
+    }
+    Ok(())
+}

@@ -25,25 +25,102 @@ pub fn repo() -> PathBuf {
 /// rebuild another package's binary, so run `cargo build -p ecmxfd` first
 /// there (a missing binary is built here, a stale one is not noticed).
 pub fn daemon_binary() -> PathBuf {
+    binary("ecmxfd", "ecmxfd")
+}
+
+/// The `ecmxfctl` binary of this build (same rules as [`daemon_binary`]).
+pub fn ctl_binary() -> PathBuf {
+    binary("ecmxfctl", "ecmxfctl")
+}
+
+fn binary(name: &str, package: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
-    // target/<profile>/deps/<test> or target/<profile>/<bin> -> target/<profile>/ecmxfd
+    // target/<profile>/deps/<test> or target/<profile>/<bin> -> target/<profile>/<name>
     let mut dir = exe.parent().expect("target directory");
     if dir.ends_with("deps") {
         dir = dir.parent().expect("target directory");
     }
-    let bin = dir.join("ecmxfd");
+    let bin = dir.join(name);
     if !bin.exists() {
         let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
         let profile: &[&str] = if cfg!(debug_assertions) { &[] } else { &["--release"] };
         let status = Command::new(cargo)
-            .args(["build", "-p", "ecmxfd", "--bin", "ecmxfd"])
+            .args(["build", "-p", package, "--bin", name])
             .args(profile)
             .current_dir(repo())
             .status()
             .expect("run cargo build");
-        assert!(status.success(), "building ecmxfd failed");
+        assert!(status.success(), "building {name} failed");
     }
     bin
+}
+
+/// What one `ecmxfctl` run did.
+#[derive(Debug)]
+pub struct Ctl {
+    /// The command line, for messages.
+    pub args: String,
+    /// Exit code (-1: killed by a signal).
+    pub code: i32,
+    pub stdout: String,
+    pub stderr: String,
+}
+
+impl Ctl {
+    /// Asserts exit code 0 and returns stdout.
+    pub fn ok(&self) -> &str {
+        assert_eq!(self.code, 0, "ecmxfctl {} failed:\n{}{}", self.args, self.stdout, self.stderr);
+        &self.stdout
+    }
+
+    /// Asserts exit code `code` and returns stderr.
+    pub fn fails(&self, code: i32) -> &str {
+        assert_eq!(self.code, code, "ecmxfctl {}: wanted exit {code}:\n{}{}", self.args, self.stdout, self.stderr);
+        &self.stderr
+    }
+
+    /// Parses stdout as one JSON value.
+    pub fn json(&self) -> serde_json::Value {
+        serde_json::from_str(self.ok())
+            .unwrap_or_else(|e| panic!("ecmxfctl {}: not JSON ({e}):\n{}", self.args, self.stdout))
+    }
+}
+
+/// Runs `ecmxfctl` with `args` (no daemon chosen: add `--socket`), with
+/// none of the user's ECMXF_* variables.
+pub fn ctl(args: &[&str]) -> Ctl {
+    let out = Command::new(ctl_binary())
+        .args(args)
+        .env_remove("ECMXF_SOCKET")
+        .env_remove("ECMXF_CONNECT")
+        .env_remove("ECMXF_TOKEN")
+        .env_remove("ECMXF_CA")
+        .stdin(Stdio::null())
+        .output()
+        .expect("run ecmxfctl");
+    Ctl {
+        args: args.join(" "),
+        code: out.status.code().unwrap_or(-1),
+        stdout: String::from_utf8_lossy(&out.stdout).into_owned(),
+        stderr: String::from_utf8_lossy(&out.stderr).into_owned(),
+    }
+}
+
+/// The published schema of `command`'s --json output
+/// (docs/ecmxfctl-json-schema.json).
+pub fn json_schema(command: &str) -> serde_json::Value {
+    let path = repo().join("docs/ecmxfctl-json-schema.json");
+    let doc: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(&path).expect("read the published schema")).expect("schema JSON");
+    doc["commands"].get(command).cloned().unwrap_or_else(|| panic!("no published schema for {command:?}"))
+}
+
+/// Asserts that `value` matches the published schema of `command`.
+pub fn assert_schema(command: &str, value: &serde_json::Value) {
+    let schema = json_schema(command);
+    let v = jsonschema::validator_for(&schema).unwrap_or_else(|e| panic!("schema of {command:?} invalid: {e}"));
+    let errors: Vec<String> = v.iter_errors(value).map(|e| format!("{} at {}", e, e.instance_path())).collect();
+    assert!(errors.is_empty(), "{command} --json does not match its schema: {errors:?}\n{value:#}");
 }
 
 /// A running daemon.
@@ -138,6 +215,14 @@ impl Daemon {
             .spawn()
             .expect("start ecmxfd");
         Self { child, socket, dir, log }
+    }
+
+    /// Runs `ecmxfctl --socket <this daemon's socket> args...`.
+    pub fn ctl(&self, args: &[&str]) -> Ctl {
+        let socket = self.socket.display().to_string();
+        let mut all = vec!["--socket", socket.as_str()];
+        all.extend_from_slice(args);
+        ctl(&all)
     }
 
     /// Its process id.

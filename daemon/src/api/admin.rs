@@ -12,7 +12,6 @@ use tonic::{Request, Response, Status};
 
 use super::auth::{Caller, Role};
 use super::bounded;
-use super::convert::slave;
 use super::status::bad_argument;
 use super::{BoxStream, Context};
 use crate::engine::job::TransferProgress;
@@ -78,7 +77,7 @@ impl FoeApi for FoeService {
         let caller = self.0.authorize(&request, Role::Admin)?;
         let t = caller.deadline.unwrap_or(FOE_TIMEOUT);
         let r = request.into_inner();
-        let s = slave(r.slave)?;
+        let s = self.0.slave(r.slave)?;
         tracing::warn!(who = %caller.who, slave = s, name = %r.name, bytes = r.data.len(), "FoE write");
         let progress = Arc::new(TransferProgress::default());
         let ctx = Arc::clone(&self.0);
@@ -95,7 +94,7 @@ impl FoeApi for FoeService {
         let caller = self.0.authorize(&request, Role::Admin)?;
         let t = caller.deadline.unwrap_or(FOE_TIMEOUT);
         let r = request.into_inner();
-        let s = slave(r.slave)?;
+        let s = self.0.slave(r.slave)?;
         if r.max_bytes == 0 {
             return Err(bad_argument("max_bytes", "0; give the largest file accepted"));
         }
@@ -157,7 +156,7 @@ impl RegistersApi for RegistersService {
     ) -> Result<Response<pb::DatagramResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         let r = request.get_ref();
-        let s = slave(r.slave)?;
+        let s = self.0.slave(r.slave)?;
         if r.length == 0 {
             return Err(bad_argument("length", "0 bytes"));
         }
@@ -176,7 +175,7 @@ impl RegistersApi for RegistersService {
     ) -> Result<Response<pb::DatagramResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         let r = request.get_ref();
-        let s = slave(r.slave)?;
+        let s = self.0.slave(r.slave)?;
         if r.data.is_empty() {
             return Err(bad_argument("data", "no bytes to write"));
         }

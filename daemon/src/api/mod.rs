@@ -75,6 +75,18 @@ impl Context {
         })
     }
 
+    /// A slave position from a request that must name a slave on the ring
+    /// (INVALID_ARGUMENT naming `slave` otherwise: the chip would only
+    /// answer "refused" for a slave that is not there).
+    pub fn slave(&self, v: u32) -> Result<u8, Status> {
+        let s = convert::slave(v)?;
+        let count = self.master.layout().slaves.len();
+        if usize::from(s) >= count {
+            return Err(status::bad_argument("slave", format!("slave {s} does not exist ({count} found)")));
+        }
+        Ok(s)
+    }
+
     /// Authorizes a call for `role`.
     pub fn authorize<T>(&self, request: &Request<T>, role: Role) -> Result<Caller, Status> {
         self.auth.authorize(request, role)

@@ -9,7 +9,7 @@ use tonic::{Request, Response, Status};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{data_type, decode_value, encode_value, index, slave, subindex};
+use super::convert::{data_type, decode_value, encode_value, index, subindex};
 use super::objects::{KNOWN, axis_index, lookup};
 use super::status::to_status;
 use crate::engine::error::EngineError;
@@ -32,7 +32,7 @@ impl SdoApi for SdoService {
     async fn upload(&self, request: Request<pb::SdoUploadRequest>) -> Result<Response<pb::SdoUploadResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.get_ref();
-        let (s, i, sub) = (slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
+        let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
         let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
         let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await?;
         let value = decode_value(t, &raw)
@@ -46,7 +46,7 @@ impl SdoApi for SdoService {
     ) -> Result<Response<pb::SdoDownloadResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let r = request.get_ref();
-        let (s, i, sub) = (slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
+        let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
         let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
         let value = r.value.as_ref().ok_or_else(|| super::status::bad_argument("value", "no value given"))?;
         let bytes = encode_value(t, value)?;
@@ -61,7 +61,7 @@ impl SdoApi for SdoService {
         request: Request<pb::ListObjectsRequest>,
     ) -> Result<Response<pb::ListObjectsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let s = slave(request.get_ref().slave)?;
+        let s = self.0.slave(request.get_ref().slave)?;
         if usize::from(s) >= self.0.master.layout().slaves.len() {
             return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
         }

@@ -11,7 +11,6 @@ use tonic::{Request, Response, Status};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::slave;
 use super::status::{bad_argument, to_status};
 use crate::master::Master;
 
@@ -87,7 +86,7 @@ impl SiiApi for SiiService {
     async fn read(&self, request: Request<pb::SiiReadRequest>) -> Result<Response<pb::SiiReadResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.get_ref();
-        let (s, w) = (slave(r.slave)?, word(r.word)?);
+        let (s, w) = (self.0.slave(r.slave)?, word(r.word)?);
         if r.count == 0 || r.count > MAX_WORDS {
             return Err(bad_argument("count", format!("{} words; read 1..={MAX_WORDS} at a time", r.count)));
         }
@@ -98,7 +97,7 @@ impl SiiApi for SiiService {
     async fn write(&self, request: Request<pb::SiiWriteRequest>) -> Result<Response<pb::SiiWriteResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         let r = request.get_ref();
-        let (s, w) = (slave(r.slave)?, word(r.word)?);
+        let (s, w) = (self.0.slave(r.slave)?, word(r.word)?);
         if r.data.is_empty() || r.data.len() % 2 != 0 || r.data.len() > 2 * MAX_WORDS as usize {
             return Err(bad_argument(
                 "data",
@@ -120,7 +119,7 @@ impl SiiApi for SiiService {
 
     async fn decode(&self, request: Request<pb::SiiDecodeRequest>) -> Result<Response<pb::SiiDecodeResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let s = slave(request.get_ref().slave)?;
+        let s = self.0.slave(request.get_ref().slave)?;
         let words = bounded(&caller, read_image(&self.0.master, s)).await?;
         let image = bytes_of(&words);
         let sii = Sii::parse(&image).map_err(|e| Status::internal(format!("slave {s}'s SII does not parse: {e}")))?;

@@ -1,0 +1,171 @@
+//! `master`: the chip and the engine (Master.GetInfo + GetStatus).
+
+use ecmxf_proto::v1 as pb;
+use schemars::JsonSchema;
+use serde::Serialize;
+
+use crate::connect::Api;
+use crate::error::CliError;
+use crate::output::{Fields, Report};
+use crate::values::{phase_name, state_name};
+
+/// `ecmxfctl master --json`.
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct MasterReport {
+    /// ecmxfd's version.
+    pub daemon_version: String,
+    /// Chip firmware version (FW_VERSION_GET).
+    pub firmware_version: u32,
+    /// SPI packet size in bytes (data section + 32).
+    pub packet_bytes: u32,
+    /// SPI check word: FIXED, CRC8, CRC16, CRC32.
+    pub check_type: String,
+    /// DC SYNC0 cycle, microseconds.
+    pub sync0_us: u32,
+    /// RxFIFO depth and feeder marks, frames.
+    pub fifo_rx_depth: u32,
+    pub fifo_low: u32,
+    pub fifo_high: u32,
+    /// Process image sizes, bytes.
+    pub output_image_bytes: u32,
+    pub input_image_bytes: u32,
+    pub slave_count: u32,
+    /// The state bring-up drives the network to.
+    pub target_state: String,
+    /// Engine phase: STARTING, BRINGING_UP, RUNNING, RECOVERING, STOPPING, STOPPED.
+    pub phase: String,
+    /// Network state: INIT, PREOP, BOOT, SAFEOP, OP, ERROR, UNKNOWN.
+    pub state: String,
+    pub link_pin: bool,
+    pub dc_stable: bool,
+    pub rx_fifo_level: u32,
+    pub tx_fifo_level: u32,
+    /// Clients holding output leases.
+    pub output_writers: u32,
+    pub config_generation: u64,
+    /// Why bring-up last failed or recovery last started ("" if never).
+    pub last_error: String,
+    pub counters: CountersReport,
+}
+
+/// Engine and chip counters (see `Counters` in proto/ecmxf/v1/master.proto).
+#[derive(Debug, Serialize, JsonSchema, Default)]
+pub struct CountersReport {
+    pub exchanges: u64,
+    pub transactions: u64,
+    pub input_frames: u64,
+    pub output_frames: u64,
+    /// The chip's own 8-bit counters.
+    pub crc_errors: u32,
+    pub wkc_errors: u32,
+    pub corrupt_answers: u64,
+    pub not_ready_answers: u64,
+    pub input_batches_lost: u64,
+    pub fifo_alarms: u64,
+    pub recoveries: u64,
+    pub max_fifo_gap_us: u64,
+}
+
+impl From<Option<pb::Counters>> for CountersReport {
+    fn from(c: Option<pb::Counters>) -> Self {
+        let c = c.unwrap_or_default();
+        Self {
+            exchanges: c.exchanges,
+            transactions: c.transactions,
+            input_frames: c.input_frames,
+            output_frames: c.output_frames,
+            crc_errors: c.crc_errors,
+            wkc_errors: c.wkc_errors,
+            corrupt_answers: c.corrupt_answers,
+            not_ready_answers: c.not_ready_answers,
+            input_batches_lost: c.input_batches_lost,
+            fifo_alarms: c.fifo_alarms,
+            recoveries: c.recoveries,
+            max_fifo_gap_us: c.max_fifo_gap_us,
+        }
+    }
+}
+
+impl CountersReport {
+    /// The counters as aligned lines.
+    pub fn add_to(&self, f: &mut Fields) {
+        f.add("Exchanges", self.exchanges)
+            .add("Transactions", self.transactions)
+            .add("Input frames", self.input_frames)
+            .add("Output frames", self.output_frames)
+            .add("CRC errors (chip)", self.crc_errors)
+            .add("WKC errors (chip)", self.wkc_errors)
+            .add("Corrupt answers", self.corrupt_answers)
+            .add("Not-ready answers", self.not_ready_answers)
+            .add("Input batches lost", self.input_batches_lost)
+            .add("FIFO alarms", self.fifo_alarms)
+            .add("Recoveries", self.recoveries)
+            .add("Max FIFO gap", format!("{} us", self.max_fifo_gap_us));
+    }
+}
+
+fn check_name(v: i32) -> &'static str {
+    match pb::CheckType::try_from(v) {
+        Ok(pb::CheckType::Fixed) => "FIXED",
+        Ok(pb::CheckType::Crc8) => "CRC8",
+        Ok(pb::CheckType::Crc16) => "CRC16",
+        Ok(pb::CheckType::Crc32) => "CRC32",
+        _ => "UNKNOWN",
+    }
+}
+
+impl Report for MasterReport {
+    fn text(&self) -> String {
+        let mut f = Fields::default();
+        f.add("Daemon", format!("ecmxfd {}", self.daemon_version))
+            .add("Firmware", format!("{:#04x}", self.firmware_version))
+            .add("SPI packet", format!("{} bytes, {}", self.packet_bytes, self.check_type))
+            .add("Cycle", format!("{} us", self.sync0_us))
+            .add("RxFIFO", format!("depth {}, marks {}..{}", self.fifo_rx_depth, self.fifo_low, self.fifo_high))
+            .add("Image", format!("{} bytes out, {} bytes in", self.output_image_bytes, self.input_image_bytes))
+            .add("Slaves", self.slave_count)
+            .add("Phase", &self.phase)
+            .add("State", format!("{} (target {})", self.state, self.target_state))
+            .add("Link pin", if self.link_pin { "up" } else { "down" })
+            .add("DC", if self.dc_stable { "stable" } else { "not stable" })
+            .add("FIFO levels", format!("rx {}, tx {}", self.rx_fifo_level, self.tx_fifo_level))
+            .add("Output writers", self.output_writers)
+            .add("Config generation", self.config_generation);
+        if !self.last_error.is_empty() {
+            f.add("Last error", &self.last_error);
+        }
+        self.counters.add_to(&mut f);
+        f.to_string()
+    }
+}
+
+/// Fetches both halves.
+pub async fn fetch(api: &Api) -> Result<MasterReport, CliError> {
+    let mut m = api.master();
+    let i = m.get_info(api.req(pb::GetInfoRequest {})).await.map_err(CliError::rpc("master info"))?.into_inner();
+    let s = m.get_status(api.req(pb::GetStatusRequest {})).await.map_err(CliError::rpc("master status"))?.into_inner();
+    Ok(MasterReport {
+        daemon_version: i.daemon_version,
+        firmware_version: i.firmware_version,
+        packet_bytes: i.packet_bytes,
+        check_type: check_name(i.check_type).into(),
+        sync0_us: i.sync0_us,
+        fifo_rx_depth: i.fifo_rx_depth,
+        fifo_low: i.fifo_low,
+        fifo_high: i.fifo_high,
+        output_image_bytes: i.output_image_bytes,
+        input_image_bytes: i.input_image_bytes,
+        slave_count: i.slave_count,
+        target_state: state_name(i.target_state).into(),
+        phase: phase_name(s.phase).into(),
+        state: state_name(s.ecat_state).into(),
+        link_pin: s.link_pin,
+        dc_stable: s.dc_stable,
+        rx_fifo_level: s.rx_fifo_level,
+        tx_fifo_level: s.tx_fifo_level,
+        output_writers: s.output_writers,
+        config_generation: s.config_generation,
+        last_error: s.last_error,
+        counters: s.counters.into(),
+    })
+}

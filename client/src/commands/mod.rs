@@ -1,0 +1,15 @@
+//! One module per command (or family of commands), each with its JSON
+//! report types next to the code that fills them.
+
+pub mod cia402;
+pub mod data;
+pub mod diag;
+pub mod foe;
+pub mod master;
+pub mod pdo;
+pub mod peripherals;
+pub mod reg;
+pub mod sdo;
+pub mod sii;
+pub mod slaves;
+pub mod states;

@@ -1,0 +1,180 @@
+//! Reaching the daemon: its Unix socket by default (who you are is your
+//! Unix user), or TCP with TLS (`--connect`), where a bearer token or a
+//! client certificate says who you are (proto/README.md, "Connecting").
+
+use std::path::{Path, PathBuf};
+use std::time::Duration;
+
+use ecmxf_proto::v1 as pb;
+use tonic::metadata::{Ascii, MetadataValue};
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint, Identity};
+
+use crate::cli::ConnectArgs;
+use crate::error::CliError;
+
+/// Adds `authorization: Bearer <token>` to every call when a token is set.
+#[derive(Debug, Clone)]
+pub struct Auth(Option<MetadataValue<Ascii>>);
+
+impl tonic::service::Interceptor for Auth {
+    fn call(&mut self, mut r: tonic::Request<()>) -> Result<tonic::Request<()>, tonic::Status> {
+        if let Some(t) = &self.0 {
+            r.metadata_mut().insert("authorization", t.clone());
+        }
+        Ok(r)
+    }
+}
+
+/// The channel every client uses.
+pub type Chan = InterceptedService<Channel, Auth>;
+
+/// A connection to the daemon and the deadline for unary calls.
+#[derive(Debug, Clone)]
+pub struct Api {
+    chan: Chan,
+    timeout: Duration,
+    /// Where it is connected (for messages).
+    pub target: String,
+}
+
+macro_rules! clients {
+    ($($name:ident => $client:ty),* $(,)?) => {
+        $(
+            #[doc = concat!("A `", stringify!($client), "` on this connection.")]
+            pub fn $name(&self) -> $client {
+                <$client>::new(self.chan.clone())
+            }
+        )*
+    };
+}
+
+impl Api {
+    clients! {
+        master => pb::master_client::MasterClient<Chan>,
+        slaves => pb::slaves_client::SlavesClient<Chan>,
+        state => pb::state_client::StateClient<Chan>,
+        sdo => pb::sdo_client::SdoClient<Chan>,
+        sii => pb::sii_client::SiiClient<Chan>,
+        pdo => pb::process_data_client::ProcessDataClient<Chan>,
+        cia402 => pb::cia402_client::Cia402Client<Chan>,
+        peripherals => pb::peripherals_client::PeripheralsClient<Chan>,
+        foe => pb::foe_client::FoeClient<Chan>,
+        registers => pb::registers_client::RegistersClient<Chan>,
+        diagnostics => pb::diagnostics_client::DiagnosticsClient<Chan>,
+    }
+
+    /// A unary request with the call deadline.
+    pub fn req<T>(&self, msg: T) -> tonic::Request<T> {
+        let mut r = tonic::Request::new(msg);
+        r.set_timeout(self.timeout);
+        r
+    }
+
+    /// A request with a longer deadline (bring-up, FoE, waiting for states).
+    pub fn req_for<T>(&self, msg: T, at_least: Duration) -> tonic::Request<T> {
+        let mut r = tonic::Request::new(msg);
+        r.set_timeout(self.timeout.max(at_least));
+        r
+    }
+
+    /// A streaming request: no deadline (it runs until stopped).
+    pub fn stream<T>(&self, msg: T) -> tonic::Request<T> {
+        tonic::Request::new(msg)
+    }
+
+    /// The unary deadline.
+    pub fn timeout(&self) -> Duration {
+        self.timeout
+    }
+}
+
+/// Connects as the arguments say.
+pub async fn connect(args: &ConnectArgs, timeout: Duration) -> Result<Api, CliError> {
+    let token = token(args)?;
+    let (channel, target) = match &args.connect {
+        Some(url) => tcp(args, url).await?,
+        None => {
+            let path = args.socket.clone().unwrap_or_else(ecmxf_proto::default_socket_path);
+            (unix(&path).await?, path.display().to_string())
+        }
+    };
+    Ok(Api { chan: InterceptedService::new(channel, Auth(token)), timeout, target })
+}
+
+fn token(args: &ConnectArgs) -> Result<Option<MetadataValue<Ascii>>, CliError> {
+    let text = match (&args.token, &args.token_file) {
+        (Some(t), _) => t.clone(),
+        (None, Some(p)) => read(p).map(|b| String::from_utf8_lossy(&b).trim().to_owned())?,
+        (None, None) => return Ok(None),
+    };
+    format!("Bearer {text}")
+        .parse()
+        .map(Some)
+        .map_err(|_| CliError::Usage("the token has characters a gRPC header cannot carry".into()))
+}
+
+fn read(p: &Path) -> Result<Vec<u8>, CliError> {
+    std::fs::read(p).map_err(|error| CliError::File { path: p.to_owned(), error })
+}
+
+async fn unix(path: &PathBuf) -> Result<Channel, CliError> {
+    // Try the socket ourselves first: tonic's error hides the OS's reason
+    // (no such file / refused / permission), which is what a user needs.
+    if let Err(e) = tokio::net::UnixStream::connect(path).await {
+        let reason = match e.kind() {
+            std::io::ErrorKind::NotFound => "no socket there".to_owned(),
+            std::io::ErrorKind::ConnectionRefused => "nothing listens on the socket (stale file)".to_owned(),
+            std::io::ErrorKind::PermissionDenied => {
+                "permission denied on the socket (be in its group, see api.socket_group)".to_owned()
+            }
+            _ => e.to_string(),
+        };
+        return Err(CliError::Unreachable { target: path.display().to_string(), reason });
+    }
+    ecmxf_proto::connect_unix(path)
+        .await
+        .map_err(|e| CliError::Unreachable { target: path.display().to_string(), reason: chain(&e) })
+}
+
+async fn tcp(args: &ConnectArgs, url: &str) -> Result<(Channel, String), CliError> {
+    let url = if url.contains("://") { url.to_owned() } else { format!("https://{url}") };
+    if url.starts_with("http://") {
+        return Err(CliError::Usage(format!(
+            "--connect {url}: ecmxfd serves TCP only with TLS; use https:// (or host:port)"
+        )));
+    }
+    let endpoint = Endpoint::from_shared(url.clone())
+        .map_err(|e| CliError::Usage(format!("--connect {url}: not a URL: {e}")))?
+        .connect_timeout(Duration::from_secs(5));
+    let mut tls = ClientTlsConfig::new();
+    tls = match &args.ca {
+        Some(ca) => tls.ca_certificate(Certificate::from_pem(read(ca)?)),
+        None => tls.with_enabled_roots(),
+    };
+    if let (Some(cert), Some(key)) = (&args.cert, &args.key) {
+        tls = tls.identity(Identity::from_pem(read(cert)?, read(key)?));
+    }
+    if let Some(d) = &args.tls_domain {
+        tls = tls.domain_name(d.clone());
+    }
+    let endpoint = endpoint.tls_config(tls).map_err(|e| CliError::Usage(format!("--connect {url}: {}", chain(&e))))?;
+    let ch = endpoint.connect().await.map_err(|e| CliError::Unreachable { target: url.clone(), reason: chain(&e) })?;
+    Ok((ch, url))
+}
+
+/// An error and its causes on one line (tonic's top-level text is often
+/// only "transport error").
+fn chain(e: &dyn std::error::Error) -> String {
+    let mut s = e.to_string();
+    let mut cur = e.source();
+    while let Some(c) = cur {
+        let t = c.to_string();
+        if !s.contains(&t) {
+            s.push_str(": ");
+            s.push_str(&t);
+        }
+        cur = c.source();
+    }
+    s
+}
