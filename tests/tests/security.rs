@@ -140,6 +140,40 @@ role = "admin"
                 MasterClient::new(ch).get_info(with_token(pb::GetInfoRequest {}, "observer-secret")).await.is_err()
             );
         }
+        // ecmxfctl over TCP with TLS: no identity, a token, a client certificate.
+        let url = format!("localhost:{port}");
+        let tcp = |extra: &[&str]| {
+            let mut a = vec!["--connect", url.as_str(), "--ca", ca_file.as_str()];
+            a.extend_from_slice(extra);
+            ecmxf_e2e::ctl(&a)
+        };
+        let c = tcp(&["master"]);
+        assert!(c.fails(4).contains("not authenticated") && c.stderr.contains("--token"), "{}", c.stderr);
+        assert!(tcp(&["--token", "observer-secret", "master"]).ok().contains("RUNNING"));
+        let c = tcp(&["--token", "observer-secret", "download", "-p", "1", "0x605A", "0", "2"]);
+        assert!(c.fails(4).contains("permission denied"), "{}", c.stderr);
+        tcp(&["--token", "operator-secret", "download", "-p", "1", "0x605A", "0", "2"]).ok();
+        let token_file = dir.join("token");
+        std::fs::write(&token_file, "operator-secret\n").unwrap();
+        tcp(&["--token-file", &token_file.display().to_string(), "download", "-p", "1", "0x605A", "0", "2"]).ok();
+        let (client_pem, client_key_pem) =
+            (write("client.pem", client.pem()), write("client.key", client_key.serialize_pem()));
+        let out = tcp(&["--cert", &client_pem, "--key", &client_key_pem, "reg", "read", "-p", "0", "0x130"]);
+        assert!(out.ok().starts_with("0x0130:"), "{}", out.stdout);
+        // A daemon certificate the given CA did not sign: refused, exit 3.
+        let other_ca = CertifiedIssuer::self_signed(
+            {
+                let mut p = CertificateParams::new(Vec::<String>::new()).unwrap();
+                p.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+                p
+            },
+            KeyPair::generate().unwrap(),
+        )
+        .unwrap();
+        let wrong_ca = write("other-ca.pem", other_ca.pem());
+        let c = ecmxf_e2e::ctl(&["--connect", &url, "--ca", &wrong_ca, "--token", "observer-secret", "master"]);
+        assert!(c.fails(3).contains("cannot reach ecmxfd at https://localhost"), "{}", c.stderr);
+
         drop(d);
         let _ = std::fs::remove_dir_all(&dir);
     });
