@@ -334,7 +334,10 @@ impl Config {
         Self {
             version: VERSION,
             link: LinkConfig::Sim { network: None },
-            chip: ChipSettings::default(),
+            // The simulated chip is a thread of this host: a host stall (a
+            // VM can stop a thread for 100 ms and more) is not a chip fault,
+            // so wait longer for "ready" before calling it one.
+            chip: ChipSettings { ready_timeout_ms: 1000, ..ChipSettings::default() },
             // No spinning: the in-process simulator already keeps a core
             // busy, and on a small machine a yielding engine thread takes
             // the CPU the API needs (ecmxf-api-bench on 2 cores: stream p99

@@ -139,7 +139,7 @@ pub struct Daemon {
 /// `config/ecmxfd-sim.toml`, then `extra` (more sections).
 pub fn config(link: &str, extra: &str) -> String {
     format!(
-        "version = 1\n[link]\n{link}\n[realtime]\npriority = 0\nlock_memory = false\nspin_us = 0\n\
+        "version = 1\n[link]\n{link}\n[chip]\nready_timeout_ms = 1000\n[realtime]\npriority = 0\nlock_memory = false\nspin_us = 0\n\
          [cycle]\nfifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240\n{extra}"
     )
 }
