@@ -50,6 +50,35 @@ pub struct Config {
     /// The gRPC API: socket, TCP/TLS, roles.
     #[serde(default)]
     pub api: ApiConfig,
+    /// Logging.
+    #[serde(default)]
+    pub log: LogConfig,
+    /// The Prometheus endpoint.
+    #[serde(default)]
+    pub metrics: MetricsConfig,
+}
+
+/// `[log]`.
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct LogConfig {
+    /// A `tracing` filter: "info", "warn", "info,ecmxfd::engine=debug".
+    /// `RUST_LOG` wins over it; SIGHUP applies a new one.
+    pub level: String,
+}
+
+impl Default for LogConfig {
+    fn default() -> Self {
+        Self { level: "info".into() }
+    }
+}
+
+/// `[metrics]`.
+#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields, default)]
+pub struct MetricsConfig {
+    /// Serve Prometheus metrics at http://ADDRESS/metrics; absent: off.
+    pub listen: Option<std::net::SocketAddr>,
 }
 
 /// `[outputs]`.
@@ -361,6 +390,8 @@ impl Config {
             recovery: RecoveryConfig::default(),
             outputs: OutputsConfig::default(),
             api: ApiConfig::default(),
+            log: LogConfig::default(),
+            metrics: MetricsConfig::default(),
         }
     }
 
@@ -399,6 +430,12 @@ impl Config {
     pub fn validate(&self, path: &Path) -> Result<(), ConfigError> {
         let bad =
             |key: &str, message: String| Err(ConfigError::Invalid { file: path.into(), key: key.into(), message });
+        if let Err(e) = tracing_subscriber::EnvFilter::builder().parse(&self.log.level) {
+            return bad(
+                "log.level",
+                format!("{:?} is not a log filter ({e}); e.g. \"info\" or \"info,ecmxfd=debug\"", self.log.level),
+            );
+        }
         if self.version != VERSION {
             return bad("version", format!("version {} is not supported (this build reads {VERSION})", self.version));
         }

@@ -11,6 +11,8 @@
 //! - [`outputs`]: client writes into the output image, and writer leases.
 //! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
 //! - [`config`]: the configuration file.
+//! - [`metrics`]: the Prometheus endpoint.
+//! - [`service`]: life under systemd: sd_notify, watchdog, logging, reload.
 #![warn(missing_docs)]
 
 pub mod api;
@@ -18,6 +20,8 @@ pub mod config;
 pub mod engine;
 pub mod link;
 pub mod master;
+pub mod metrics;
 pub mod outputs;
 pub mod port;
 pub mod realtime;
+pub mod service;

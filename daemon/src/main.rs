@@ -9,7 +9,11 @@ use clap::Parser;
 use ecmxfd::config::{Config, LinkConfig};
 use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::master::Master;
-use tracing::{error, info};
+use std::sync::Arc;
+
+use ecmxfd::api::Context;
+use ecmxfd::service::{Liveness, Logging, Notifier, ReloadPlan};
+use tracing::{error, info, warn};
 
 #[derive(Parser, Debug)]
 #[command(name = "ecmxfd", version, about = "Daemon that owns a NEXTW ECM-XF EtherCAT master chip")]
@@ -26,9 +30,10 @@ struct Cli {
     /// Network file for --sim (see config/demo-network.toml).
     #[arg(long, value_name = "FILE", requires = "sim")]
     network: Option<PathBuf>,
-    /// Log filter when RUST_LOG is not set, e.g. "info" or "ecmxfd=debug".
-    #[arg(long, default_value = "info")]
-    log: String,
+    /// Log filter when RUST_LOG is not set, e.g. "info" or "ecmxfd=debug"
+    /// [default: log.level of the configuration, "info"].
+    #[arg(long)]
+    log: Option<String>,
     /// Serve the API on this Unix socket (overrides api.socket; default:
     /// $ECMXF_SOCKET, /run/ecmxfd/ecmxfd.sock for root, else
     /// $XDG_RUNTIME_DIR/ecmxfd.sock or /tmp/ecmxfd-UID.sock).
@@ -37,17 +42,6 @@ struct Cli {
     /// Print the engine status every this many seconds (0: never).
     #[arg(long, default_value_t = 5)]
     status_every: u64,
-}
-
-fn init_logging(filter: &str) {
-    let filter = tracing_subscriber::EnvFilter::try_from_default_env()
-        .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(filter));
-    use std::io::IsTerminal;
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::stderr().is_terminal())
-        .init();
 }
 
 fn status_line(m: &Master) -> String {
@@ -71,20 +65,54 @@ fn status_line(m: &Master) -> String {
     )
 }
 
-async fn run(config: Config, status_every: u64) -> Result<(), String> {
+/// The one-line state systemd shows (`systemctl status`): phase, state,
+/// slaves, cycle.
+fn service_status(m: &Master) -> String {
+    let s = m.status();
+    let l = m.layout();
+    match s.phase {
+        Phase::Running => {
+            format!("{}: {} slaves, cycle {} us", s.ecat_state, l.slaves.len(), m.config().cycle.sync0_us)
+        }
+        Phase::Recovering => format!("recovering: {}", m.last_error().unwrap_or_default()),
+        p => format!("{p:?}"),
+    }
+}
+
+/// Runs until SIGINT/SIGTERM (or a fatal error): the engine, the API, the
+/// optional metrics endpoint, systemd notifications and SIGHUP reloads.
+async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, logging: Logging) -> Result<(), String> {
+    let notifier = Notifier::from_env();
     let api = config.api.clone();
+    let metrics_listener = match config.metrics.listen {
+        Some(addr) => Some(ecmxfd::metrics::bind(addr).await?),
+        None => None,
+    };
+    let mut running = config.clone();
+    let target = config.cycle.target();
     let (master, _sim) = Master::from_config(config).map_err(|e| e.to_string())?;
-    let master = std::sync::Arc::new(master);
+    let master = Arc::new(master);
+    let ctx = Context::new(Arc::clone(&master), &api, nix::unistd::getuid().as_raw());
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
-    let mut server = tokio::spawn(ecmxfd::api::server::serve(std::sync::Arc::clone(&master), api, api_stopped));
-    let mut sigterm =
-        tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()).map_err(|e| e.to_string())?;
+    if let Some(l) = metrics_listener {
+        tokio::spawn(ecmxfd::metrics::serve(Arc::clone(&ctx), l, api_stopped.clone()));
+    }
+    let mut server = tokio::spawn(ecmxfd::api::server::serve(Arc::clone(&ctx), api, api_stopped));
+    let signal = |k| tokio::signal::unix::signal(k).map_err(|e| e.to_string());
+    let mut sigterm = signal(tokio::signal::unix::SignalKind::terminate())?;
+    let mut sighup = signal(tokio::signal::unix::SignalKind::hangup())?;
     let mut ticker = tokio::time::interval(Duration::from_secs(status_every.max(1)));
     ticker.tick().await;
+    let watchdog_every = Notifier::watchdog_interval();
+    let mut watchdog = tokio::time::interval(watchdog_every.unwrap_or(Duration::from_secs(3600)));
+    let mut liveness = Liveness::default();
     let mut announced = false;
+    let mut ready = false;
+    let mut status_sent = String::new();
     let mut poll = tokio::time::interval(Duration::from_millis(50));
     let mut events = master.events();
     let mut events_open = true;
+    info!(logs = logging.sink, systemd = notifier.enabled(), watchdog = ?watchdog_every, "service");
     loop {
         tokio::select! {
             e = events.recv(), if events_open => match e {
@@ -98,15 +126,29 @@ async fn run(config: Config, status_every: u64) -> Result<(), String> {
                     Ok(Err(e)) => e.to_string(),
                     Err(e) => format!("the API server failed: {e}"),
                 };
+                notifier.send(&format!("STOPPING=1\nSTATUS=failed: {why}"));
                 tokio::task::spawn_blocking(move || master.stop()).await.map_err(|e| e.to_string())?;
                 return Err(why);
             }
             _ = tokio::signal::ctrl_c() => { info!("SIGINT"); break; }
             _ = sigterm.recv() => { info!("SIGTERM"); break; }
+            _ = sighup.recv() => {
+                notifier.send("RELOADING=1");
+                reload(config_path.as_deref(), &mut running, &ctx, &logging);
+                notifier.send(&format!("READY=1\nSTATUS={}", service_status(&master)));
+            }
+            _ = watchdog.tick(), if watchdog_every.is_some() => {
+                let s = master.status();
+                if s.phase != Phase::Stopped && liveness.advanced(s.exchanges) {
+                    notifier.send("WATCHDOG=1");
+                } else {
+                    warn!(phase = ?s.phase, exchanges = s.exchanges, "the real-time loop made no exchange since the last watchdog ping: not pinging");
+                }
+            }
             _ = ticker.tick(), if status_every > 0 => info!("{}", status_line(&master)),
             _ = poll.tick() => {
-                let phase = master.status().phase;
-                if phase == Phase::Running && !announced {
+                let s = master.status();
+                if s.phase == Phase::Running && !announced {
                     announced = true;
                     let l = master.layout();
                     for (i, s) in l.slaves.iter().enumerate() {
@@ -114,12 +156,24 @@ async fn run(config: Config, status_every: u64) -> Result<(), String> {
                     }
                     info!(state = %l.state, firmware = format_args!("{:#04x}", l.firmware), "ready");
                 }
-                if phase == Phase::Stopped {
+                let status = service_status(&master);
+                // READY only once bring-up reached the configured state.
+                if !ready && s.phase == Phase::Running && s.ecat_state == target {
+                    ready = true;
+                    notifier.send(&format!("READY=1\nSTATUS={status}"));
+                    status_sent = status;
+                } else if status != status_sent {
+                    notifier.send(&format!("STATUS={status}"));
+                    status_sent = status;
+                }
+                if s.phase == Phase::Stopped {
+                    notifier.send("STOPPING=1\nSTATUS=the engine stopped");
                     return Err("the engine stopped (see the log above)".into());
                 }
             }
         }
     }
+    notifier.send("STOPPING=1\nSTATUS=stopping: bringing the network down");
     let _ = stop_api.send(());
     let _ = tokio::time::timeout(Duration::from_secs(2), server).await;
     tokio::task::spawn_blocking(move || master.stop()).await.map_err(|e| e.to_string())?;
@@ -127,9 +181,52 @@ async fn run(config: Config, status_every: u64) -> Result<(), String> {
     Ok(())
 }
 
+/// SIGHUP: reads the configuration file again and applies what can change
+/// while the bus runs (log filter, API roles and tokens); names what needs
+/// a restart. A file with mistakes changes nothing.
+fn reload(path: Option<&std::path::Path>, running: &mut Config, ctx: &Context, logging: &Logging) {
+    let Some(path) = path else {
+        warn!("SIGHUP: started without --config, nothing to reload");
+        return;
+    };
+    let new = match Config::load(path) {
+        Ok(c) => c,
+        Err(e) => {
+            error!("SIGHUP: {e}; keeping the running configuration");
+            return;
+        }
+    };
+    let plan = ReloadPlan::between(running, &new);
+    if plan.log_level {
+        match logging.set_level(&new.log.level) {
+            Ok(true) => info!(level = %new.log.level, "SIGHUP: log.level applied"),
+            Ok(false) => warn!("SIGHUP: log.level not applied: RUST_LOG is set and wins"),
+            Err(e) => warn!("SIGHUP: log.level not applied: {e}"),
+        }
+        running.log = new.log.clone();
+    }
+    if plan.roles {
+        ctx.reload_roles(&new.api);
+        running.api.users = new.api.users.clone();
+        running.api.groups = new.api.groups.clone();
+        running.api.tokens = new.api.tokens.clone();
+        running.api.client_certs = new.api.client_certs.clone();
+        running.api.default_role = new.api.default_role;
+        info!("SIGHUP: api roles, tokens and client certificates applied");
+    }
+    if !plan.needs_restart.is_empty() {
+        warn!(
+            changed = %plan.needs_restart.join(", "),
+            "SIGHUP: not applied while the bus runs; restart the service to apply"
+        );
+    }
+    if !plan.log_level && !plan.roles && plan.needs_restart.is_empty() {
+        info!("SIGHUP: {} unchanged", path.display());
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
-    init_logging(&cli.log);
     if let Some(path) = &cli.check_config {
         return match Config::load(path) {
             Ok(c) => {
@@ -171,6 +268,14 @@ fn main() -> ExitCode {
     if let Some(socket) = cli.socket {
         config.api.socket = Some(socket);
     }
+    if let Some(level) = &cli.log {
+        if let Err(e) = tracing_subscriber::EnvFilter::builder().parse(level) {
+            eprintln!("ecmxfd: --log {level:?} is not a log filter ({e}); e.g. \"info\" or \"info,ecmxfd=debug\"");
+            return ExitCode::from(2);
+        }
+        config.log.level = level.clone();
+    }
+    let logging = ecmxfd::service::init_logging(&config.log.level);
     let rt = match tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .thread_stack_size(8 << 20)
@@ -183,7 +288,7 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    match rt.block_on(run(config, cli.status_every)) {
+    match rt.block_on(run(config, cli.config.clone(), cli.status_every, logging)) {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             error!("{e}");

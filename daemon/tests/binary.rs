@@ -13,15 +13,30 @@ fn repo(path: &str) -> String {
 
 #[test]
 fn check_config_accepts_the_examples_and_names_mistakes() {
-    let out = Command::new(BIN).args(["--check-config", &repo("config/ecmxfd-sim.toml")]).output().unwrap();
-    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    assert!(String::from_utf8_lossy(&out.stdout).contains(": ok (in-process simulator"));
+    // Every example configuration the package ships.
+    for (file, link) in [
+        ("config/ecmxfd-sim.toml", "in-process simulator"),
+        ("config/ecmxfd-rpi.toml", "/dev/spidev0.0"),
+        ("config/ecmxfd-gateway.toml", "/dev/spidev1.0"),
+    ] {
+        let out = Command::new(BIN).args(["--check-config", &repo(file)]).output().unwrap();
+        assert!(out.status.success(), "{file}: {}", String::from_utf8_lossy(&out.stderr));
+        assert!(String::from_utf8_lossy(&out.stdout).contains(&format!(": ok ({link}")), "{file}");
+    }
+    let examples: Vec<String> = std::fs::read_dir(repo("config"))
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .filter(|n| n.starts_with("ecmxfd") && n.ends_with(".toml"))
+        .collect();
+    assert_eq!(examples.len(), 3, "a new example configuration needs a line above: {examples:?}");
 
     let bad = std::env::temp_dir().join(format!("ecmxfd-bad-{}.toml", std::process::id()));
     for (text, expect) in [
         ("version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 100\n", "cycle.sync0_us"),
         ("version = 1\n[link]\nbackend = \"sim\"\n[chip]\ndatasize = 1\n", "line 5"),
         ("version = 1\n", "link"),
+        ("version = 1\n[link]\nbackend = \"sim\"\n[log]\nlevel = \"info,=[\"\n", "log.level"),
+        ("version = 1\n[link]\nbackend = \"sim\"\n[metrics]\nlisten = \"localhost\"\n", "line 5"),
     ] {
         std::fs::write(&bad, text).unwrap();
         let out = Command::new(BIN).args(["--check-config", bad.to_str().unwrap()]).output().unwrap();

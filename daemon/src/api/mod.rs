@@ -43,8 +43,10 @@ pub type BoxStream<T> = std::pin::Pin<Box<dyn tokio_stream::Stream<Item = Result
 pub struct Context {
     /// The engine.
     pub master: Arc<Master>,
-    /// Roles.
-    pub auth: Authenticator,
+    /// Roles (replaced whole on SIGHUP, see [`Context::reload_roles`]).
+    pub auth: std::sync::RwLock<Authenticator>,
+    /// SDO transfer durations, for the metrics endpoint.
+    pub sdo_latency: crate::metrics::Histogram,
     /// The process image, named.
     pub image: image::ImageCache,
     /// Output leases.
@@ -65,7 +67,8 @@ impl Context {
     pub fn new(master: Arc<Master>, config: &config::ApiConfig, own_uid: u32) -> Arc<Self> {
         Arc::new(Self {
             master,
-            auth: Authenticator::new(config, own_uid),
+            auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
+            sdo_latency: crate::metrics::Histogram::default(),
             image: image::ImageCache::default(),
             leases: leases::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
@@ -87,9 +90,16 @@ impl Context {
         Ok(s)
     }
 
+    /// Takes the `[api]` roles, tokens and client certificates of a reloaded
+    /// configuration; calls already authorized keep their role.
+    pub fn reload_roles(&self, config: &config::ApiConfig) {
+        let own_uid = nix::unistd::getuid().as_raw();
+        *self.auth.write().unwrap_or_else(|e| e.into_inner()) = Authenticator::new(config, own_uid);
+    }
+
     /// Authorizes a call for `role`.
     pub fn authorize<T>(&self, request: &Request<T>, role: Role) -> Result<Caller, Status> {
-        self.auth.authorize(request, role)
+        self.auth.read().unwrap_or_else(|e| e.into_inner()).authorize(request, role)
     }
 
     /// The newest input frame, if any arrived.

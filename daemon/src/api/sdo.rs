@@ -34,7 +34,10 @@ impl SdoApi for SdoService {
         let r = request.get_ref();
         let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
         let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
-        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await?;
+        let started = std::time::Instant::now();
+        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await;
+        self.0.sdo_latency.observe(started.elapsed());
+        let raw = raw?;
         let value = decode_value(t, &raw)
             .map_err(|e| Status::invalid_argument(format!("data_type: object {i:#06x}:{sub:02x} of slave {s}: {e}")))?;
         Ok(Response::new(pb::SdoUploadResponse { raw, value, data_type: t as i32 }))
@@ -52,7 +55,11 @@ impl SdoApi for SdoService {
         let bytes = encode_value(t, value)?;
         let n = bytes.len() as u32;
         tracing::debug!(who = %caller.who, slave = s, object = format_args!("{i:#06x}:{sub:02x}"), "SDO download");
-        bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, caller.deadline)).await?;
+        let started = std::time::Instant::now();
+        let done =
+            bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, caller.deadline)).await;
+        self.0.sdo_latency.observe(started.elapsed());
+        done?;
         Ok(Response::new(pb::SdoDownloadResponse { bytes_written: n }))
     }
 

@@ -178,13 +178,7 @@ async fn track_inputs(ctx: Arc<Context>) {
 }
 
 /// Serves the API until `shutdown` changes; removes the socket file after.
-pub async fn serve(
-    master: Arc<Master>,
-    config: ApiConfig,
-    mut shutdown: watch::Receiver<()>,
-) -> Result<(), ServeError> {
-    let own_uid = nix::unistd::getuid().as_raw();
-    let ctx = Context::new(master, &config, own_uid);
+pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Receiver<()>) -> Result<(), ServeError> {
     let (reporter, health) = tonic_health::server::health_reporter();
     for name in SERVICES {
         reporter.set_service_status(name, ServingStatus::NotServing).await;

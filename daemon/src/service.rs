@@ -1,0 +1,235 @@
+//! Life as a service: the systemd notification protocol (READY, STATUS,
+//! WATCHDOG, RELOADING, STOPPING; sd_notify(3)) spoken directly on
+//! `$NOTIFY_SOCKET` (no libsystemd), logging to journald under systemd and
+//! to stderr otherwise with a filter SIGHUP can change, and what a reload
+//! may apply while the bus runs.
+
+use std::os::unix::net::UnixDatagram;
+use std::time::Duration;
+
+use tracing_subscriber::layer::SubscriberExt;
+use tracing_subscriber::util::SubscriberInitExt;
+use tracing_subscriber::{EnvFilter, Registry, reload};
+
+use crate::config::Config;
+
+/// The sender side of sd_notify; inert when not started by systemd.
+#[derive(Debug)]
+pub struct Notifier {
+    socket: Option<(UnixDatagram, std::os::unix::net::SocketAddr)>,
+}
+
+impl Notifier {
+    /// From `$NOTIFY_SOCKET` (a path, or `@name` for the abstract namespace).
+    pub fn from_env() -> Self {
+        let Some(path) = std::env::var_os("NOTIFY_SOCKET") else { return Self { socket: None } };
+        let bytes = path.as_encoded_bytes();
+        let addr = if let Some(name) = bytes.strip_prefix(b"@") {
+            use std::os::linux::net::SocketAddrExt;
+            std::os::unix::net::SocketAddr::from_abstract_name(name)
+        } else {
+            std::os::unix::net::SocketAddr::from_pathname(&path)
+        };
+        let socket = match (UnixDatagram::unbound(), addr) {
+            (Ok(s), Ok(a)) => Some((s, a)),
+            (Err(e), _) | (_, Err(e)) => {
+                tracing::warn!(error = %e, socket = ?path, "NOTIFY_SOCKET unusable: systemd will not hear from ecmxfd");
+                None
+            }
+        };
+        Self { socket }
+    }
+
+    /// Whether a service manager listens.
+    pub fn enabled(&self) -> bool {
+        self.socket.is_some()
+    }
+
+    /// Sends `state` lines ("READY=1\nSTATUS=..."); failures are logged,
+    /// never fatal.
+    pub fn send(&self, state: &str) {
+        if let Some((s, addr)) = &self.socket {
+            if let Err(e) = s.send_to_addr(state.as_bytes(), addr) {
+                tracing::debug!(error = %e, "sd_notify failed");
+            }
+        }
+    }
+
+    /// How often to ping the watchdog: half of `$WATCHDOG_USEC`, when it is
+    /// meant for this process (`$WATCHDOG_PID` absent or ours).
+    pub fn watchdog_interval() -> Option<Duration> {
+        if let Some(pid) = std::env::var("WATCHDOG_PID").ok().and_then(|p| p.parse::<u32>().ok()) {
+            if pid != std::process::id() {
+                return None;
+            }
+        }
+        let usec: u64 = std::env::var("WATCHDOG_USEC").ok()?.parse().ok()?;
+        (usec > 0).then(|| Duration::from_micros(usec / 2))
+    }
+}
+
+/// Proves the real-time loop alive to the watchdog: the engine's exchange
+/// counter must have moved since the last ping. A stalled loop (stuck SPI
+/// transfer, dead chip, deadlock) stops the pings and systemd restarts us.
+#[derive(Debug, Default)]
+pub struct Liveness {
+    last_exchanges: Option<u64>,
+}
+
+impl Liveness {
+    /// True when `exchanges` advanced since the previous call (the first
+    /// call only records).
+    pub fn advanced(&mut self, exchanges: u64) -> bool {
+        let moved = self.last_exchanges.is_none_or(|l| exchanges > l);
+        self.last_exchanges = Some(exchanges);
+        moved
+    }
+}
+
+/// The log filter in force, replaceable on SIGHUP.
+#[derive(Debug)]
+pub struct Logging {
+    handle: reload::Handle<EnvFilter, Registry>,
+    from_env: bool,
+    /// Where logs go: "journald" or "stderr".
+    pub sink: &'static str,
+}
+
+/// Starts logging: to journald when systemd connected our stderr to the
+/// journal (`$JOURNAL_STREAM`) and journald answers, else to stderr. The
+/// filter is `RUST_LOG` if set, else `level`.
+pub fn init_logging(level: &str) -> Logging {
+    let from_env = std::env::var_os("RUST_LOG").is_some();
+    let filter = if from_env {
+        EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"))
+    } else {
+        EnvFilter::try_new(level).unwrap_or_else(|_| EnvFilter::new("info"))
+    };
+    let (filter, handle) = reload::Layer::new(filter);
+    let journald = if std::env::var_os("JOURNAL_STREAM").is_some() {
+        tracing_journald::layer().ok().map(|l| l.with_syslog_identifier("ecmxfd".into()))
+    } else {
+        None
+    };
+    let sink = if journald.is_some() { "journald" } else { "stderr" };
+    use std::io::IsTerminal;
+    let stderr = journald.is_none().then(|| {
+        tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_ansi(std::io::stderr().is_terminal())
+    });
+    let _ = tracing_subscriber::registry().with(filter).with(journald).with(stderr).try_init();
+    Logging { handle, from_env, sink }
+}
+
+impl Logging {
+    /// Applies a new filter from the configuration. `Ok(false)`: RUST_LOG
+    /// is in force and wins.
+    pub fn set_level(&self, level: &str) -> Result<bool, String> {
+        if self.from_env {
+            return Ok(false);
+        }
+        let f = EnvFilter::try_new(level).map_err(|e| e.to_string())?;
+        self.handle.reload(f).map_err(|e| e.to_string())?;
+        Ok(true)
+    }
+}
+
+/// What a reload changed, split into what is applied while the bus runs
+/// and what needs a restart.
+#[derive(Debug, Default, PartialEq, Eq)]
+pub struct ReloadPlan {
+    /// `log.level` changed.
+    pub log_level: bool,
+    /// `[api]` roles, tokens, client certificates or default role changed.
+    pub roles: bool,
+    /// Keys that changed but take a restart (or a re-initialisation that
+    /// interrupts the bus), for the log.
+    pub needs_restart: Vec<&'static str>,
+}
+
+impl ReloadPlan {
+    /// Compares the running configuration with the reloaded one.
+    pub fn between(old: &Config, new: &Config) -> Self {
+        let mut p = Self { log_level: old.log != new.log, ..Self::default() };
+        let (a, b) = (&old.api, &new.api);
+        p.roles = a.users != b.users
+            || a.groups != b.groups
+            || a.tokens != b.tokens
+            || a.client_certs != b.client_certs
+            || a.default_role != b.default_role;
+        let mut restart = |changed: bool, key: &'static str| {
+            if changed {
+                p.needs_restart.push(key);
+            }
+        };
+        restart(old.link != new.link, "[link]");
+        restart(old.chip != new.chip, "[chip]");
+        restart(old.realtime != new.realtime, "[realtime]");
+        restart(old.cycle != new.cycle, "[cycle]");
+        restart(old.slaves != new.slaves, "[[slave]]");
+        restart(old.axes != new.axes, "[[axis]]");
+        restart(old.recovery != new.recovery, "[recovery]");
+        restart(old.outputs != new.outputs, "[outputs]");
+        restart(old.metrics != new.metrics, "[metrics]");
+        restart(
+            a.socket != b.socket || a.socket_mode != b.socket_mode || a.socket_group != b.socket_group,
+            "api.socket*",
+        );
+        restart(
+            a.tcp != b.tcp || a.tls_cert != b.tls_cert || a.tls_key != b.tls_key || a.client_ca != b.client_ca,
+            "api.tcp/tls",
+        );
+        restart(a.lease_ttl_ms != b.lease_ttl_ms, "api.lease_ttl_ms");
+        p
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn the_watchdog_is_fed_only_while_exchanges_advance() {
+        let mut l = Liveness::default();
+        assert!(l.advanced(10), "the first look only records");
+        assert!(l.advanced(11));
+        assert!(!l.advanced(11), "a stalled loop stops the pings");
+        assert!(l.advanced(500));
+    }
+
+    #[test]
+    fn a_reload_applies_roles_and_log_level_and_names_the_rest() {
+        let old = Config::simulator();
+        let mut new = old.clone();
+        assert_eq!(ReloadPlan::between(&old, &new), ReloadPlan::default());
+        new.log.level = "debug".into();
+        new.api.default_role = crate::api::config::RoleName::None;
+        new.cycle.sync0_us = 500;
+        new.api.lease_ttl_ms = 10;
+        let p = ReloadPlan::between(&old, &new);
+        assert!(p.log_level && p.roles);
+        assert_eq!(p.needs_restart, vec!["[cycle]", "api.lease_ttl_ms"]);
+    }
+
+    #[test]
+    fn notifications_reach_the_socket_and_the_abstract_namespace() {
+        let dir = std::env::temp_dir().join(format!("ecmxfd-notify-{}", std::process::id()));
+        let _ = std::fs::create_dir_all(&dir);
+        let path = dir.join("notify.sock");
+        let _ = std::fs::remove_file(&path);
+        let listener = UnixDatagram::bind(&path).unwrap();
+        let n = Notifier {
+            socket: Some((
+                UnixDatagram::unbound().unwrap(),
+                std::os::unix::net::SocketAddr::from_pathname(&path).unwrap(),
+            )),
+        };
+        assert!(n.enabled());
+        n.send("READY=1\nSTATUS=OP");
+        let mut buf = [0u8; 64];
+        let len = listener.recv(&mut buf).unwrap();
+        assert_eq!(&buf[..len], b"READY=1\nSTATUS=OP");
+        let _ = std::fs::remove_dir_all(&dir);
+        // Outside systemd nothing is sent and nothing fails.
+        Notifier { socket: None }.send("READY=1");
+    }
+}
