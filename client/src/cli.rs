@@ -36,8 +36,10 @@ pub struct Cli {
 /// Where the daemon is and who we are.
 #[derive(Debug, Args)]
 pub struct ConnectArgs {
-    /// The daemon's Unix socket [default: /run/ecmxfd/ecmxfd.sock for root,
-    /// else $XDG_RUNTIME_DIR/ecmxfd.sock or /tmp/ecmxfd-UID.sock].
+    /// The daemon's Unix socket [default: your own daemon's
+    /// ($XDG_RUNTIME_DIR/ecmxfd.sock or /tmp/ecmxfd-UID.sock; root:
+    /// /run/ecmxfd/ecmxfd.sock) if it exists, else the system service's
+    /// /run/ecmxfd/ecmxfd.sock].
     #[arg(long, global = true, env = "ECMXF_SOCKET", value_name = "PATH")]
     pub socket: Option<PathBuf>,
     /// Connect over TCP with TLS instead: host:port or https://host:port.

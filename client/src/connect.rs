@@ -95,7 +95,7 @@ pub async fn connect(args: &ConnectArgs, timeout: Duration) -> Result<Api, CliEr
     let (channel, target) = match &args.connect {
         Some(url) => tcp(args, url).await?,
         None => {
-            let path = args.socket.clone().unwrap_or_else(ecmxf_proto::default_socket_path);
+            let path = args.socket.clone().unwrap_or_else(ecmxf_proto::client_socket_path);
             (unix(&path).await?, path.display().to_string())
         }
     };

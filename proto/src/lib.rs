@@ -23,13 +23,30 @@ pub fn default_socket_path() -> std::path::PathBuf {
     }
     let uid = current_uid();
     if uid == 0 {
-        return "/run/ecmxfd/ecmxfd.sock".into();
+        return SYSTEM_SOCKET.into();
     }
     match std::env::var_os("XDG_RUNTIME_DIR") {
         Some(d) if !d.is_empty() => std::path::Path::new(&d).join("ecmxfd.sock"),
         _ => format!("/tmp/ecmxfd-{uid}.sock").into(),
     }
 }
+
+/// The socket path a client tries when not told: `$ECMXF_SOCKET`; else
+/// [`default_socket_path`] if a daemon of this user listens there; else the
+/// system daemon's `/run/ecmxfd/ecmxfd.sock` if it exists (the packaged
+/// service, reachable by members of its group); else
+/// [`default_socket_path`] (for the error message).
+pub fn client_socket_path() -> std::path::PathBuf {
+    let own = default_socket_path();
+    if std::env::var_os("ECMXF_SOCKET").is_some() || own.exists() {
+        return own;
+    }
+    let system = std::path::PathBuf::from(SYSTEM_SOCKET);
+    if system.exists() { system } else { own }
+}
+
+/// Where the packaged service listens (systemd RuntimeDirectory).
+pub const SYSTEM_SOCKET: &str = "/run/ecmxfd/ecmxfd.sock";
 
 fn current_uid() -> u32 {
     // The owner of /proc/self is the process's real uid; no libc needed.
