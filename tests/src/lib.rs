@@ -28,7 +28,8 @@ pub fn daemon_binary() -> PathBuf {
     binary("ecmxfd", "ecmxfd")
 }
 
-/// The `ecmxfctl` binary of this build (same rules as [`daemon_binary`]).
+/// The `ecmxfctl` binary of this build (same rules as [`daemon_binary`]:
+/// client/tests/binary.rs makes `cargo test --workspace` build it fresh).
 pub fn ctl_binary() -> PathBuf {
     binary("ecmxfctl", "ecmxfctl")
 }
