@@ -107,7 +107,8 @@ pub fn init_logging(level: &str) -> Logging {
     };
     let (filter, handle) = reload::Layer::new(filter);
     let journald = if std::env::var_os("JOURNAL_STREAM").is_some() {
-        tracing_journald::layer().ok().map(|l| l.with_syslog_identifier("ecmxfd".into()))
+        // Fields as journal fields of their own (POSITION=1, not F_POSITION=1).
+        tracing_journald::layer().ok().map(|l| l.with_syslog_identifier("ecmxfd".into()).with_field_prefix(None))
     } else {
         None
     };
