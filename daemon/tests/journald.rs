@@ -54,7 +54,7 @@ fn logs_go_to_journald_when_systemd_says_so() {
         std::fs::create_dir_all("/run/systemd/journal").unwrap();
         let journal = UnixDatagram::bind(JOURNAL).unwrap();
         journal.set_read_timeout(Some(Duration::from_millis(200))).unwrap();
-        let mut child = sim_daemon(&dir).stderr(Stdio::piped()).spawn().unwrap();
+        let child = sim_daemon(&dir).stderr(Stdio::piped()).spawn().unwrap();
         let start = Instant::now();
         let mut entries: Vec<Vec<(String, String)>> = Vec::new();
         let mut buf = vec![0u8; 65536];
@@ -82,7 +82,7 @@ fn logs_go_to_journald_when_systemd_says_so() {
 
     // No journald answering: stderr, as without systemd.
     if !std::path::Path::new(JOURNAL).exists() {
-        let mut child = sim_daemon(&dir).stderr(Stdio::piped()).spawn().unwrap();
+        let child = sim_daemon(&dir).stderr(Stdio::piped()).spawn().unwrap();
         std::thread::sleep(Duration::from_secs(2));
         sigterm(child.id());
         let out = child.wait_with_output().unwrap();
