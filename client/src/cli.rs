@@ -504,7 +504,7 @@ pub enum RegCommand {
 
 #[derive(Debug, Args)]
 pub struct Top {
-    /// Input entries to plot (e.g. 1.position_actual 1.velocity_actual) [default: the first axis' actual position and velocity].
+    /// Input entries to plot (e.g. 1.position_actual 1.velocity_actual) [default: the actual position and velocity of the first [[axis]], else of the first drive].
     #[arg(long = "plot", value_name = "ENTRY")]
     pub plot: Vec<String>,
     /// Refresh interval.

@@ -122,13 +122,17 @@ pub async fn run(api: &Api, out: Out, t: &Top) -> Result<(), CliError> {
         // the layout names them ("1.position_actual", "1.axis2.velocity_actual").
         let axes = api.cia402().list_axes(api.req(pb::ListAxesRequest {})).await;
         let axes = axes.map_err(CliError::rpc("list axes"))?.into_inner().axes;
-        axes.first()
-            .map(|a| {
-                let prefix = if a.slave_axis == 0 {
-                    format!("{}.", a.slave)
-                } else {
-                    format!("{}.axis{}.", a.slave, a.slave_axis)
-                };
+        // Without [[axis]]: the first drive-like slave in the image.
+        let prefix = match axes.first() {
+            Some(a) if a.slave_axis == 0 => Some(format!("{}.", a.slave)),
+            Some(a) => Some(format!("{}.axis{}.", a.slave, a.slave_axis)),
+            None => image
+                .entries
+                .iter()
+                .find_map(|e| e.name.strip_suffix("position_actual").filter(|_| !e.is_output()).map(str::to_owned)),
+        };
+        prefix
+            .map(|prefix| {
                 ["position_actual", "velocity_actual"]
                     .iter()
                     .map(|n| format!("{prefix}{n}"))
