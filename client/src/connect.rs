@@ -115,26 +115,33 @@ fn token(args: &ConnectArgs) -> Result<Option<MetadataValue<Ascii>>, CliError> {
 }
 
 fn read(p: &Path) -> Result<Vec<u8>, CliError> {
-    std::fs::read(p).map_err(|error| CliError::File { path: p.to_owned(), error })
+    std::fs::read(p).map_err(CliError::file(p))
 }
 
 async fn unix(path: &PathBuf) -> Result<Channel, CliError> {
-    // Try the socket ourselves first: tonic's error hides the OS's reason
-    // (no such file / refused / permission), which is what a user needs.
-    if let Err(e) = tokio::net::UnixStream::connect(path).await {
-        let reason = match e.kind() {
-            std::io::ErrorKind::NotFound => "no socket there".to_owned(),
-            std::io::ErrorKind::ConnectionRefused => "nothing listens on the socket (stale file)".to_owned(),
-            std::io::ErrorKind::PermissionDenied => {
-                "permission denied on the socket (be in its group, see api.socket_group)".to_owned()
-            }
-            _ => e.to_string(),
-        };
-        return Err(CliError::Unreachable { target: path.display().to_string(), reason });
-    }
     ecmxf_proto::connect_unix(path)
         .await
-        .map_err(|e| CliError::Unreachable { target: path.display().to_string(), reason: chain(&e) })
+        .map_err(|e| CliError::Unreachable { target: path.display().to_string(), reason: unix_reason(&e) })
+}
+
+/// What a user needs to hear about a failed socket connection: the OS's
+/// reason (tonic's own text is only "transport error").
+fn unix_reason(e: &(dyn std::error::Error + 'static)) -> String {
+    let mut cur = Some(e);
+    while let Some(c) = cur {
+        if let Some(io) = c.downcast_ref::<std::io::Error>() {
+            return match io.kind() {
+                std::io::ErrorKind::NotFound => "no socket there".to_owned(),
+                std::io::ErrorKind::ConnectionRefused => "nothing listens on the socket (stale file)".to_owned(),
+                std::io::ErrorKind::PermissionDenied => {
+                    "permission denied on the socket (be in its group, see api.socket_group)".to_owned()
+                }
+                _ => io.to_string(),
+            };
+        }
+        cur = c.source();
+    }
+    chain(e)
 }
 
 async fn tcp(args: &ConnectArgs, url: &str) -> Result<(Channel, String), CliError> {

@@ -73,6 +73,12 @@ impl CliError {
         }
     }
 
+    /// A failed file operation on `path`.
+    pub fn file(path: impl Into<PathBuf>) -> impl FnOnce(std::io::Error) -> Self {
+        let path = path.into();
+        move |error| Self::File { path, error }
+    }
+
     /// The exit code for this error.
     pub fn exit_code(&self) -> u8 {
         match self {

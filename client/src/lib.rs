@@ -129,15 +129,14 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
 }
 
 fn write_man_pages(dir: &std::path::Path) -> Result<(), CliError> {
-    let file_err = |path: std::path::PathBuf| move |error| CliError::File { path, error };
-    std::fs::create_dir_all(dir).map_err(file_err(dir.to_owned()))?;
+    std::fs::create_dir_all(dir).map_err(CliError::file(dir))?;
     let cmd = Cli::command();
     let mut written = Vec::new();
     let mut page = |c: &clap::Command, name: String| -> Result<(), CliError> {
         let path = dir.join(format!("{name}.1"));
         let mut buf = Vec::new();
         clap_mangen::Man::new(c.clone().name(name.clone())).render(&mut buf).map_err(CliError::Output)?;
-        std::fs::write(&path, buf).map_err(file_err(path.clone()))?;
+        std::fs::write(&path, buf).map_err(CliError::file(&path))?;
         written.push(path);
         Ok(())
     };

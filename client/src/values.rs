@@ -34,34 +34,25 @@ pub fn parse_state(s: &str) -> Option<pb::EcatState> {
     })
 }
 
-/// Engine phase names.
-pub fn phase_name(v: i32) -> &'static str {
-    use pb::EnginePhase as P;
-    match P::try_from(v) {
-        Ok(P::Starting) => "STARTING",
-        Ok(P::BringingUp) => "BRINGING_UP",
-        Ok(P::Running) => "RUNNING",
-        Ok(P::Recovering) => "RECOVERING",
-        Ok(P::Stopping) => "STOPPING",
-        Ok(P::Stopped) => "STOPPED",
+/// A proto enum value's name without its type prefix
+/// (`ENGINE_PHASE_RUNNING` -> `RUNNING`); `UNKNOWN` for UNSPECIFIED and for
+/// numbers a newer daemon may send. The JSON schema promises these names, so
+/// they come from the .proto, not from a second table here.
+pub fn enum_name<E: TryFrom<i32>>(v: i32, name: fn(&E) -> &'static str, prefix: &str) -> &'static str {
+    match E::try_from(v).map(|e| name(&e).strip_prefix(prefix)) {
+        Ok(Some(n)) if n != "UNSPECIFIED" => n,
         _ => "UNKNOWN",
     }
 }
 
+/// Engine phase names.
+pub fn phase_name(v: i32) -> &'static str {
+    enum_name(v, pb::EnginePhase::as_str_name, "ENGINE_PHASE_")
+}
+
 /// CiA 402 drive state names.
 pub fn drive_state_name(v: i32) -> &'static str {
-    use pb::DriveState as D;
-    match D::try_from(v) {
-        Ok(D::NotReadyToSwitchOn) => "NOT_READY_TO_SWITCH_ON",
-        Ok(D::SwitchOnDisabled) => "SWITCH_ON_DISABLED",
-        Ok(D::ReadyToSwitchOn) => "READY_TO_SWITCH_ON",
-        Ok(D::SwitchedOn) => "SWITCHED_ON",
-        Ok(D::OperationEnabled) => "OPERATION_ENABLED",
-        Ok(D::QuickStopActive) => "QUICK_STOP_ACTIVE",
-        Ok(D::FaultReactionActive) => "FAULT_REACTION_ACTIVE",
-        Ok(D::Fault) => "FAULT",
-        _ => "UNKNOWN",
-    }
+    enum_name(v, pb::DriveState::as_str_name, "DRIVE_STATE_")
 }
 
 /// The data type names ecmxfctl accepts and prints (the IgH tool's).
@@ -190,31 +181,12 @@ pub fn parse_value(text: &str, t: pb::DataType) -> Result<pb::Value, CliError> {
     Ok(pb::Value { kind: Some(kind) })
 }
 
-/// Decodes little-endian bytes (CiA 301) as `t`, here in the client: for
-/// types only the slave's ESI knows, and for registers. Short data is None.
+/// Decodes little-endian bytes as `t` with the daemon's own codec
+/// ([`ecmxf_proto::value::decode_value`]), for types only a slave's ESI
+/// knows and for registers. Short data and untyped bytes (octet strings)
+/// are `None`: the caller shows the raw bytes.
 pub fn decode_le(t: pb::DataType, raw: &[u8]) -> Option<pb::Value> {
-    use pb::DataType as T;
-    use pb::value::Kind;
-    let le = |n: usize| -> Option<u64> {
-        (raw.len() >= n).then(|| raw[..n].iter().rev().fold(0u64, |a, b| (a << 8) | u64::from(*b)))
-    };
-    let sext = |v: u64, n: usize| -> i64 { ((v << (64 - 8 * n)) as i64) >> (64 - 8 * n) };
-    let kind = match t {
-        T::Boolean => Kind::Boolean(*raw.first()? != 0),
-        T::Unsigned8 => Kind::Unsigned(le(1)?),
-        T::Unsigned16 => Kind::Unsigned(le(2)?),
-        T::Unsigned32 => Kind::Unsigned(le(4)?),
-        T::Unsigned64 => Kind::Unsigned(le(8)?),
-        T::Integer8 => Kind::Integer(sext(le(1)?, 1)),
-        T::Integer16 => Kind::Integer(sext(le(2)?, 2)),
-        T::Integer32 => Kind::Integer(sext(le(4)?, 4)),
-        T::Integer64 => Kind::Integer(le(8)? as i64),
-        T::Real32 => Kind::Real(f64::from(f32::from_bits(le(4)? as u32))),
-        T::Real64 => Kind::Real(f64::from_bits(le(8)?)),
-        T::VisibleString => Kind::Text(String::from_utf8_lossy(raw).trim_end_matches('\0').to_owned()),
-        T::OctetString | T::Unspecified => return None,
-    };
-    Some(pb::Value { kind: Some(kind) })
+    ecmxf_proto::value::decode_value(t, raw).ok().flatten().filter(|v| !matches!(v.kind, Some(Kind::Raw(_))))
 }
 
 /// A typed value as it appears in JSON output: the number, bool or text
@@ -304,6 +276,14 @@ mod tests {
             assert_eq!(parse_state(state_name(st as i32)), Some(st));
         }
         assert_eq!(parse_state("run"), None);
+    }
+
+    #[test]
+    fn enum_names_drop_the_prefix_and_hide_unspecified() {
+        assert_eq!(phase_name(pb::EnginePhase::BringingUp as i32), "BRINGING_UP");
+        assert_eq!(drive_state_name(pb::DriveState::OperationEnabled as i32), "OPERATION_ENABLED");
+        assert_eq!(phase_name(0), "UNKNOWN");
+        assert_eq!(drive_state_name(99), "UNKNOWN");
     }
 
     #[test]

@@ -109,6 +109,7 @@ async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, lo
     let mut announced = false;
     let mut ready = false;
     let mut status_sent = String::new();
+    let mut status_key = None;
     let mut poll = tokio::time::interval(Duration::from_millis(50));
     let mut events = master.events();
     let mut events_open = true;
@@ -156,15 +157,21 @@ async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, lo
                     }
                     info!(state = %l.state, firmware = format_args!("{:#04x}", l.firmware), "ready");
                 }
-                let status = service_status(&master);
+                // The status line is rebuilt (layout and config cloned) only
+                // when what it shows may have changed, and only for systemd.
+                let key = (s.phase, s.ecat_state, s.config_generation, s.recoveries);
+                if notifier.enabled() && status_key != Some(key) {
+                    status_key = Some(key);
+                    let status = service_status(&master);
+                    if status != status_sent {
+                        notifier.send(&format!("STATUS={status}"));
+                        status_sent = status;
+                    }
+                }
                 // READY only once bring-up reached the configured state.
                 if !ready && s.phase == Phase::Running && s.ecat_state == target {
                     ready = true;
-                    notifier.send(&format!("READY=1\nSTATUS={status}"));
-                    status_sent = status;
-                } else if status != status_sent {
-                    notifier.send(&format!("STATUS={status}"));
-                    status_sent = status;
+                    notifier.send(&format!("READY=1\nSTATUS={status_sent}"));
                 }
                 if s.phase == Phase::Stopped {
                     notifier.send("STOPPING=1\nSTATUS=the engine stopped");

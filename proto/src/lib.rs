@@ -13,6 +13,9 @@ pub mod v1 {
     pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/ecmxf_descriptor.bin"));
 }
 
+#[warn(clippy::all)]
+pub mod value;
+
 /// Where `ecmxfd` listens and `ecmxfctl` connects when not told otherwise:
 /// `$ECMXF_SOCKET` if set; for root `/run/ecmxfd/ecmxfd.sock` (the systemd
 /// unit's RuntimeDirectory); for other users `$XDG_RUNTIME_DIR/ecmxfd.sock`,

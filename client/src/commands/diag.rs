@@ -98,22 +98,7 @@ pub struct EventLine {
 }
 
 fn kind_name(k: i32) -> &'static str {
-    use pb::EventKind as K;
-    match K::try_from(k) {
-        Ok(K::Phase) => "PHASE",
-        Ok(K::StateChange) => "STATE_CHANGE",
-        Ok(K::Link) => "LINK",
-        Ok(K::DcStable) => "DC_STABLE",
-        Ok(K::CrcErrors) => "CRC_ERRORS",
-        Ok(K::WkcErrors) => "WKC_ERRORS",
-        Ok(K::FifoUnderrun) => "FIFO_UNDERRUN",
-        Ok(K::BringUpFailed) => "BRING_UP_FAILED",
-        Ok(K::Recovering) => "RECOVERING",
-        Ok(K::LastWriterGone) => "LAST_WRITER_GONE",
-        Ok(K::Lost) => "LOST",
-        Ok(K::Emergency) => "EMERGENCY",
-        _ => "UNKNOWN",
-    }
+    crate::values::enum_name(k, pb::EventKind::as_str_name, "EVENT_KIND_")
 }
 
 impl From<pb::Event> for EventLine {
@@ -223,8 +208,8 @@ impl Report for DiagReport {
 
 /// `diag`.
 pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
-    let r = api.diagnostics().get_counters(api.req(pb::GetCountersRequest {})).await;
-    let r = r.map_err(CliError::rpc("read counters"))?.into_inner();
+    // Counters come with the status and per-slave state with the slave list:
+    // Diagnostics.GetCounters would read every slave from the chip a second time.
     let info = api.master().get_info(api.req(pb::GetInfoRequest {})).await.map_err(CliError::rpc("master info"))?;
     let target = info.into_inner().target_state;
     let status = api.master().get_status(api.req(pb::GetStatusRequest {})).await;
@@ -235,9 +220,9 @@ pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
     if status.phase != pb::EnginePhase::Running as i32 {
         problems.push(format!("the engine is {}", crate::values::phase_name(status.phase)));
     }
-    let slaves: Vec<SlaveDiagReport> = r
+    let slaves: Vec<SlaveDiagReport> = list
         .slaves
-        .into_iter()
+        .iter()
         .map(|s| {
             let wrong_state = s.state != target;
             let suspect = wrong_state || s.al_status_code != 0;
@@ -258,10 +243,10 @@ pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
             }
             SlaveDiagReport {
                 position: s.position,
-                name: s.name,
+                name: s.name.clone(),
                 state: state_name(s.state).into(),
                 al_status_code: s.al_status_code,
-                al_status_text: s.al_status_text,
+                al_status_text: s.al_status_text.clone(),
                 suspect,
             }
         })
@@ -277,7 +262,7 @@ pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
         problems,
         state: state_name(status.ecat_state).into(),
         target_state: state_name(target).into(),
-        counters: r.counters.into(),
+        counters: status.counters.into(),
         slaves,
     })
 }

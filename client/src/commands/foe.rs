@@ -103,7 +103,7 @@ pub async fn run(api: &Api, out: Out, cmd: &FoeCommand) -> Result<(), CliError> 
             let b = bar(out);
             b.set_message(format!("reading {name}"));
             let last = follow(s, &b, &action).await?;
-            std::fs::write(&file, &last.data).map_err(|error| CliError::File { path: file.clone(), error })?;
+            std::fs::write(&file, &last.data).map_err(CliError::file(&file))?;
             out.report(&FoeReport {
                 slave,
                 direction: "read".into(),
@@ -114,7 +114,7 @@ pub async fn run(api: &Api, out: Out, cmd: &FoeCommand) -> Result<(), CliError> 
         }
         FoeCommand::Write { slave, file, name, password } => {
             let slave = slave.position;
-            let data = std::fs::read(file).map_err(|error| CliError::File { path: file.clone(), error })?;
+            let data = std::fs::read(file).map_err(CliError::file(file))?;
             let name = match name {
                 Some(n) => n.clone(),
                 None => file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),

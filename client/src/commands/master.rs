@@ -105,13 +105,7 @@ impl CountersReport {
 }
 
 fn check_name(v: i32) -> &'static str {
-    match pb::CheckType::try_from(v) {
-        Ok(pb::CheckType::Fixed) => "FIXED",
-        Ok(pb::CheckType::Crc8) => "CRC8",
-        Ok(pb::CheckType::Crc16) => "CRC16",
-        Ok(pb::CheckType::Crc32) => "CRC32",
-        _ => "UNKNOWN",
-    }
+    crate::values::enum_name(v, pb::CheckType::as_str_name, "CHECK_TYPE_")
 }
 
 impl Report for MasterReport {

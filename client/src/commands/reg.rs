@@ -39,15 +39,9 @@ impl Report for RegReport {
     }
 }
 
+/// A register type's size in bytes.
 fn size_of(t: pb::DataType) -> Option<u32> {
-    use pb::DataType as T;
-    match t {
-        T::Boolean | T::Integer8 | T::Unsigned8 => Some(1),
-        T::Integer16 | T::Unsigned16 => Some(2),
-        T::Integer32 | T::Unsigned32 | T::Real32 => Some(4),
-        T::Integer64 | T::Unsigned64 | T::Real64 => Some(8),
-        _ => None,
-    }
+    ecmxf_proto::value::type_size(t).map(|n| n as u32)
 }
 
 /// Little-endian bytes of an integer `value` for type `t`.

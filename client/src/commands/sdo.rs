@@ -206,11 +206,7 @@ pub async fn sdos(api: &Api, slave: u32) -> Result<SdosReport, CliError> {
     let req = api.req_for(pb::ListObjectsRequest { slave }, std::time::Duration::from_secs(30));
     let r = api.sdo().list_objects(req).await.map_err(CliError::rpc(format!("object dictionary of slave {slave}")))?;
     let r = r.into_inner();
-    let source = match pb::DictionarySource::try_from(r.source) {
-        Ok(pb::DictionarySource::Esi) => "ESI",
-        Ok(pb::DictionarySource::Probe) => "PROBE",
-        _ => "UNKNOWN",
-    };
+    let source = crate::values::enum_name(r.source, pb::DictionarySource::as_str_name, "DICTIONARY_SOURCE_");
     Ok(SdosReport {
         slave,
         source: source.into(),

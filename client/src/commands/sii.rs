@@ -232,10 +232,6 @@ impl Report for SiiDecodeReport {
     }
 }
 
-fn file_err(path: &std::path::Path) -> impl FnOnce(std::io::Error) -> CliError + '_ {
-    move |error| CliError::File { path: path.to_owned(), error }
-}
-
 /// Runs a `sii` subcommand and prints its result.
 pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> {
     match cmd {
@@ -252,7 +248,7 @@ pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> 
             let stdout = std::io::stdout();
             match output {
                 Some(p) => {
-                    std::fs::write(p, &image).map_err(file_err(p))?;
+                    std::fs::write(p, &image).map_err(CliError::file(p))?;
                     let file = Some(p.display().to_string());
                     out.report(&SiiDataReport { slave, word: 0, data: Hex::of(&image), file, bytes: image })?;
                 }
@@ -306,10 +302,10 @@ pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> 
                 (_, Some(h)) => parse_hex_bytes(h).map_err(|e| CliError::Usage(format!("--hex: {e}")))?,
                 (Some(p), None) if p.as_os_str() == "-" => {
                     let mut b = Vec::new();
-                    std::io::stdin().read_to_end(&mut b).map_err(file_err(p))?;
+                    std::io::stdin().read_to_end(&mut b).map_err(CliError::file(p))?;
                     b
                 }
-                (Some(p), None) => std::fs::read(p).map_err(file_err(p))?,
+                (Some(p), None) => std::fs::read(p).map_err(CliError::file(p))?,
                 (None, None) => return Err(CliError::Usage("sii write: give a FILE or --hex".into())),
             };
             if data.is_empty() || data.len() % 2 != 0 || data.len() > 8192 {
@@ -323,7 +319,7 @@ pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> 
                 PathBuf::from(format!("sii-backup-{slave}-{t}.bin"))
             });
             // Fail before touching the EEPROM if the backup cannot be kept.
-            std::fs::write(&backup_path, b"").map_err(file_err(&backup_path))?;
+            std::fs::write(&backup_path, b"").map_err(CliError::file(&backup_path))?;
             let words = (data.len() / 2) as u64;
             let req = api.req_for(pb::SiiWriteRequest { slave, word: *word, data }, Duration::from_millis(200 * words));
             let r = match api.sii().write(req).await {
@@ -333,7 +329,7 @@ pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> 
                     return Err(CliError::rpc(format!("write SII of slave {slave}"))(s));
                 }
             };
-            std::fs::write(&backup_path, &r.backup).map_err(file_err(&backup_path))?;
+            std::fs::write(&backup_path, &r.backup).map_err(CliError::file(&backup_path))?;
             out.report(&SiiWriteReport {
                 slave,
                 word: *word,

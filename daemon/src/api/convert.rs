@@ -50,6 +50,17 @@ pub fn slave(v: u32) -> Result<u8, Status> {
     u8::try_from(v).ok().filter(|s| *s < 128).ok_or_else(|| bad_argument("slave", format!("{v} is outside 0..=127")))
 }
 
+/// A slave position from a request that must name a slave on the ring
+/// (`count` found): the chip would only answer "refused" for one that is
+/// not there. Errors name `field`.
+pub fn existing_slave(v: u32, count: usize, field: &'static str) -> Result<u8, Status> {
+    let s = slave(v).map_err(|_| bad_argument(field, format!("{v} is outside 0..=127")))?;
+    if usize::from(s) >= count {
+        return Err(bad_argument(field, format!("slave {s} does not exist ({count} found)")));
+    }
+    Ok(s)
+}
+
 /// An object index from a request.
 pub fn index(v: u32) -> Result<u16, Status> {
     u16::try_from(v).map_err(|_| bad_argument("index", format!("{v:#x} is outside 0..=0xFFFF")))
@@ -60,65 +71,11 @@ pub fn subindex(v: u32) -> Result<u8, Status> {
     u8::try_from(v).map_err(|_| bad_argument("subindex", format!("{v:#x} is outside 0..=0xFF")))
 }
 
-/// Size in bytes of a fixed-size type, `None` for strings and unknown.
-pub fn type_size(t: pb::DataType) -> Option<usize> {
-    use pb::DataType as T;
-    Some(match t {
-        T::Boolean | T::Integer8 | T::Unsigned8 => 1,
-        T::Integer16 | T::Unsigned16 => 2,
-        T::Integer32 | T::Unsigned32 | T::Real32 => 4,
-        T::Integer64 | T::Unsigned64 | T::Real64 => 8,
-        T::VisibleString | T::OctetString | T::Unspecified => return None,
-    })
-}
+pub use ecmxf_proto::value::{decode_value, type_size};
 
 /// A type from a request field.
 pub fn data_type(v: i32) -> Result<pb::DataType, Status> {
     pb::DataType::try_from(v).map_err(|_| bad_argument("data_type", format!("{v} is not a DataType")))
-}
-
-/// Decodes bytes (little-endian) as `t`. Short data is an error naming the
-/// sizes; longer data is decoded from its start (complete access).
-pub fn decode_value(t: pb::DataType, raw: &[u8]) -> Result<Option<pb::Value>, String> {
-    use pb::DataType as T;
-    use pb::value::Kind;
-    if let Some(n) = type_size(t) {
-        if raw.len() < n {
-            return Err(format!("{} bytes received for a {}-byte {}", raw.len(), n, t.as_str_name()));
-        }
-    }
-    let mut b = [0u8; 8];
-    let n = raw.len().min(8);
-    b[..n].copy_from_slice(&raw[..n]);
-    let signed = |bytes: usize| {
-        let v = u64::from_le_bytes(b);
-        let shift = 64 - 8 * bytes as u32;
-        ((v << shift) as i64) >> shift
-    };
-    let unsigned = |bytes: usize| {
-        let v = u64::from_le_bytes(b);
-        if bytes == 8 { v } else { v & ((1u64 << (8 * bytes)) - 1) }
-    };
-    let kind = match t {
-        T::Unspecified => return Ok(None),
-        T::Boolean => Kind::Boolean(b[0] != 0),
-        T::Integer8 => Kind::Integer(signed(1)),
-        T::Integer16 => Kind::Integer(signed(2)),
-        T::Integer32 => Kind::Integer(signed(4)),
-        T::Integer64 => Kind::Integer(signed(8)),
-        T::Unsigned8 => Kind::Unsigned(unsigned(1)),
-        T::Unsigned16 => Kind::Unsigned(unsigned(2)),
-        T::Unsigned32 => Kind::Unsigned(unsigned(4)),
-        T::Unsigned64 => Kind::Unsigned(unsigned(8)),
-        T::Real32 => Kind::Real(f32::from_le_bytes([b[0], b[1], b[2], b[3]]).into()),
-        T::Real64 => Kind::Real(f64::from_le_bytes(b)),
-        T::VisibleString => {
-            let end = raw.iter().position(|&c| c == 0).unwrap_or(raw.len());
-            Kind::Text(String::from_utf8_lossy(&raw[..end]).into_owned())
-        }
-        T::OctetString => Kind::Raw(raw.to_vec()),
-    };
-    Ok(Some(pb::Value { kind: Some(kind) }))
 }
 
 /// Encodes `value` as `t`; a raw value is taken as it is. Errors name

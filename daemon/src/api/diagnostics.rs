@@ -188,6 +188,6 @@ impl DiagnosticsApi for DiagnosticsService {
                 al_status_text: s.al_status_text,
             })
             .collect();
-        Ok(Response::new(pb::GetCountersResponse { counters: Some(counters_pb(&self.0.master)), slaves }))
+        Ok(Response::new(pb::GetCountersResponse { counters: Some(counters_pb(&self.0.master.status())), slaves }))
     }
 }

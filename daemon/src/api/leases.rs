@@ -49,13 +49,7 @@ impl Leases {
         } else {
             let mut v = Vec::with_capacity(slaves.len());
             for &s in slaves {
-                if s as usize >= count {
-                    return Err(super::status::bad_argument(
-                        "slaves",
-                        format!("slave {s} does not exist ({count} found)"),
-                    ));
-                }
-                v.push(s as u8);
+                v.push(super::convert::existing_slave(s, count, "slaves")?);
             }
             v.sort_unstable();
             v.dedup();

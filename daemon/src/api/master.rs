@@ -15,7 +15,7 @@ use tonic::{Request, Response, Status};
 
 use super::auth::Role;
 use super::bounded;
-use super::convert::{phase_to_pb, slave, state_from_pb, state_to_pb};
+use super::convert::{phase_to_pb, state_from_pb, state_to_pb};
 use super::status::to_status;
 use super::{Context, wait_budget};
 use crate::config::SlaveConfig;
@@ -40,7 +40,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
         blocking_busy: status.contains(ecmxf_wire::flags::StatusFlags::BLOCKING_BUSY),
         rx_fifo_level: s.rx_fifo.into(),
         tx_fifo_level: s.tx_fifo.into(),
-        counters: Some(counters_pb(m)),
+        counters: Some(counters_pb(&s)),
         last_error: m.last_error().unwrap_or_default(),
         output_writers: m.output_writers() as u32,
         config_generation: s.config_generation,
@@ -48,8 +48,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
 }
 
 /// The counters from the engine's snapshot.
-pub fn counters_pb(m: &Master) -> pb::Counters {
-    let s = m.status();
+pub fn counters_pb(s: &crate::engine::telemetry::Snapshot) -> pb::Counters {
     pb::Counters {
         crc_errors: s.crc_errors.into(),
         wkc_errors: s.wkc_errors.into(),
@@ -248,13 +247,7 @@ pub struct StateService(pub Arc<Context>);
 fn selector(slave_field: Option<u32>, count: usize) -> Result<SlaveSelector, Status> {
     match slave_field {
         None => Ok(SlaveSelector::All),
-        Some(v) => {
-            let s = slave(v)?;
-            if usize::from(s) >= count {
-                return Err(super::status::bad_argument("slave", format!("slave {s} does not exist ({count} found)")));
-            }
-            Ok(SlaveSelector::One(s))
-        }
+        Some(v) => Ok(SlaveSelector::One(super::convert::existing_slave(v, count, "slave")?)),
     }
 }
 

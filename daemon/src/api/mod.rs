@@ -82,12 +82,7 @@ impl Context {
     /// (INVALID_ARGUMENT naming `slave` otherwise: the chip would only
     /// answer "refused" for a slave that is not there).
     pub fn slave(&self, v: u32) -> Result<u8, Status> {
-        let s = convert::slave(v)?;
-        let count = self.master.layout().slaves.len();
-        if usize::from(s) >= count {
-            return Err(status::bad_argument("slave", format!("slave {s} does not exist ({count} found)")));
-        }
-        Ok(s)
+        convert::existing_slave(v, self.master.layout().slaves.len(), "slave")
     }
 
     /// Takes the `[api]` roles, tokens and client certificates of a reloaded

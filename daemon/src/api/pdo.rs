@@ -13,7 +13,7 @@ use tonic::{Request, Response, Status, Streaming};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{encode_value, slave};
+use super::convert::{encode_value, existing_slave};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
@@ -139,13 +139,7 @@ impl ProcessDataApi for ProcessDataService {
         let m = &self.0.master;
         let count = m.layout().slaves.len();
         let which: Vec<u8> = match request.get_ref().slave {
-            Some(s) => {
-                let s = slave(s)?;
-                if usize::from(s) >= count {
-                    return Err(bad_argument("slave", format!("slave {s} does not exist ({count} found)")));
-                }
-                vec![s]
-            }
+            Some(s) => vec![existing_slave(s, count, "slave")?],
             None => (0..count as u8).collect(),
         };
         let t = caller.deadline;
@@ -168,12 +162,9 @@ impl ProcessDataApi for ProcessDataService {
     ) -> Result<Response<pb::SetMappingResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let mapping = request.get_ref().mapping.clone().ok_or_else(|| bad_argument("mapping", "no mapping given"))?;
-        let s = usize::from(slave(mapping.slave)?);
         let m = &self.0.master;
         let count = m.layout().slaves.len();
-        if s >= count {
-            return Err(bad_argument("mapping.slave", format!("slave {s} does not exist ({count} found)")));
-        }
+        let s = usize::from(existing_slave(mapping.slave, count, "mapping.slave")?);
         let rx = pdos_from_pb(&mapping.rx_pdos, "mapping.rx_pdos")?;
         let tx = pdos_from_pb(&mapping.tx_pdos, "mapping.tx_pdos")?;
         let previous = m.config();
