@@ -18,6 +18,14 @@ pub use ecmxf_sim::config::ConfigError;
 /// The file format version this build reads.
 pub const VERSION: u32 = 1;
 
+/// The DC cycle range, us: at least 125 us (PROTOCOL-NOTES "Chip limits"),
+/// at most what SYNC0's 32-bit nanosecond register holds (ECAT_INIT's
+/// cycle field, v049 命令 1).
+pub const SYNC0_US: std::ops::RangeInclusive<u32> = 125..=(u32::MAX / 1000);
+
+/// CPUs the affinity mask can name (the kernel's `CPU_SETSIZE`).
+pub const MAX_CPUS: usize = 1024;
+
 /// The whole file.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -399,7 +407,7 @@ impl Config {
     /// are taken relative to the file's folder.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
         let mut c: Self = toml::from_str(text).map_err(|e| ConfigError::Toml(path.into(), e.to_string()))?;
-        c.validate(path)?;
+        c.validate(path).map_err(|e| e.at_line(text))?;
         let base = path.parent().unwrap_or(Path::new(""));
         let resolve = |p: &mut PathBuf| {
             if p.is_relative() {
@@ -422,7 +430,7 @@ impl Config {
 
     /// Reads, parses and validates a file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io(path.into(), e))?;
+        let text = ConfigError::read(path)?;
         Self::parse(&text, path)
     }
 
@@ -442,13 +450,79 @@ impl Config {
         if !(32..=1408).contains(&self.chip.data_size) {
             return bad("chip.data_size", format!("{} is outside 32..=1408", self.chip.data_size));
         }
+        if !(1..=60_000).contains(&self.chip.ready_timeout_ms) {
+            return bad("chip.ready_timeout_ms", format!("{} ms is outside 1..=60000", self.chip.ready_timeout_ms));
+        }
         if self.realtime.priority > 99 {
             return bad("realtime.priority", format!("{} is outside 0..=99", self.realtime.priority));
         }
-        if self.cycle.sync0_us < 125 {
-            return bad("cycle.sync0_us", format!("{} us is below the chip's 125 us minimum", self.cycle.sync0_us));
+        if let Some(cpu) = self.realtime.cpu {
+            if cpu >= MAX_CPUS {
+                return bad("realtime.cpu", format!("CPU {cpu} is outside 0..{MAX_CPUS} (the kernel's CPU set)"));
+            }
+        }
+        if self.realtime.spin_us > 100_000 {
+            return bad("realtime.spin_us", format!("{} us is outside 0..=100000", self.realtime.spin_us));
+        }
+        if !SYNC0_US.contains(&self.cycle.sync0_us) {
+            return bad(
+                "cycle.sync0_us",
+                format!(
+                    "{} us is outside the chip's {}..={} us (SYNC0 is a 32-bit nanosecond register)",
+                    self.cycle.sync0_us,
+                    SYNC0_US.start(),
+                    SYNC0_US.end()
+                ),
+            );
         }
         let c = &self.cycle;
+        let cycle_ns = i64::from(c.sync0_us) * 1000;
+        for (key, shift) in std::iter::once(("cycle.shift_ns".to_string(), Some(c.shift_ns)))
+            .chain(self.slaves.iter().enumerate().map(|(i, s)| (format!("slave[{i}].dc_shift_ns"), s.dc_shift_ns)))
+        {
+            if let Some(shift) = shift {
+                if i64::from(shift).abs() >= cycle_ns {
+                    return bad(&key, format!("{shift} ns is not within one cycle (+-{cycle_ns} ns)"));
+                }
+            }
+        }
+        if c.fifo_tx_depth == 0 {
+            return bad("cycle.fifo_tx_depth", "0 frames: the TxFIFO needs at least 1".into());
+        }
+        if c.wkc_error_limit == 0 {
+            return bad("cycle.wkc_error_limit", "0 is outside 1..=255 (255: never stop)".into());
+        }
+        let r = &self.recovery;
+        if !(1..=60_000).contains(&r.backoff_ms) {
+            return bad("recovery.backoff_ms", format!("{} ms is outside 1..=60000", r.backoff_ms));
+        }
+        if r.max_backoff_ms < r.backoff_ms || r.max_backoff_ms > 600_000 {
+            return bad(
+                "recovery.max_backoff_ms",
+                format!("{} ms is outside backoff_ms..=600000 ({}..=600000)", r.max_backoff_ms, r.backoff_ms),
+            );
+        }
+        if self.slaves.len() > ecmxf_sim::config::MAX_SLAVES {
+            return bad(
+                "slave",
+                format!("{} slaves; the chip takes at most {}", self.slaves.len(), ecmxf_sim::config::MAX_SLAVES),
+            );
+        }
+        if let LinkConfig::Spidev { spi_hz, idle_us, debounce_us, .. } = &self.link {
+            let range = ecmxf_sim::config::SPI_HZ;
+            if !range.contains(&u64::from(*spi_hz)) {
+                return bad(
+                    "link.spi_hz",
+                    format!("{spi_hz} Hz is outside the chip's {}..={} Hz", range.start(), range.end()),
+                );
+            }
+            if *idle_us > 1_000_000 {
+                return bad("link.idle_us", format!("{idle_us} us is outside 100..=1000000"));
+            }
+            if debounce_us.is_some_and(|d| d > 100_000) {
+                return bad("link.debounce_us", format!("{} us is outside 0..=100000", debounce_us.unwrap_or(0)));
+            }
+        }
         if c.fifo_low >= c.fifo_high || c.fifo_high > c.fifo_rx_depth {
             return bad(
                 "cycle.fifo_high",
@@ -541,6 +615,15 @@ mod tests {
     const MINIMAL: &str = "version = 1\n[link]\nbackend = \"sim\"\n";
 
     #[test]
+    fn every_mistake_names_its_line() {
+        let e = parse(&format!("{MINIMAL}[cycle]\nfifo_rx_depth = 10\n\nsync0_us = 50\n")).unwrap_err().to_string();
+        assert!(e.contains("line 7") && e.contains("cycle.sync0_us"), "{e}");
+        let spi = "version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nspi_hz = 0\n";
+        let e = parse(spi).unwrap_err().to_string();
+        assert!(e.contains("line 5") && e.contains("link.spi_hz") && e.contains("96000000"), "{e}");
+    }
+
+    #[test]
     fn minimal_and_full() {
         let c = parse(MINIMAL).unwrap();
         assert_eq!(c.link, LinkConfig::Sim { network: None });
@@ -583,6 +666,18 @@ slave = 0
         assert!(e.contains("sync0") && e.contains("line 5"), "{e}");
         let e = parse(&format!("{MINIMAL}[cycle]\nsync0_us = 100\n")).unwrap_err().to_string();
         assert!(e.contains("cycle.sync0_us") && e.contains("125"), "{e}");
+        let e = parse(&format!("{MINIMAL}[cycle]\nsync0_us = 1000000000\n")).unwrap_err().to_string();
+        assert!(e.contains("cycle.sync0_us") && e.contains("4294967") && e.contains("32-bit"), "{e}");
+        assert!(parse(&format!("{MINIMAL}[cycle]\nsync0_us = 4294967\n")).is_ok(), "the largest SYNC0 fits");
+        let e = parse(&format!("{MINIMAL}[realtime]\ncpu = 99999999999\n")).unwrap_err().to_string();
+        assert!(e.contains("realtime.cpu"), "{e}");
+        let e =
+            parse(&format!("{MINIMAL}[recovery]\nbackoff_ms = 500\nmax_backoff_ms = 100\n")).unwrap_err().to_string();
+        assert!(e.contains("recovery.max_backoff_ms"), "{e}");
+        let e = parse(&format!("{MINIMAL}[cycle]\nshift_ns = 2000000\n")).unwrap_err().to_string();
+        assert!(e.contains("cycle.shift_ns"), "{e}");
+        let e = parse(&format!("{MINIMAL}{}", "[[slave]]\n".repeat(129))).unwrap_err().to_string();
+        assert!(e.contains("129 slaves"), "{e}");
         let e = parse(&format!("{MINIMAL}[chip]\ndata_size = 2000\n")).unwrap_err().to_string();
         assert!(e.contains("chip.data_size"), "{e}");
         let e = parse("version = 2\n[link]\nbackend = \"sim\"\n").unwrap_err().to_string();

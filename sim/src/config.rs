@@ -94,6 +94,27 @@ pub enum ConfigError {
         /// What is wrong.
         message: String,
     },
+    /// The value of `key` is wrong, at this line (see [`ConfigError::at_line`]).
+    InvalidAt {
+        /// The file.
+        file: PathBuf,
+        /// 1-based line of the key (or of the nearest table on its path,
+        /// when the key itself is not written).
+        line: usize,
+        /// The key.
+        key: String,
+        /// What is wrong.
+        message: String,
+    },
+    /// The file is not UTF-8 text.
+    NotText {
+        /// The file.
+        file: PathBuf,
+        /// 1-based line of the first byte that is not UTF-8.
+        line: usize,
+        /// Byte offset of it.
+        offset: usize,
+    },
 }
 
 impl fmt::Display for ConfigError {
@@ -102,29 +123,131 @@ impl fmt::Display for ConfigError {
             Self::Io(p, e) => write!(f, "{}: {e}", p.display()),
             Self::Toml(p, e) => write!(f, "{}: {e}", p.display()),
             Self::Invalid { file, key, message } => write!(f, "{}: {key}: {message}", file.display()),
+            Self::InvalidAt { file, line, key, message } => {
+                write!(f, "{}: line {line}: {key}: {message}", file.display())
+            }
+            Self::NotText { file, line, offset } => {
+                write!(
+                    f,
+                    "{}: line {line}: not UTF-8 text (byte offset {offset}); is this a TOML file?",
+                    file.display()
+                )
+            }
         }
     }
 }
 
+impl ConfigError {
+    /// The same error, with the line of its key in `text` where it can be
+    /// found.
+    pub fn at_line(self, text: &str) -> Self {
+        match self {
+            Self::Invalid { file, key, message } => match key_line(text, &key) {
+                Some(line) => Self::InvalidAt { file, line, key, message },
+                None => Self::Invalid { file, key, message },
+            },
+            other => other,
+        }
+    }
+
+    /// Reads a configuration file as text: I/O errors and bytes that are not
+    /// UTF-8 (a binary file given by mistake) are errors naming the file
+    /// and, for the latter, the line.
+    pub fn read(path: &Path) -> Result<String, Self> {
+        let bytes = std::fs::read(path).map_err(|e| Self::Io(path.into(), e))?;
+        String::from_utf8(bytes).map_err(|e| {
+            let offset = e.utf8_error().valid_up_to();
+            let line = e.as_bytes()[..offset].iter().filter(|b| **b == b'\n').count() + 1;
+            Self::NotText { file: path.into(), line, offset }
+        })
+    }
+}
+
+/// The 1-based line where a dotted key (`cycle.sync0_us`, `slave[2].alias`)
+/// is written in `text`; the nearest table on its path when the key itself
+/// is not written (a default that conflicts with a written value).
+pub fn key_line(text: &str, key: &str) -> Option<usize> {
+    use toml::de::{DeTable, DeValue};
+    let root = DeTable::parse(text).ok()?;
+    let mut table = root.get_ref();
+    let mut at = None;
+    for part in key.split('.') {
+        let (name, index) = match part.split_once('[') {
+            Some((n, rest)) => (n, rest.trim_end_matches(']').parse::<usize>().ok()),
+            None => (part, None),
+        };
+        let Some((k, v)) = table.iter().find(|(k, _)| k.get_ref() == name) else { break };
+        at = Some(k.span().start);
+        let mut value = v;
+        if let Some(i) = index {
+            let DeValue::Array(items) = v.get_ref() else { break };
+            let Some(item) = items.get(i) else { break };
+            at = Some(item.span().start);
+            value = item;
+        }
+        let DeValue::Table(t) = value.get_ref() else { break };
+        table = t;
+    }
+    at.map(|offset| text[..offset.min(text.len())].matches('\n').count() + 1)
+}
+
 impl std::error::Error for ConfigError {}
+
+/// The chip's SPI clock range, Hz: up to 96 Mbit/s (v049 硬體規格
+/// "傳輸率 96Mbps(max.)"); below 100 kHz one packet takes longer than a
+/// DC cycle could ever wait, so a smaller figure is a typo.
+pub const SPI_HZ: std::ops::RangeInclusive<u64> = 100_000..=96_000_000;
+/// Slaves the chip takes (PROTOCOL-NOTES "Chip limits").
+pub const MAX_SLAVES: usize = 128;
 
 impl NetworkFile {
     /// Parses and checks the text of a file at `path`.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
         let file: Self = toml::from_str(text).map_err(|e| ConfigError::Toml(path.into(), e.to_string()))?;
-        if file.version != VERSION {
-            return Err(ConfigError::Invalid {
-                file: path.into(),
-                key: "version".into(),
-                message: format!("version {} is not supported (this build reads {VERSION})", file.version),
-            });
-        }
+        file.validate(path).map_err(|e| e.at_line(text))?;
         Ok(file)
+    }
+
+    /// Checks the values the schema cannot: version, ranges, the chip's
+    /// limits, unique aliases.
+    fn validate(&self, path: &Path) -> Result<(), ConfigError> {
+        let bad =
+            |key: &str, message: String| Err(ConfigError::Invalid { file: path.into(), key: key.into(), message });
+        if self.version != VERSION {
+            return bad("version", format!("version {} is not supported (this build reads {VERSION})", self.version));
+        }
+        if let Some(hz) = self.chip.spi_hz {
+            if !SPI_HZ.contains(&hz) {
+                return bad(
+                    "chip.spi_hz",
+                    format!("{hz} Hz is outside the chip's {}..={} Hz", SPI_HZ.start(), SPI_HZ.end()),
+                );
+            }
+        }
+        if let Some(us) = self.chip.processing_us {
+            if !(1..=10_000).contains(&us) {
+                return bad("chip.processing_us", format!("{us} us is outside 1..=10000"));
+            }
+        }
+        if self.slaves.len() > MAX_SLAVES {
+            return bad("slave", format!("{} slaves; the chip takes at most {MAX_SLAVES}", self.slaves.len()));
+        }
+        for (i, s) in self.slaves.iter().enumerate() {
+            if s.alias != 0 {
+                if let Some(j) = self.slaves[..i].iter().position(|o| o.alias == s.alias) {
+                    return bad(
+                        &format!("slave[{i}].alias"),
+                        format!("alias {} is already slave {j}'s; aliases address one slave each", s.alias),
+                    );
+                }
+            }
+        }
+        Ok(())
     }
 
     /// Reads and checks a file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|e| ConfigError::Io(path.into(), e))?;
+        let text = ConfigError::read(path)?;
         Self::parse(&text, path)
     }
 
@@ -149,7 +272,12 @@ impl NetworkFile {
         let base = path.parent().unwrap_or(Path::new("."));
         let mut slaves = Vec::new();
         for (i, s) in self.slaves.iter().enumerate() {
-            slaves.push(s.build(i, base, path)?);
+            // The line of the slave at fault, when the file can be read.
+            let at_line = |e: ConfigError| match std::fs::read_to_string(path) {
+                Ok(text) => e.at_line(&text),
+                Err(_) => e,
+            };
+            slaves.push(s.build(i, base, path).map_err(at_line)?);
         }
         if slaves.is_empty() {
             return Err(ConfigError::Invalid {
@@ -236,5 +364,43 @@ mod tests {
         let f = parse("version = 1\n[[slave]]\nesi = \"missing.xml\"\n").unwrap();
         let e = f.build(Path::new("net.toml")).unwrap_err().to_string();
         assert!(e.contains("slave[0].esi") && e.contains("missing.xml"), "{e}");
+    }
+
+    #[test]
+    fn values_outside_the_chip_s_limits_are_refused_with_their_line() {
+        let e = parse("version = 1\n[chip]\nspi_hz = 0\n").unwrap_err().to_string();
+        assert!(e.contains("line 3") && e.contains("chip.spi_hz") && e.contains("96000000"), "{e}");
+        let e = parse(
+            "version = 1\n[[slave]]\nprofile = \"coupler\"\nalias = 7\n[[slave]]\nprofile = \"coupler\"\nalias = 7\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("slave[1].alias") && e.contains("slave 0") && e.contains("line 7"), "{e}");
+        let many = "[[slave]]\nprofile = \"coupler\"\n".repeat(129);
+        let e = parse(&format!("version = 1\n{many}")).unwrap_err().to_string();
+        assert!(e.contains("129 slaves") && e.contains("128"), "{e}");
+        assert!(parse(&format!("version = 1\n{}", "[[slave]]\nprofile = \"coupler\"\n".repeat(128))).is_ok());
+    }
+
+    #[test]
+    fn keys_are_found_at_their_lines() {
+        let text =
+            "version = 1\n\n[cycle]\nsync0_us = 5\n\n[[slave]]\nname = \"a\"\n[[slave]]\nname = \"b\"\nalias = 3\n";
+        assert_eq!(key_line(text, "version"), Some(1));
+        assert_eq!(key_line(text, "cycle.sync0_us"), Some(4));
+        assert_eq!(key_line(text, "cycle.fifo_high"), Some(3), "not written: its table");
+        assert_eq!(key_line(text, "slave[1].alias"), Some(10));
+        assert_eq!(key_line(text, "nothing"), None);
+    }
+
+    #[test]
+    fn a_binary_file_is_named_as_such() {
+        let dir = std::env::temp_dir().join(format!("ecmxf-sim-bin-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let p = dir.join("garbage.toml");
+        std::fs::write(&p, b"version = 1\n\xff\xfe\x00binary").unwrap();
+        let e = NetworkFile::load(&p).unwrap_err().to_string();
+        assert!(e.contains("line 2") && e.contains("not UTF-8"), "{e}");
+        let _ = std::fs::remove_dir_all(&dir);
     }
 }
