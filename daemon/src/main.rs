@@ -79,6 +79,10 @@ fn service_status(m: &Master) -> String {
     }
 }
 
+/// How long open streams (events, inputs) get to end by themselves at
+/// shutdown before their connections are cut.
+const STREAM_GRACE: Duration = Duration::from_millis(200);
+
 /// Runs until SIGINT/SIGTERM (or a fatal error): the engine, the API, the
 /// optional metrics endpoint, systemd notifications and SIGHUP reloads.
 async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, logging: Logging) -> Result<(), String> {
@@ -89,7 +93,6 @@ async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, lo
         None => None,
     };
     let mut running = config.clone();
-    let target = config.cycle.target();
     let (master, _sim) = Master::from_config(config).map_err(|e| e.to_string())?;
     let master = Arc::new(master);
     let ctx = Context::new(Arc::clone(&master), &api, nix::unistd::getuid().as_raw());
@@ -140,10 +143,9 @@ async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, lo
             }
             _ = watchdog.tick(), if watchdog_every.is_some() => {
                 let s = master.status();
-                if s.phase != Phase::Stopped && liveness.advanced(s.exchanges) {
-                    notifier.send("WATCHDOG=1");
-                } else {
-                    warn!(phase = ?s.phase, exchanges = s.exchanges, "the real-time loop made no exchange since the last watchdog ping: not pinging");
+                match liveness.verdict(&s, master.health()) {
+                    Ok(()) => notifier.send("WATCHDOG=1"),
+                    Err(why) => warn!(phase = ?s.phase, exchanges = s.exchanges, "{why}: not pinging the watchdog"),
                 }
             }
             _ = ticker.tick(), if status_every > 0 => info!("{}", status_line(&master)),
@@ -168,8 +170,9 @@ async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, lo
                         status_sent = status;
                     }
                 }
-                // READY only once bring-up reached the configured state.
-                if !ready && s.phase == Phase::Running && s.ecat_state == target {
+                // READY only once bring-up reached the configured state and
+                // process data flows.
+                if !ready && master.health().is_healthy() {
                     ready = true;
                     notifier.send(&format!("READY=1\nSTATUS={status_sent}"));
                 }
@@ -180,11 +183,21 @@ async fn run(config: Config, config_path: Option<PathBuf>, status_every: u64, lo
             }
         }
     }
+    // The bus first and at once: axes disabled and slaves in INIT within a
+    // second, whatever clients are attached. The API stops taking calls
+    // meanwhile; streams still open after a short grace are cut.
     notifier.send("STOPPING=1\nSTATUS=stopping: bringing the network down");
+    let started = std::time::Instant::now();
+    let bus = tokio::task::spawn_blocking({
+        let master = Arc::clone(&master);
+        move || master.stop()
+    });
     let _ = stop_api.send(());
-    let _ = tokio::time::timeout(Duration::from_secs(2), server).await;
-    tokio::task::spawn_blocking(move || master.stop()).await.map_err(|e| e.to_string())?;
-    info!("stopped");
+    if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
+        server.abort();
+    }
+    bus.await.map_err(|e| e.to_string())?;
+    info!(took_ms = started.elapsed().as_millis() as u64, "stopped");
     Ok(())
 }
 
@@ -295,7 +308,10 @@ fn main() -> ExitCode {
             return ExitCode::FAILURE;
         }
     };
-    match rt.block_on(run(config, cli.config.clone(), cli.status_every, logging)) {
+    let result = rt.block_on(run(config, cli.config.clone(), cli.status_every, logging));
+    // Connections cut at shutdown are not waited for.
+    rt.shutdown_timeout(Duration::from_millis(100));
+    match result {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             error!("{e}");

@@ -89,7 +89,7 @@ pub async fn render(ctx: &Context) -> String {
         let _ = writeln!(out, "ecmxf_engine_phase{{phase=\"{}\"}} {}", p.as_str_name(), u8::from(p == phase));
     }
     // (name, type, help, value): one sample each.
-    let single: [(&str, &str, &str, String); 20] = [
+    let single: [(&str, &str, &str, String); 23] = [
         (
             "ecmxf_network_state",
             "gauge",
@@ -97,12 +97,35 @@ pub async fn render(ctx: &Context) -> String {
             s.ecat_state.to_string(),
         ),
         ("ecmxf_exchanges_total", "counter", "SPI packets exchanged with the chip.", c.exchanges.to_string()),
-        ("ecmxf_chip_crc_errors", "gauge", "The chip's own 8-bit SPI CRC error counter.", c.crc_errors.to_string()),
         (
-            "ecmxf_chip_wkc_errors",
-            "gauge",
-            "The chip's own 8-bit working-counter error counter.",
+            "ecmxf_crc_errors_total",
+            "counter",
+            "SPI packets the chip received with bad check words (accumulated from its 8-bit counter).",
+            c.crc_errors.to_string(),
+        ),
+        (
+            "ecmxf_wkc_errors_total",
+            "counter",
+            "Cycles with a wrong working counter (accumulated from the chip's 8-bit counter).",
             c.wkc_errors.to_string(),
+        ),
+        (
+            "ecmxf_process_data_flowing",
+            "gauge",
+            "1 while the engine runs in the target state and input frames arrive within the limit.",
+            u8::from(s.process_data_flowing).to_string(),
+        ),
+        (
+            "ecmxf_input_age_seconds",
+            "gauge",
+            "Age of the newest input frame (0 while no cyclic exchange runs).",
+            (s.input_age_us as f64 / 1e6).to_string(),
+        ),
+        (
+            "ecmxf_ring_overflows_total",
+            "counter",
+            "Input frames dropped before any subscriber saw them (the distributor fell behind).",
+            c.ring_overflows.to_string(),
         ),
         (
             "ecmxf_corrupt_answers_total",
@@ -122,7 +145,7 @@ pub async fn render(ctx: &Context) -> String {
         (
             "ecmxf_input_batches_lost_total",
             "counter",
-            "Input batches a subscriber could not take.",
+            "FIFO answers lost (corrupt): batches of input frames never received.",
             c.input_batches_lost.to_string(),
         ),
         (

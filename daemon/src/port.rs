@@ -19,7 +19,9 @@
 //! A packet the chip was not ready for comes back with the "not ready" check
 //! word and was not taken: it is resent as is.
 
-use std::time::Duration;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::ControlFlags;
 use ecmxf_wire::framing::{DATA_DEFAULT, DATA_MAX, PacketLayout};
@@ -52,6 +54,9 @@ pub enum PortError {
     },
     /// The packet size could not be found in the byte stream.
     Unsynchronized,
+    /// The daemon is stopping: the wait was abandoned (see
+    /// [`Port::set_abort`]).
+    Aborted,
 }
 
 impl std::fmt::Display for PortError {
@@ -67,6 +72,7 @@ impl std::fmt::Display for PortError {
                 write!(f, "no intact answer to {code} after {attempts} attempts")
             }
             Self::Unsynchronized => f.write_str("no packet boundary found in the chip's byte stream"),
+            Self::Aborted => f.write_str("stopped while waiting for the chip"),
         }
     }
 }
@@ -78,6 +84,9 @@ impl From<LinkError> for PortError {
         Self::Link(e)
     }
 }
+
+/// The longest single wait for INT0: how soon an abort is seen.
+pub const WAIT_SLICE: Duration = Duration::from_millis(100);
 
 /// Exchange counters.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -126,6 +135,7 @@ pub struct Port<L> {
     /// Control bits to send with the next packet (error clears).
     pub pending_control: ControlFlags,
     ready_timeout: Duration,
+    abort: Option<Arc<AtomicBool>>,
     max_attempts: u32,
     status: ResponseHeader,
     stats: PortStats,
@@ -146,6 +156,7 @@ impl<L: Link> Port<L> {
             last_sent: None,
             pending_control: ControlFlags::empty(),
             ready_timeout: Duration::from_millis(100),
+            abort: None,
             max_attempts: 16,
             status: ResponseHeader::default(),
             stats: PortStats::default(),
@@ -165,6 +176,61 @@ impl<L: Link> Port<L> {
     /// How long to wait for INT0 before giving up.
     pub fn set_ready_timeout(&mut self, t: Duration) {
         self.ready_timeout = t;
+    }
+
+    /// While `flag` is set, every exchange fails with
+    /// [`PortError::Aborted`] instead of waiting for INT0, and a wait in
+    /// progress ends within [`WAIT_SLICE`]: a daemon told to stop during
+    /// bring-up or recovery (a chip that never gets ready, a link that
+    /// hangs) stops within a second. `None` disarms it (the safe stop
+    /// itself must reach the chip).
+    pub fn set_abort(&mut self, flag: Option<Arc<AtomicBool>>) {
+        self.abort = flag;
+    }
+
+    fn aborted(&self) -> bool {
+        self.abort.as_ref().is_some_and(|f| f.load(Ordering::Relaxed))
+    }
+
+    /// Waits for INT0 up to the ready timeout, in slices so an abort is
+    /// seen; `Ok(false)` on time-out.
+    fn wait_ready(&mut self) -> Result<bool, PortError> {
+        let start = Instant::now();
+        loop {
+            if self.aborted() {
+                return Err(PortError::Aborted);
+            }
+            let left = self.ready_timeout.saturating_sub(start.elapsed());
+            if left.is_zero() {
+                return Ok(false);
+            }
+            if self.link.wait_ready(left.min(WAIT_SLICE))? {
+                return Ok(true);
+            }
+        }
+    }
+
+    /// One transfer after INT0 said ready. A link that waits for INT0 as
+    /// part of the transfer ([`LinkError::NotReady`]) is given the rest of
+    /// the ready timeout, slice by slice.
+    fn transfer(&mut self, tx_rx: (&[u8], &mut [u8])) -> Result<(), PortError> {
+        let (tx, rx) = tx_rx;
+        let start = Instant::now();
+        loop {
+            match self.link.transfer(tx, rx) {
+                Err(LinkError::NotReady) => {
+                    if self.aborted() {
+                        return Err(PortError::Aborted);
+                    }
+                    let left = self.ready_timeout.saturating_sub(start.elapsed());
+                    if left.is_zero() {
+                        return Err(PortError::NotReady(self.ready_timeout));
+                    }
+                    self.link.wait_ready(left.min(WAIT_SLICE))?;
+                }
+                r => return r.map_err(PortError::Link),
+            }
+        }
     }
 
     /// Counters.
@@ -205,12 +271,15 @@ impl<L: Link> Port<L> {
 
     /// Waits for INT0, clocks `self.tx`, decodes into `self.rx`.
     fn clock(&mut self, decode_as: CheckType) -> Result<Received, PortError> {
-        if !self.link.wait_ready(self.ready_timeout)? {
+        if !self.wait_ready()? {
             return Err(PortError::NotReady(self.ready_timeout));
         }
         self.rx.clear();
         self.rx.resize(self.tx.len(), 0);
-        self.link.transfer(&self.tx, &mut self.rx)?;
+        let (tx, mut rx) = (std::mem::take(&mut self.tx), std::mem::take(&mut self.rx));
+        let r = self.transfer((&tx, &mut rx));
+        (self.tx, self.rx) = (tx, rx);
+        r?;
         self.stats.exchanges += 1;
         Ok(match decode_response(&self.rx, decode_as) {
             Ok(p) => {
@@ -372,10 +441,10 @@ impl<L: Link> Port<L> {
             if stream.len() > 3 * (DATA_MAX + 32) {
                 return Err(PortError::Unsynchronized);
             }
-            if !self.link.wait_ready(self.ready_timeout)? {
+            if !self.wait_ready()? {
                 return Err(PortError::NotReady(self.ready_timeout));
             }
-            self.link.transfer(&[0], &mut byte)?;
+            self.transfer((&[0], &mut byte))?;
             stream.push(byte[0]);
             if stream.ends_with(&END_START) {
                 starts.push(stream.len() - 4);
@@ -385,10 +454,10 @@ impl<L: Link> Port<L> {
         let in_packet = stream.len() - starts[1];
         let fill = vec![0u8; layout.packet_len() - in_packet];
         let mut sink = vec![0u8; fill.len()];
-        if !self.link.wait_ready(self.ready_timeout)? {
+        if !self.wait_ready()? {
             return Err(PortError::NotReady(self.ready_timeout));
         }
-        self.link.transfer(&fill, &mut sink)?;
+        self.transfer((&fill, &mut sink))?;
         self.layout = layout;
         self.last_sent = None;
         for _ in 0..self.max_attempts {

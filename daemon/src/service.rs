@@ -12,6 +12,8 @@ use tracing_subscriber::util::SubscriberInitExt;
 use tracing_subscriber::{EnvFilter, Registry, reload};
 
 use crate::config::Config;
+use crate::engine::telemetry::{Phase, Snapshot};
+use crate::master::Health;
 
 /// The sender side of sd_notify; inert when not started by systemd.
 #[derive(Debug)]
@@ -83,6 +85,24 @@ impl Liveness {
         let moved = self.last_exchanges.is_none_or(|l| exchanges > l);
         self.last_exchanges = Some(exchanges);
         moved
+    }
+
+    /// Whether to ping the watchdog now. Running, the real-time loop must
+    /// exchange packets and process data must flow: a stall the engine
+    /// did not turn into a recovery within a ping interval means it is
+    /// wedged, and systemd should restart it. Bringing up or recovering,
+    /// the engine is doing its job (its waits are bounded), so it is pinged.
+    pub fn verdict(&mut self, s: &Snapshot, health: Health) -> Result<(), String> {
+        let advanced = self.advanced(s.exchanges);
+        match s.phase {
+            Phase::Stopped => Err("the engine stopped".into()),
+            Phase::Running if !advanced => Err("the real-time loop made no exchange since the last ping".into()),
+            Phase::Running => match health {
+                Health::Stalled { .. } => Err(health.to_string()),
+                _ => Ok(()),
+            },
+            _ => Ok(()),
+        }
     }
 }
 
@@ -195,6 +215,25 @@ mod tests {
         assert!(l.advanced(11));
         assert!(!l.advanced(11), "a stalled loop stops the pings");
         assert!(l.advanced(500));
+    }
+
+    #[test]
+    fn the_watchdog_wants_flowing_process_data_while_running() {
+        let t = crate::engine::telemetry::Telemetry::default();
+        t.set_phase(Phase::Running);
+        let mut l = Liveness::default();
+        let mut s = t.snapshot();
+        assert!(l.verdict(&s, Health::Healthy).is_ok());
+        s.exchanges += 1;
+        let stalled = Health::Stalled { age: Duration::from_millis(900), limit: Duration::from_millis(50) };
+        assert!(l.verdict(&s, stalled).unwrap_err().contains("stalled"));
+        s.exchanges += 1;
+        assert!(l.verdict(&s, Health::Healthy).is_ok());
+        assert!(l.verdict(&s, Health::Healthy).unwrap_err().contains("no exchange"), "a loop that stopped");
+        s.phase = Phase::Recovering;
+        assert!(l.verdict(&s, Health::NotRunning(Phase::Recovering)).is_ok(), "recovering is the engine's job");
+        s.phase = Phase::Stopped;
+        assert!(l.verdict(&s, Health::NotRunning(Phase::Stopped)).is_err());
     }
 
     #[test]

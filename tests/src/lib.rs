@@ -124,6 +124,83 @@ pub fn assert_schema(command: &str, value: &serde_json::Value) {
     assert!(errors.is_empty(), "{command} --json does not match its schema: {errors:?}\n{value:#}");
 }
 
+/// `ecmxf-sim serve` as its own process, for a daemon with
+/// `backend = "sim-socket"`: faults are injected with `ecmxf-sim ctl`, and
+/// the simulator can be killed and started again on the same socket.
+#[derive(Debug)]
+pub struct Simulator {
+    child: Child,
+    bin: PathBuf,
+    /// Its socket.
+    pub socket: PathBuf,
+    args: Vec<String>,
+}
+
+impl Simulator {
+    /// Serves the demo network on `dir/sim.sock`, with `args` added to
+    /// `serve` (e.g. `["--seed", "7"]`).
+    pub fn serve(dir: &Path, args: &[&str]) -> Self {
+        let bin = daemon_binary().with_file_name("ecmxf-sim");
+        if !bin.exists() {
+            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+            let ok = Command::new(cargo).args(["build", "-p", "ecmxf-sim"]).current_dir(repo()).status();
+            assert!(ok.is_ok_and(|s| s.success()), "building ecmxf-sim failed");
+        }
+        let socket = dir.join("sim.sock");
+        let args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
+        let child = Self::spawn(&bin, &socket, &args);
+        Self { child, bin, socket, args }
+    }
+
+    fn spawn(bin: &Path, socket: &Path, args: &[String]) -> Child {
+        let _ = std::fs::remove_file(socket);
+        let child = Command::new(bin)
+            .args(["serve", "--socket"])
+            .arg(socket)
+            .args(args)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start ecmxf-sim");
+        let start = Instant::now();
+        while !socket.exists() {
+            assert!(start.elapsed() < Duration::from_secs(10), "ecmxf-sim did not create its socket");
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        child
+    }
+
+    /// `ecmxf-sim ctl WORDS...`; its answer (panics if refused).
+    pub fn ctl(&self, words: &str) -> String {
+        let out = Command::new(&self.bin)
+            .args(["ctl", "--socket"])
+            .arg(&self.socket)
+            .args(words.split(' '))
+            .output()
+            .expect("run ecmxf-sim ctl");
+        assert!(out.status.success(), "ctl {words}: {}", String::from_utf8_lossy(&out.stderr));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    }
+
+    /// Kills the simulator (SIGKILL: no goodbye to its clients).
+    pub fn kill(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+    }
+
+    /// Starts a fresh simulator (a chip at power-up) on the same socket.
+    pub fn restart(&mut self) {
+        self.kill();
+        self.child = Self::spawn(&self.bin, &self.socket, &self.args);
+    }
+}
+
+impl Drop for Simulator {
+    fn drop(&mut self) {
+        self.kill();
+    }
+}
+
 /// A running daemon.
 #[derive(Debug)]
 pub struct Daemon {

@@ -14,7 +14,7 @@ fn snap(d: &Daemon, name: &str, args: &[&str]) {
     settings.set_omit_expression(true);
     // Counters and levels move while the bus runs.
     settings.add_filter(
-        r"(?m)^(Exchanges|Transactions|Input frames|Output frames|CRC errors \(chip\)|WKC errors \(chip\)|Corrupt answers|Not-ready answers|Input batches lost|FIFO alarms|Recoveries|Max FIFO gap|FIFO levels|Config generation):(\s+).*$",
+        r"(?m)^(Exchanges|Transactions|Input frames|Output frames|CRC errors|WKC errors|Ring overflows|Process data|Corrupt answers|Not-ready answers|Input batches lost|FIFO alarms|Recoveries|Max FIFO gap|FIFO levels|Config generation):(\s+).*$",
         "$1:$2[live]",
     );
     settings.bind(|| insta::assert_snapshot!("ecmxfctl", out));

@@ -3,8 +3,6 @@
 //! EMERGENCY event and in the emergency history; the axis shows FAULT and
 //! comes back with FAULT_RESET once the cause is gone.
 
-use std::path::PathBuf;
-use std::process::{Child, Command, Stdio};
 use std::time::{Duration, Instant};
 
 use ecmxf_e2e::{Daemon, run};
@@ -13,60 +11,11 @@ use pb::cia402_client::Cia402Client;
 use pb::diagnostics_client::DiagnosticsClient;
 use tokio_stream::StreamExt;
 
-struct Sim {
-    child: Child,
-    bin: PathBuf,
-    socket: PathBuf,
-}
-
-impl Sim {
-    fn serve(dir: &std::path::Path) -> Self {
-        let bin = ecmxf_e2e::daemon_binary().with_file_name("ecmxf-sim");
-        if !bin.exists() {
-            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let ok =
-                Command::new(cargo).args(["build", "-p", "ecmxf-sim"]).current_dir(ecmxf_e2e::repo()).status().unwrap();
-            assert!(ok.success());
-        }
-        let socket = dir.join("sim.sock");
-        let child = Command::new(&bin)
-            .args(["serve", "--socket"])
-            .arg(&socket)
-            .stdout(Stdio::null())
-            .stderr(Stdio::null())
-            .spawn()
-            .expect("start ecmxf-sim");
-        let start = Instant::now();
-        while !socket.exists() {
-            assert!(start.elapsed() < Duration::from_secs(10), "ecmxf-sim did not create its socket");
-            std::thread::sleep(Duration::from_millis(20));
-        }
-        Self { child, bin, socket }
-    }
-
-    fn ctl(&self, words: &str) {
-        let out = Command::new(&self.bin)
-            .args(["ctl", "--socket"])
-            .arg(&self.socket)
-            .args(words.split(' '))
-            .output()
-            .unwrap();
-        assert!(out.status.success(), "ctl {words}: {}", String::from_utf8_lossy(&out.stderr));
-    }
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-    }
-}
-
 #[test]
 fn a_drive_fault_arrives_as_an_emergency_event() {
     run(async {
         let dir = ecmxf_e2e::temp_dir("emcy");
-        let sim = Sim::serve(&dir);
+        let sim = ecmxf_e2e::Simulator::serve(&dir, &[]);
         let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
         let config = ecmxf_e2e::config(&link, ecmxf_e2e::TI_AXIS);
         let mut d = Daemon::with_config(&config);

@@ -196,7 +196,9 @@ impl Report for DiagReport {
         }
         let mut out = format!("{f}\n{t}\n");
         if self.healthy {
-            out.push_str("healthy: every slave in the target state, no AL status code, configuration matches\n");
+            out.push_str(
+                "healthy: process data flowing, every slave in the target state, no AL status code, configuration matches\n",
+            );
         } else {
             for p in &self.problems {
                 out.push_str(&format!("PROBLEM: {p}\n"));
@@ -219,6 +221,10 @@ pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
     let mut problems = Vec::new();
     if status.phase != pb::EnginePhase::Running as i32 {
         problems.push(format!("the engine is {}", crate::values::phase_name(status.phase)));
+    } else if status.flow_limit_us > 0 && !status.process_data_flowing {
+        // The daemon's own verdict: OP on paper is not OP when no input
+        // frame arrives.
+        problems.push(status.health.clone());
     }
     let slaves: Vec<SlaveDiagReport> = list
         .slaves

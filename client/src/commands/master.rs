@@ -45,6 +45,16 @@ pub struct MasterReport {
     pub config_generation: u64,
     /// Why bring-up last failed or recovery last started ("" if never).
     pub last_error: String,
+    /// Whether process data flows (the newest input frame is younger than
+    /// flow_limit_us); false while no cyclic exchange runs.
+    pub process_data_flowing: bool,
+    /// Age of the newest input frame, microseconds.
+    pub input_age_us: u64,
+    /// Age beyond which process data counts as stalled, microseconds (0:
+    /// no cyclic exchange).
+    pub flow_limit_us: u64,
+    /// The daemon's health verdict in words.
+    pub health: String,
     pub counters: CountersReport,
 }
 
@@ -55,12 +65,15 @@ pub struct CountersReport {
     pub transactions: u64,
     pub input_frames: u64,
     pub output_frames: u64,
-    /// The chip's own 8-bit counters.
-    pub crc_errors: u32,
-    pub wkc_errors: u32,
+    /// The chip's CRC and WKC error counts since the daemon started
+    /// (totals accumulated from its 8-bit counters: they never wrap).
+    pub crc_errors: u64,
+    pub wkc_errors: u64,
     pub corrupt_answers: u64,
     pub not_ready_answers: u64,
     pub input_batches_lost: u64,
+    /// Input frames dropped before any subscriber saw them.
+    pub ring_overflows: u64,
     pub fifo_alarms: u64,
     pub recoveries: u64,
     pub max_fifo_gap_us: u64,
@@ -82,6 +95,7 @@ impl From<Option<pb::Counters>> for CountersReport {
             fifo_alarms: c.fifo_alarms,
             recoveries: c.recoveries,
             max_fifo_gap_us: c.max_fifo_gap_us,
+            ring_overflows: c.ring_overflows,
         }
     }
 }
@@ -93,11 +107,12 @@ impl CountersReport {
             .add("Transactions", self.transactions)
             .add("Input frames", self.input_frames)
             .add("Output frames", self.output_frames)
-            .add("CRC errors (chip)", self.crc_errors)
-            .add("WKC errors (chip)", self.wkc_errors)
+            .add("CRC errors", self.crc_errors)
+            .add("WKC errors", self.wkc_errors)
             .add("Corrupt answers", self.corrupt_answers)
             .add("Not-ready answers", self.not_ready_answers)
             .add("Input batches lost", self.input_batches_lost)
+            .add("Ring overflows", self.ring_overflows)
             .add("FIFO alarms", self.fifo_alarms)
             .add("Recoveries", self.recoveries)
             .add("Max FIFO gap", format!("{} us", self.max_fifo_gap_us));
@@ -124,7 +139,19 @@ impl Report for MasterReport {
             .add("DC", if self.dc_stable { "stable" } else { "not stable" })
             .add("FIFO levels", format!("rx {}, tx {}", self.rx_fifo_level, self.tx_fifo_level))
             .add("Output writers", self.output_writers)
-            .add("Config generation", self.config_generation);
+            .add("Config generation", self.config_generation)
+            .add("Health", &self.health);
+        if self.flow_limit_us > 0 {
+            f.add(
+                "Process data",
+                format!(
+                    "{}: newest input {:.1} ms old (limit {:.1} ms)",
+                    if self.process_data_flowing { "flowing" } else { "NOT FLOWING" },
+                    self.input_age_us as f64 / 1000.0,
+                    self.flow_limit_us as f64 / 1000.0
+                ),
+            );
+        }
         if !self.last_error.is_empty() {
             f.add("Last error", &self.last_error);
         }
@@ -160,6 +187,10 @@ pub async fn fetch(api: &Api) -> Result<MasterReport, CliError> {
         output_writers: s.output_writers,
         config_generation: s.config_generation,
         last_error: s.last_error,
+        process_data_flowing: s.process_data_flowing,
+        input_age_us: s.input_age_us,
+        flow_limit_us: s.flow_limit_us,
+        health: s.health,
         counters: s.counters.into(),
     })
 }

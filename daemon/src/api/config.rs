@@ -51,6 +51,10 @@ pub struct ApiConfig {
     pub client_certs: Vec<TokenRole>,
     /// Default output-lease time-to-live, ms.
     pub lease_ttl_ms: u32,
+    /// The oldest an input sample may be when a stream hands it to the
+    /// transport, ms (10..=60000): older samples of a subscriber that
+    /// reads slower than the cycle are dropped and counted in `lost`.
+    pub stream_max_age_ms: u32,
 }
 
 impl Default for ApiConfig {
@@ -69,6 +73,7 @@ impl Default for ApiConfig {
             tokens: Vec::new(),
             client_certs: Vec::new(),
             lease_ttl_ms: 2000,
+            stream_max_age_ms: 100,
         }
     }
 }
@@ -161,6 +166,9 @@ impl ApiConfig {
         }
         if !(100..=60_000).contains(&self.lease_ttl_ms) {
             return bad("api.lease_ttl_ms", format!("{} ms is outside 100..=60000", self.lease_ttl_ms));
+        }
+        if !(10..=60_000).contains(&self.stream_max_age_ms) {
+            return bad("api.stream_max_age_ms", format!("{} ms is outside 10..=60000", self.stream_max_age_ms));
         }
         Ok(())
     }

@@ -70,11 +70,11 @@ pub fn event_pb(e: &Event) -> pb::Event {
             K::DcStable
         }
         EventKind::CrcErrors { total } => {
-            out.counter = (*total).into();
+            out.counter = *total;
             K::CrcErrors
         }
         EventKind::WkcErrors { total } => {
-            out.counter = (*total).into();
+            out.counter = *total;
             K::WkcErrors
         }
         EventKind::FifoUnderrun => K::FifoUnderrun,
@@ -93,6 +93,24 @@ pub fn event_pb(e: &Event) -> pb::Event {
         EventKind::Lost(n) => {
             out.counter = *n;
             K::Lost
+        }
+        EventKind::AlStatus { slave, state, code } => {
+            out.slave = (*slave).into();
+            out.to_state = state_to_pb(*state) as i32;
+            out.al_status_code = (*code).into();
+            out.detail = ecmxf_wire::al_status_text(*code).into();
+            out.text = format!("slave {slave} in {state}: AL status {code:#06x} ({})", out.detail);
+            K::AlStatus
+        }
+        EventKind::ProcessData { flowing, age_us } => {
+            out.flag = *flowing;
+            out.counter = *age_us;
+            out.text = if *flowing {
+                "process data flowing again".into()
+            } else {
+                format!("process data stalled: no input frame for {} ms", age_us / 1000)
+            };
+            K::ProcessData
         }
     };
     out.kind = kind as i32;

@@ -28,6 +28,9 @@ pub struct MasterService(pub Arc<Context>);
 /// The status message from the engine's snapshot.
 pub fn status_pb(m: &Master) -> pb::MasterStatus {
     let s = m.status();
+    let target = m.config().cycle.target();
+    let health = crate::master::Health::judge(&s, target, m.now_ns());
+    let age = s.input_age(m.now_ns());
     let errors = ecmxf_wire::flags::ErrorFlags::from_bits_retain(s.error_byte);
     let status = ecmxf_wire::flags::StatusFlags::from_bits_retain(s.status_byte);
     pb::MasterStatus {
@@ -44,14 +47,18 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
         last_error: m.last_error().unwrap_or_default(),
         output_writers: m.output_writers() as u32,
         config_generation: s.config_generation,
+        process_data_flowing: health.is_healthy() && age.is_some(),
+        input_age_us: age.map_or(0, |(a, _)| a.as_micros() as u64),
+        flow_limit_us: age.map_or(0, |(_, l)| l.as_micros() as u64),
+        health: health.to_string(),
     }
 }
 
 /// The counters from the engine's snapshot.
 pub fn counters_pb(s: &crate::engine::telemetry::Snapshot) -> pb::Counters {
     pb::Counters {
-        crc_errors: s.crc_errors.into(),
-        wkc_errors: s.wkc_errors.into(),
+        crc_errors: s.crc_errors,
+        wkc_errors: s.wkc_errors,
         exchanges: s.exchanges,
         corrupt_answers: s.corrupt,
         not_ready_answers: s.not_ready,
@@ -62,6 +69,7 @@ pub fn counters_pb(s: &crate::engine::telemetry::Snapshot) -> pb::Counters {
         fifo_alarms: s.fifo_alarms,
         recoveries: s.recoveries,
         max_fifo_gap_us: s.max_fifo_gap_us,
+        ring_overflows: s.ring_overflows,
     }
 }
 
@@ -261,6 +269,12 @@ impl StateApi for StateService {
         let out = bounded(&caller, async {
             let state = m.get_state(target, t).await?;
             let mut slaves = Vec::new();
+            let (mut al_code, mut al_text) = (0u32, String::new());
+            if let SlaveSelector::One(i) = target {
+                let al = number(m, i, SlaveInfoCode::AlStatus).await? as u16;
+                al_code = al.into();
+                al_text = ecmxf_wire::al_status_text(al).into();
+            }
             if target == SlaveSelector::All {
                 for i in 0..m.layout().slaves.len() as u8 {
                     let s = EcatState::from_u8(number(m, i, SlaveInfoCode::State).await? as u8);
@@ -273,7 +287,12 @@ impl StateApi for StateService {
                     });
                 }
             }
-            Ok::<_, Status>(pb::GetStateResponse { state: state_to_pb(state) as i32, slaves })
+            Ok::<_, Status>(pb::GetStateResponse {
+                state: state_to_pb(state) as i32,
+                slaves,
+                al_status_code: al_code,
+                al_status_text: al_text,
+            })
         })
         .await?;
         Ok(Response::new(out))

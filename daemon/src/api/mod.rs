@@ -53,6 +53,8 @@ pub struct Context {
     pub leases: leases::Leases,
     /// Default lease time-to-live.
     pub lease_ttl: Duration,
+    /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
+    pub stream_max_age: Duration,
     /// The newest input frame (for CiA 402 actual values).
     pub latest: Mutex<Option<Arc<InputFrame>>>,
     /// The output image as the API last wrote it (bit-sized entries are
@@ -72,6 +74,7 @@ impl Context {
             image: image::ImageCache::default(),
             leases: leases::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
+            stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             latest: Mutex::new(None),
             shadow: Mutex::new(Vec::new()),
             emergencies: tokio::sync::broadcast::channel(64).0,

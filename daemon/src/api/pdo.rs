@@ -129,6 +129,28 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
 
 type SampleStream = super::BoxStream<pb::InputSample>;
 
+/// Keeps a stream from falling behind silently: a sample older than the
+/// bound when its turn comes is dropped (and counted as lost by the
+/// caller), so what a slow subscriber gets is always recent, never a queue
+/// of seconds-old frames.
+#[derive(Clone, Copy, Debug)]
+pub struct AgeGate {
+    max_age_ns: u64,
+}
+
+impl AgeGate {
+    /// A gate that admits samples up to `max_age` old.
+    pub fn new(max_age: Duration) -> Self {
+        Self { max_age_ns: max_age.as_nanos() as u64 }
+    }
+
+    /// Whether a frame received at `time_ns` may still go out at `now_ns`
+    /// (both on the engine's clock).
+    pub fn admit(&self, time_ns: u64, now_ns: u64) -> bool {
+        now_ns.saturating_sub(time_ns) <= self.max_age_ns
+    }
+}
+
 #[tonic::async_trait]
 impl ProcessDataApi for ProcessDataService {
     async fn get_mapping(
@@ -242,11 +264,14 @@ impl ProcessDataApi for ProcessDataService {
         // subscriber on its way out.
         let decimation = u64::from(r.decimation.max(1));
         let on_change = r.on_change;
-        let epoch = self.0.master.epoch_monotonic_ns();
+        let master = Arc::clone(&self.0.master);
+        let epoch = master.epoch_monotonic_ns();
         let mut n = 0u64;
         let mut lost = 0u64;
+        let mut gap = 0u64;
+        let fresh = AgeGate::new(self.0.stream_max_age);
         let mut last: Option<Vec<u8>> = None;
-        let frames = tokio_stream::wrappers::BroadcastStream::new(self.0.master.subscribe());
+        let frames = tokio_stream::wrappers::BroadcastStream::new(master.subscribe());
         let samples = frames.filter_map(move |frame| {
             let frame = match frame {
                 Ok(f) => f,
@@ -255,6 +280,13 @@ impl ProcessDataApi for ProcessDataService {
                     return None;
                 }
             };
+            // Frames the daemon never received are told with the next
+            // sample, whatever is skipped in between.
+            gap += frame.gap;
+            if !fresh.admit(frame.time_ns, master.now_ns()) {
+                lost += 1;
+                return None;
+            }
             n += 1;
             if n % decimation != 0 {
                 return None;
@@ -287,6 +319,7 @@ impl ProcessDataApi for ProcessDataService {
                 values,
                 lost: std::mem::take(&mut lost),
                 monotonic_ns: epoch + frame.time_ns,
+                gap: std::mem::take(&mut gap),
             };
             Some(Ok(sample))
         });
@@ -343,5 +376,19 @@ impl ProcessDataApi for ProcessDataService {
             applied += 1;
         }
         Ok(Response::new(pb::WriteOutputsResponse { applied }))
+    }
+}
+
+#[cfg(test)]
+mod age_tests {
+    use super::*;
+
+    #[test]
+    fn samples_older_than_the_bound_are_not_sent() {
+        let g = AgeGate::new(Duration::from_millis(100));
+        assert!(g.admit(1_000_000, 1_000_000));
+        assert!(g.admit(1_000_000, 101_000_000), "exactly the bound");
+        assert!(!g.admit(1_000_000, 101_000_001));
+        assert!(g.admit(5_000_000, 1_000_000), "a clock read before the frame is not an age");
     }
 }

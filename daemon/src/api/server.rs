@@ -28,7 +28,6 @@ use super::pdo::ProcessDataService;
 use super::peripherals::PeripheralsService;
 use super::sdo::SdoService;
 use super::sii::SiiService;
-use crate::engine::telemetry::Phase;
 use crate::master::Master;
 
 /// Why the API could not be served.
@@ -145,16 +144,18 @@ fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
     Ok(tls)
 }
 
-/// Health follows the bus: SERVING while the engine runs and the network
-/// is in the configured target state, NOT_SERVING otherwise (bringing up,
-/// recovering, a slave dropped out of OP...).
+/// Health follows the bus: SERVING while the engine runs, the network is in
+/// the configured target state and process data flows ([`Master::health`]),
+/// NOT_SERVING otherwise (bringing up, recovering, a slave dropped out of
+/// OP, no input frame for longer than the limit). Looked at every
+/// [`HEALTH_EVERY`], so a stop shows within the limit plus that.
 async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
     let mut last = None;
-    let mut tick = tokio::time::interval(Duration::from_millis(100));
+    let mut tick = tokio::time::interval(HEALTH_EVERY);
+    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
         tick.tick().await;
-        let s = master.status();
-        let serving = s.phase == Phase::Running && s.ecat_state == master.config().cycle.target();
+        let serving = master.health().is_healthy();
         if last != Some(serving) {
             last = Some(serving);
             let status = if serving { ServingStatus::Serving } else { ServingStatus::NotServing };
@@ -164,6 +165,9 @@ async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
         }
     }
 }
+
+/// How often health is judged again.
+pub const HEALTH_EVERY: Duration = Duration::from_millis(20);
 
 /// Keeps the newest input frame for the services.
 async fn track_inputs(ctx: Arc<Context>) {

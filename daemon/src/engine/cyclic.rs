@@ -8,16 +8,15 @@
 //! count as it was two exchanges ago, adds what was pushed since, and takes
 //! off one frame per cycle elapsed since then.
 //!
-//! Input frames go out through a wait-free single-producer ring of bytes:
-//! each record is `len: u32, seq: u64, time_ns: u64` followed by the frame.
-//! Nothing here allocates or locks once running.
+//! Input frames go on through [`super::inputs`]. Nothing here allocates or
+//! locks once running.
 
 use std::time::{Duration, Instant};
 
-use rtrb::Producer;
-
-/// Bytes before each frame in the input ring.
-pub const RECORD_HEADER: usize = 4 + 8 + 8;
+/// The longest time between two FIFO exchanges, whatever the marks allow:
+/// inputs reach clients at least this often, so process data that stops
+/// flowing is seen within a bounded time (see `supervisor::FlowWatch`).
+pub const MAX_EXCHANGE_INTERVAL: Duration = Duration::from_millis(20);
 
 /// Frame sizes, cycle and marks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -51,35 +50,34 @@ pub struct Cyclic {
     recent: [(Instant, u8); 3],
     /// Level reported, and when it was true.
     reported: (u8, Instant),
-    seq: u64,
-    epoch: Instant,
-    epoch_started: Instant,
-    ring: Producer<u8>,
-    /// Input frames dropped because the ring was full.
-    pub ring_overflows: u64,
+    started: Instant,
 }
 
 impl Cyclic {
-    /// A plan, the packet's data size and the ring to publish into.
-    pub fn new(plan: Plan, data_size: usize, ring: Producer<u8>, epoch: Instant) -> Self {
+    /// A plan and the packet's data size. `outputs` is the image to start
+    /// from (the one clients wrote before a recovery) when it has the
+    /// plan's size; otherwise the image starts zeroed.
+    pub fn new(plan: Plan, data_size: usize, outputs: Vec<u8>) -> Self {
         let now = Instant::now();
         let Plan { rx_size, tx_size, cycle, low, high } = plan;
+        let outputs = if outputs.len() == rx_size { outputs } else { vec![0; rx_size] };
         Self {
             rx_size,
             tx_size,
             cycle,
-            outputs: vec![0; rx_size],
+            outputs,
             push_buf: Vec::with_capacity(data_size),
             low,
             high,
             recent: [(now, 0); 3],
             reported: (0, now),
-            seq: 0,
-            epoch,
-            epoch_started: now,
-            ring,
-            ring_overflows: 0,
+            started: now,
         }
+    }
+
+    /// The DC cycle.
+    pub fn cycle(&self) -> Duration {
+        self.cycle
     }
 
     fn cycles_since(&self, t: Instant, now: Instant) -> u64 {
@@ -112,7 +110,7 @@ impl Cyclic {
         let refill_at = self.target() - rx_room as i64;
         let by_level = self.cycle * (self.estimate(now) - refill_at).max(0) as u32;
         let by_inputs = self.cycle * (tx_room.max(1) as u32);
-        let cap = self.cycle * u32::from((self.high - self.low).max(2) / 2);
+        let cap = (self.cycle * u32::from((self.high - self.low).max(2) / 2)).min(MAX_EXCHANGE_INTERVAL);
         now + by_level.min(by_inputs).min(cap)
     }
 
@@ -136,100 +134,25 @@ impl Cyclic {
         }
     }
 
-    /// Publishes the input frames in an answer's data; returns how many.
-    pub fn publish(&mut self, data: &[u8], now: Instant) -> usize {
-        if self.tx_size == 0 {
-            return 0;
-        }
-        let t = now.saturating_duration_since(self.epoch).as_nanos() as u64;
-        let mut n = 0;
-        for frame in data.chunks_exact(self.tx_size) {
-            self.seq += 1;
-            let need = RECORD_HEADER + frame.len();
-            let Ok(mut chunk) = self.ring.write_chunk(need) else {
-                self.ring_overflows += 1;
-                continue;
-            };
-            let (a, b) = chunk.as_mut_slices();
-            let mut record = [0u8; RECORD_HEADER];
-            record[..4].copy_from_slice(&(frame.len() as u32).to_le_bytes());
-            record[4..12].copy_from_slice(&self.seq.to_le_bytes());
-            record[12..20].copy_from_slice(&t.to_le_bytes());
-            for (slot, byte) in a.iter_mut().chain(b.iter_mut()).zip(record.iter().chain(frame.iter())) {
-                *slot = *byte;
-            }
-            chunk.commit_all();
-            n += 1;
-        }
-        n
-    }
-
     /// When the last exchange was, if any.
     pub fn last_exchange(&self) -> Option<Instant> {
         let (t, _) = self.recent[2];
-        (t > self.epoch_started).then_some(t)
+        (t > self.started).then_some(t)
     }
 
     /// The low mark.
     pub fn low(&self) -> u8 {
         self.low
     }
-
-    /// Sequence number of the last frame published.
-    pub fn seq(&self) -> u64 {
-        self.seq
-    }
-}
-
-/// One input frame as read back from the ring.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct InputRecord {
-    /// Frame sequence number (one per DC cycle received).
-    pub seq: u64,
-    /// When the engine received it, ns since the engine started.
-    pub time_ns: u64,
-    /// The frame.
-    pub data: Vec<u8>,
-}
-
-/// Reads the next record from the ring's consumer side, if whole.
-pub fn read_record(c: &mut rtrb::Consumer<u8>) -> Option<InputRecord> {
-    // Records are committed whole, so a header means its frame is there too;
-    // the check below only guards against a foreign writer.
-    let available = c.slots();
-    if available < RECORD_HEADER {
-        return None;
-    }
-    let head = c.read_chunk(RECORD_HEADER).ok()?;
-    let (a, b) = head.as_slices();
-    let mut h = [0u8; RECORD_HEADER];
-    for (d, s) in h.iter_mut().zip(a.iter().chain(b.iter())) {
-        *d = *s;
-    }
-    let len = u32::from_le_bytes([h[0], h[1], h[2], h[3]]) as usize;
-    if available < RECORD_HEADER + len {
-        return None;
-    }
-    head.commit_all();
-    let body = c.read_chunk(len).ok()?;
-    let (a, b) = body.as_slices();
-    let data: Vec<u8> = a.iter().chain(b.iter()).copied().collect();
-    body.commit_all();
-    Some(InputRecord {
-        seq: u64::from_le_bytes(h[4..12].try_into().unwrap_or([0; 8])),
-        time_ns: u64::from_le_bytes(h[12..20].try_into().unwrap_or([0; 8])),
-        data,
-    })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
 
-    fn cyclic() -> (Cyclic, rtrb::Consumer<u8>) {
-        let (p, c) = rtrb::RingBuffer::new(1024);
+    fn cyclic() -> (Cyclic, ()) {
         let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_micros(125), low: 8, high: 20 };
-        (Cyclic::new(plan, 112, p, Instant::now()), c)
+        (Cyclic::new(plan, 112, Vec::new()), ())
     }
 
     #[test]
@@ -243,22 +166,6 @@ mod tests {
         assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 15 - 8);
         assert_eq!(cy.frames_to_push(t0 + Duration::from_millis(1), 9), 0);
         assert_eq!(cy.frames_to_push(t0 + Duration::from_millis(4), 9), 9);
-    }
-
-    #[test]
-    fn records_round_trip_through_the_ring() {
-        let (mut cy, mut c) = cyclic();
-        assert_eq!(cy.publish(&[1, 2, 3, 4, 5, 6, 7], Instant::now()), 2, "whole frames only");
-        let r1 = read_record(&mut c).unwrap();
-        let r2 = read_record(&mut c).unwrap();
-        assert_eq!((r1.seq, r1.data.as_slice()), (1, &[1, 2, 3][..]));
-        assert_eq!((r2.seq, r2.data.as_slice()), (2, &[4, 5, 6][..]));
-        assert!(read_record(&mut c).is_none());
-        // A full ring drops frames and counts them.
-        for _ in 0..100 {
-            cy.publish(&[0; 3], Instant::now());
-        }
-        assert!(cy.ring_overflows > 0);
     }
 
     #[test]
@@ -288,6 +195,24 @@ mod tests {
             assert!(usize::from(d) * rx + usize::from(t) * tx <= 0x4000, "{rx}/{tx}: {d} x {rx} + {t} x {tx}");
             assert!(l < h && h <= d && t >= 1, "{rx}/{tx}: {d} {t} {l} {h}");
         }
+    }
+
+    #[test]
+    fn an_image_of_the_right_size_is_kept_across_runs() {
+        let plan = Plan { rx_size: 2, tx_size: 1, cycle: Duration::from_millis(1), low: 8, high: 20 };
+        assert_eq!(Cyclic::new(plan, 112, vec![7, 9]).outputs, [7, 9]);
+        assert_eq!(Cyclic::new(plan, 112, vec![7, 9, 1]).outputs, [0, 0], "another layout starts zeroed");
+    }
+
+    #[test]
+    fn exchanges_happen_at_least_every_max_interval() {
+        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_millis(1), low: 128, high: 240 };
+        let mut cy = Cyclic::new(plan, 112, Vec::new());
+        let t0 = Instant::now();
+        cy.exchanged(t0, 0, Some(240));
+        cy.exchanged(t0, 0, None);
+        cy.exchanged(t0, 0, None);
+        assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
     }
 
     #[test]

@@ -49,15 +49,34 @@ pub enum EventKind {
     LinkPin(bool),
     /// The DC cycle became stable (true) or lost stability (status bit2).
     DcStable(bool),
-    /// The chip counted packets with bad check words; `total` is its counter.
+    /// The chip counted packets with bad check words.
     CrcErrors {
-        /// The chip's counter now.
-        total: u8,
+        /// CRC errors since the daemon started (never wraps).
+        total: u64,
     },
     /// The chip counted cycles with a wrong working counter.
     WkcErrors {
-        /// The chip's counter now.
-        total: u8,
+        /// WKC errors since the daemon started (never wraps).
+        total: u64,
+    },
+    /// A slave reports an AL status code (read when the network left its
+    /// state or reported an error).
+    AlStatus {
+        /// Ring position.
+        slave: u8,
+        /// The slave's state.
+        state: EcatState,
+        /// The AL status code (ETG.1000.6 table 11; 0x001A: synchronisation
+        /// error...).
+        code: u16,
+    },
+    /// Process data stopped flowing (no input frame for longer than the
+    /// limit), or flows again.
+    ProcessData {
+        /// Flowing now.
+        flowing: bool,
+        /// How long no input frame had arrived, us (0 when flowing again).
+        age_us: u64,
     },
     /// The RxFIFO ran dry: the slaves got repeated outputs.
     FifoUnderrun,
@@ -80,9 +99,9 @@ pub struct EventSink {
     seen: Option<Seen>,
     crc_reported: Option<Instant>,
     wkc_reported: Option<Instant>,
-    /// Counter values last reported.
-    crc_told: u8,
-    wkc_told: u8,
+    /// Totals last reported.
+    crc_told: u64,
+    wkc_told: u64,
     lost: u64,
 }
 
@@ -92,8 +111,6 @@ struct Seen {
     state: EcatState,
     link: bool,
     dc_stable: bool,
-    crc_errors: u8,
-    wkc_errors: u8,
 }
 
 impl Seen {
@@ -102,8 +119,6 @@ impl Seen {
             state: h.ecat_state,
             link: h.errors.contains(ErrorFlags::LINK_PIN),
             dc_stable: h.status.flags.contains(StatusFlags::DC_STABLE),
-            crc_errors: h.crc_errors,
-            wkc_errors: h.wkc_errors,
         }
     }
 }
@@ -139,15 +154,17 @@ impl EventSink {
         }
     }
 
-    /// Compares an answer's header with the previous one. A chip that
-    /// answers NOP (just reset) has no meaningful state and is skipped.
-    pub fn header(&mut self, h: &ResponseHeader, now: Instant) {
+    /// Compares an answer's header with the previous one; `totals` are the
+    /// CRC and WKC error totals after it. A chip that answers NOP (just
+    /// reset) has no meaningful state and is skipped.
+    pub fn header(&mut self, h: &ResponseHeader, totals: (u64, u64), now: Instant) {
         if h.is_nop() {
             return;
         }
         let new = Seen::of(h);
+        let (crc, wkc) = totals;
         let Some(old) = self.seen.replace(new) else {
-            (self.crc_told, self.wkc_told) = (new.crc_errors, new.wkc_errors);
+            (self.crc_told, self.wkc_told) = (crc, wkc);
             return;
         };
         if new.state != old.state {
@@ -159,15 +176,15 @@ impl EventSink {
         if new.dc_stable != old.dc_stable {
             self.emit(EventKind::DcStable(new.dc_stable));
         }
-        // The counters are u8 and wrap; any change from what was last
-        // reported is news, told at most every COUNTER_QUIET.
-        if new.crc_errors != self.crc_told && quiet(&mut self.crc_reported, now) {
-            self.crc_told = new.crc_errors;
-            self.emit(EventKind::CrcErrors { total: new.crc_errors });
+        // A rise since the last report is news, told at most every
+        // COUNTER_QUIET.
+        if crc != self.crc_told && quiet(&mut self.crc_reported, now) {
+            self.crc_told = crc;
+            self.emit(EventKind::CrcErrors { total: crc });
         }
-        if new.wkc_errors != self.wkc_told && quiet(&mut self.wkc_reported, now) {
-            self.wkc_told = new.wkc_errors;
-            self.emit(EventKind::WkcErrors { total: new.wkc_errors });
+        if wkc != self.wkc_told && quiet(&mut self.wkc_reported, now) {
+            self.wkc_told = wkc;
+            self.emit(EventKind::WkcErrors { total: wkc });
         }
     }
 
@@ -209,10 +226,10 @@ mod tests {
         let (p, mut c) = rtrb::RingBuffer::new(RING);
         let mut s = EventSink::new(p, Instant::now(), None);
         let t = Instant::now();
-        s.header(&header(EcatState::PreOp, 0, true), t);
-        s.header(&header(EcatState::PreOp, 0, true), t);
+        s.header(&header(EcatState::PreOp, 0, true), (0, 0), t);
+        s.header(&header(EcatState::PreOp, 0, true), (0, 0), t);
         assert!(drain(&mut c).is_empty(), "the first header is the baseline");
-        s.header(&header(EcatState::Op, 0, false), t);
+        s.header(&header(EcatState::Op, 0, false), (0, 0), t);
         assert_eq!(
             drain(&mut c),
             [EventKind::EcatState { from: EcatState::PreOp, to: EcatState::Op }, EventKind::LinkPin(false)]
@@ -224,12 +241,12 @@ mod tests {
         let (p, mut c) = rtrb::RingBuffer::new(RING);
         let mut s = EventSink::new(p, Instant::now(), None);
         let t = Instant::now();
-        s.header(&header(EcatState::Op, 0, true), t);
+        s.header(&header(EcatState::Op, 0, true), (0, 0), t);
         for n in 1..=50u8 {
-            s.header(&header(EcatState::Op, n, true), t + Duration::from_millis(u64::from(n)));
+            s.header(&header(EcatState::Op, n, true), (n.into(), 0), t + Duration::from_millis(u64::from(n)));
         }
         assert_eq!(drain(&mut c), [EventKind::CrcErrors { total: 1 }]);
-        s.header(&header(EcatState::Op, 50, true), t + Duration::from_millis(200));
+        s.header(&header(EcatState::Op, 50, true), (50, 0), t + Duration::from_millis(200));
         assert_eq!(drain(&mut c), [EventKind::CrcErrors { total: 50 }], "the rise is not forgotten");
     }
 

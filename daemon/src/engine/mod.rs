@@ -13,11 +13,14 @@ pub mod cyclic;
 pub mod error;
 pub mod events;
 mod fair;
+pub mod inputs;
 pub mod job;
 mod running;
+pub mod supervisor;
 pub mod telemetry;
 mod transaction;
 
+use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{Receiver, RecvTimeoutError, TryRecvError};
 use std::sync::{Arc, Mutex};
@@ -38,8 +41,10 @@ use cyclic::Cyclic;
 use error::EngineError;
 use events::{Event, EventKind, EventSink};
 use fair::FairQueue;
+use inputs::InputPublisher;
 use job::{Job, OutputAssembler, OutputWrite, PendingAction, Writers};
-use telemetry::{Phase, Telemetry};
+use supervisor::RecoverCause;
+use telemetry::{CounterTotal, Phase, Telemetry};
 use transaction::Active;
 
 /// Messages to the engine.
@@ -54,7 +59,7 @@ pub enum Command {
 /// Why the running loop left.
 enum Exit {
     Stop,
-    Recover(String),
+    Recover(RecoverCause),
 }
 
 /// The engine's state on its thread.
@@ -70,7 +75,15 @@ pub struct Engine<L> {
     outputs: Receiver<OutputWrite>,
     telemetry: Arc<Telemetry>,
     layout: Arc<Mutex<NetworkLayout>>,
-    ring: Option<rtrb::Producer<u8>>,
+    intake: running::Intake,
+    /// The output image clients wrote, kept across a recovery: bring-up
+    /// prefills the RxFIFO with it and the next run starts from it, so the
+    /// slaves see what the lease holders last wrote, not zeros.
+    saved_outputs: Vec<u8>,
+    crc_errors: CounterTotal,
+    wkc_errors: CounterTotal,
+    /// Set by [`crate::master::Master::stop`]: abandon bring-up and waits.
+    stop: Arc<AtomicBool>,
     distributor: Option<Thread>,
     writers: Arc<Writers>,
     events: EventSink,
@@ -79,7 +92,6 @@ pub struct Engine<L> {
     assembler: OutputAssembler,
     queue: FairQueue,
     active: Option<Active>,
-    epoch: Instant,
 }
 
 impl<L> std::fmt::Debug for Engine<L> {
@@ -113,6 +125,8 @@ pub struct Parts<L> {
     pub events: rtrb::Producer<Event>,
     /// Re-init or warm reset asked for by a client.
     pub action: Arc<PendingAction>,
+    /// Set when the daemon stops: bring-up and recovery waits end at once.
+    pub stop: Arc<AtomicBool>,
     /// A new configuration to bring the network up with, and its number
     /// (published in the telemetry once taken).
     pub reconfigure: Receiver<(u64, Config)>,
@@ -133,7 +147,11 @@ impl<L: Link> Engine<L> {
             outputs: p.outputs,
             telemetry: p.telemetry,
             layout: p.layout,
-            ring: Some(p.ring),
+            intake: running::Intake::new(InputPublisher::new(p.ring, epoch), epoch),
+            saved_outputs: Vec::new(),
+            crc_errors: CounterTotal::default(),
+            wkc_errors: CounterTotal::default(),
+            stop: p.stop,
             distributor: p.distributor,
             held_below_target: false,
             writers: p.writers,
@@ -143,7 +161,6 @@ impl<L: Link> Engine<L> {
             events,
             queue: FairQueue::default(),
             active: None,
-            epoch,
         }
     }
 
@@ -153,15 +170,31 @@ impl<L: Link> Engine<L> {
         let mut first = true;
         loop {
             self.set_phase(if first { Phase::BringUp } else { Phase::Recovering });
+            self.telemetry.forget_network();
             self.events.rebase();
-            let result = bring_up(&mut self.port, &self.config);
+            self.crc_errors.rebase();
+            self.wkc_errors.rebase();
+            // A stop during bring-up ends its waits at once (Port::set_abort).
+            self.port.set_abort(Some(Arc::clone(&self.stop)));
+            let result = bring_up(&mut self.port, &self.config, &self.saved_outputs);
+            self.port.set_abort(None);
+            if self.stop.load(Relaxed) {
+                return self.abandon_bring_up(result.is_ok());
+            }
             self.publish_status();
+            if result.is_err() {
+                // The header of a failed bring-up says nothing about the network.
+                self.telemetry.forget_network();
+            }
             let layout = match result {
                 Ok(l) => l,
                 Err(e) => {
                     error!(error = %e, "bring-up failed");
                     self.telemetry.set_error(format!("bring-up: {e}"));
                     self.events.emit(EventKind::BringUpFailed(e.to_string()));
+                    if let bringup::BringUpError::Port(p) = &e {
+                        self.reopen_if_needed(&RecoverCause::from_port(p));
+                    }
                     if !self.config.recovery.enabled || !self.pause(backoff) {
                         return self.stopped();
                     }
@@ -181,7 +214,6 @@ impl<L: Link> Engine<L> {
                 } else {
                     1000
                 }));
-                let ring = self.ring.take().unwrap_or_else(|| rtrb::RingBuffer::new(1).0);
                 let plan = cyclic::Plan {
                     rx_size: layout.rx_size,
                     tx_size: layout.tx_size,
@@ -189,27 +221,67 @@ impl<L: Link> Engine<L> {
                     low: layout.fifo_low,
                     high: layout.fifo_high,
                 };
-                Cyclic::new(plan, self.port.data_size(), ring, self.epoch)
+                Cyclic::new(plan, self.port.data_size(), std::mem::take(&mut self.saved_outputs))
             });
             *self.layout.lock().unwrap_or_else(|e| e.into_inner()) = layout;
             self.held_below_target = false;
-            self.set_phase(Phase::Running);
-            match self.running(cyclic) {
+            // With cyclic data, "running" waits for the first input frame
+            // (the running loop says it): a network that reached OP but
+            // delivers nothing is not running.
+            if cyclic.is_none() {
+                self.set_phase(Phase::Running);
+            }
+            let mut cyclic = cyclic;
+            let exit = self.running(cyclic.as_mut());
+            if let Some(c) = cyclic {
+                self.saved_outputs = c.outputs;
+            }
+            match exit {
                 Exit::Stop => return self.stopped(),
                 Exit::Recover(why) => {
                     warn!(reason = %why, "recovering");
                     self.telemetry.set_error(format!("recovery: {why}"));
                     // Phase first: no one may see "running" while recovering.
                     self.set_phase(Phase::Recovering);
-                    self.events.emit(EventKind::Recovering(why.clone()));
+                    self.telemetry.forget_network();
+                    self.events.emit(EventKind::Recovering(why.to_string()));
                     self.telemetry.recoveries.fetch_add(1, Relaxed);
                     self.fail_all(EngineError::Unavailable(format!("recovering: {why}")));
+                    self.reopen_if_needed(&why);
                     if !self.config.recovery.enabled || !self.pause(backoff) {
                         return self.stopped();
                     }
                 }
             }
         }
+    }
+
+    /// Opens the link again when the fault was the link's own (a restarted
+    /// simulator, a device node that came back). A failure is logged; the
+    /// next bring-up fails on the link again and tries again after its
+    /// back-off.
+    fn reopen_if_needed(&mut self, why: &RecoverCause) {
+        if !why.needs_reopen() {
+            return;
+        }
+        match self.port.link_mut().reopen() {
+            Ok(()) => info!(link = %self.port.link_mut().describe(), "link opened again"),
+            Err(e) => warn!(error = %e, "link could not be opened again; retrying after the back-off"),
+        }
+    }
+
+    /// Told to stop during bring-up: the slaves go back to INIT if the chip
+    /// answers (bounded, so the daemon still stops within a second), then
+    /// the engine stops.
+    fn abandon_bring_up(mut self, reached: bool) {
+        self.set_phase(Phase::Stopping);
+        info!(reached, "stop during bring-up");
+        self.port.set_ready_timeout(self.config.ready_timeout().min(Duration::from_millis(200)));
+        let init = StateCheck { target: SlaveSelector::All, state: EcatState::Init };
+        if let Err(e) = bringup::blocking(&mut self.port, &init, Duration::from_millis(500)) {
+            warn!(error = %e, "stop during bring-up: slaves not brought to INIT");
+        }
+        self.stopped();
     }
 
     /// Publishes a phase change, to the status snapshot and as an event.
@@ -246,6 +318,9 @@ impl<L: Link> Engine<L> {
     fn pause(&mut self, d: Duration) -> bool {
         let until = Instant::now() + d;
         while let Some(left) = until.checked_duration_since(Instant::now()) {
+            if self.stop.load(Relaxed) {
+                return false;
+            }
             if self.take_new_config() {
                 return true;
             }
@@ -276,12 +351,23 @@ impl<L: Link> Engine<L> {
 
     fn publish_status(&mut self) {
         let s = self.port.stats();
-        self.telemetry.header(self.port.status());
-        self.events.header(self.port.status(), Instant::now());
+        let h = *self.port.status();
+        self.telemetry.header(&h);
+        // A chip that answers NOP has just reset: its counters restart.
+        if h.is_nop() {
+            self.crc_errors.rebase();
+            self.wkc_errors.rebase();
+        } else {
+            let totals = (self.crc_errors.update(h.crc_errors), self.wkc_errors.update(h.wkc_errors));
+            self.telemetry.crc_errors.store(totals.0, Relaxed);
+            self.telemetry.wkc_errors.store(totals.1, Relaxed);
+            self.events.header(&h, totals, Instant::now());
+        }
         self.telemetry.exchanges.store(s.exchanges, Relaxed);
         self.telemetry.corrupt.store(s.corrupt, Relaxed);
         self.telemetry.not_ready.store(s.not_ready, Relaxed);
         self.telemetry.input_batches_lost.store(s.lost, Relaxed);
+        self.telemetry.ring_overflows.store(self.intake.inputs.ring_overflows, Relaxed);
     }
 
     /// Takes new requests; false when told to stop.
@@ -298,6 +384,9 @@ impl<L: Link> Engine<L> {
     /// Safe stop: CiA402 axes disabled through the helper, slaves to SAFE-OP
     /// then INIT.
     fn safe_stop(&mut self, cyclic: Option<&mut Cyclic>) -> Exit {
+        // A safe stop must not outlast the daemon's one-second promise:
+        // each wait for the chip is short.
+        self.port.set_ready_timeout(self.config.ready_timeout().min(Duration::from_millis(200)));
         self.set_phase(Phase::Stopping);
         info!("safe stop");
         let mut fifo_pending = false;
@@ -319,7 +408,7 @@ impl<L: Link> Engine<L> {
             if let Err(e) = bringup::blocking(
                 &mut self.port,
                 &StateCheck { target: SlaveSelector::All, state },
-                Duration::from_secs(2),
+                Duration::from_millis(400),
             ) {
                 warn!(error = %e, %state, "safe stop");
             }

@@ -11,14 +11,16 @@ use ecmxf_wire::flags::{ControlFlags, ErrorFlags, StatusFlags};
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
-use ecmxf_wire::payload::slave_info::SlaveCountGet;
-use ecmxf_wire::{CommandCode, EcatState, ResponseHeader};
+use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
+use ecmxf_wire::{CommandCode, EcatState, ResponseHeader, al_status_text};
 use tracing::{debug, info, warn};
 
 use super::cyclic::Cyclic;
 use super::events::EventKind;
+use super::inputs::InputPublisher;
 use super::job::{NetworkAction, Request};
-use super::telemetry::Telemetry;
+use super::supervisor::{FlowWatch, RecoverCause, flow_limit};
+use super::telemetry::{Phase, Telemetry};
 use super::transaction::{Active, Progress};
 use super::{Command, Engine, Exit};
 use crate::config::WriterGoneAction;
@@ -42,39 +44,135 @@ const CENSUS: Duration = Duration::from_secs(1);
 /// How often a transaction waiting for the chip polls its status.
 const POLL: Duration = Duration::from_micros(100);
 
+/// Where FIFO answers go: input frames to subscribers, and the watch that
+/// they keep coming.
+#[derive(Debug)]
+pub(super) struct Intake {
+    /// The input ring.
+    pub inputs: InputPublisher,
+    flow: FlowWatch,
+    epoch: Instant,
+    /// A stall the last answer confirmed, for the loop to act on.
+    stall: Option<RecoverCause>,
+}
+
+impl Intake {
+    pub(super) fn new(inputs: InputPublisher, epoch: Instant) -> Self {
+        Self { inputs, flow: FlowWatch::new(Duration::ZERO, epoch), epoch, stall: None }
+    }
+
+    /// A run of the cyclic exchange starts at `now`.
+    fn start(&mut self, c: &Cyclic, telemetry: &Telemetry, now: Instant) {
+        let limit = flow_limit(c.cycle());
+        self.flow = FlowWatch::new(limit, now);
+        self.stall = None;
+        self.inputs.resume(now, c.cycle());
+        telemetry.newest_input_ns.store(self.ns(now), Relaxed);
+        telemetry.flow_limit_ns.store(limit.as_nanos() as u64, Relaxed);
+    }
+
+    fn ns(&self, t: Instant) -> u64 {
+        t.saturating_duration_since(self.epoch).as_nanos() as u64
+    }
+
+    /// Handles an intact answer to a FIFO exchange: inputs out, freshness
+    /// noted. A network without inputs counts the answer itself as the
+    /// sign of life.
+    fn answer(&mut self, c: &Cyclic, telemetry: &Telemetry, header: &ResponseHeader, data: &[u8], now: Instant) {
+        if header.code != CommandCode::PdoDataFifoOp {
+            return;
+        }
+        let n = self.inputs.publish(data, c.tx_size, now);
+        telemetry.input_frames.fetch_add(n as u64, Relaxed);
+        let alive = if c.tx_size == 0 { 1 } else { n };
+        if alive > 0 {
+            telemetry.newest_input_ns.store(self.ns(now), Relaxed);
+        }
+        if let Some(stall) = self.flow.answer(alive, now) {
+            self.stall.get_or_insert(stall);
+        }
+    }
+}
+
 impl<L: Link> Engine<L> {
-    fn check_health(&self, h: &ResponseHeader) -> Result<(), String> {
+    fn check_health(&self, h: &ResponseHeader) -> Result<(), RecoverCause> {
         if h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) {
-            return Err("chip reset (status back to power-up values)".into());
+            return Err(RecoverCause::ChipReset);
         }
         if h.ecat_state == EcatState::Error {
-            return Err("a slave reports an error or is missing".into());
+            return Err(RecoverCause::SlaveError(String::new()));
         }
         Ok(())
     }
 
-    /// Handles an answer to a FIFO exchange: inputs out, level noted.
-    fn fifo_answer(
-        cyclic: &mut Cyclic,
-        telemetry: &Telemetry,
-        header: &ResponseHeader,
-        data: &[u8],
-        now: Instant,
-    ) -> usize {
-        if header.code != CommandCode::PdoDataFifoOp {
-            return 0;
+    /// Reads every slave's state and AL status code (a fault is being
+    /// handled: the time is not the cycle's), reports the codes as events,
+    /// and returns them as text, e.g. "slave 2 SAFE-OP, AL status 0x001a
+    /// (...)". Read failures are left out.
+    fn al_report(&mut self, slaves: usize) -> String {
+        let mut text = String::new();
+        for i in 0..slaves.min(usize::from(u8::MAX)) as u8 {
+            let mut read = |item| match self.port.call(&SlaveInfoGet { slave: i, item }) {
+                Ok(a) => match SlaveInfo::decode(item, a.data) {
+                    Ok(SlaveInfo::State(v)) => Some(u32::from(v.to_u8())),
+                    Ok(SlaveInfo::AlStatus(v)) => Some(u32::from(v)),
+                    _ => None,
+                },
+                Err(_) => None,
+            };
+            let (Some(state), Some(code)) = (read(SlaveInfoCode::State), read(SlaveInfoCode::AlStatus)) else {
+                continue;
+            };
+            let (state, code) = (EcatState::from_u8(state as u8), code as u16);
+            if code != 0 {
+                self.events.emit(EventKind::AlStatus { slave: i, state, code });
+                if !text.is_empty() {
+                    text.push_str("; ");
+                }
+                text.push_str(&format!("slave {i} {state}, AL status {code:#06x} ({})", al_status_text(code)));
+            }
         }
-        let n = cyclic.publish(data, now);
-        telemetry.input_frames.fetch_add(n as u64, Relaxed);
-        n
+        text
     }
 
-    pub(super) fn running(&mut self, mut cyclic: Option<Cyclic>) -> Exit {
+    /// The cause, with the slaves' AL status codes read and reported where
+    /// a slave is at fault.
+    fn explained(&mut self, why: RecoverCause, slaves: usize) -> RecoverCause {
+        match why {
+            RecoverCause::SlaveError(_) | RecoverCause::WkcStreak(_) | RecoverCause::ExchangeStopped => {
+                let report = self.al_report(slaves);
+                match why {
+                    RecoverCause::SlaveError(_) => RecoverCause::SlaveError(if report.is_empty() {
+                        "no slave reports an AL status code".into()
+                    } else {
+                        report
+                    }),
+                    other => {
+                        if !report.is_empty() {
+                            warn!(slaves = %report, "AL status");
+                        }
+                        other
+                    }
+                }
+            }
+            other => other,
+        }
+    }
+
+    pub(super) fn running(&mut self, cyclic: Option<&mut Cyclic>) -> Exit {
+        let slaves = self.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
+        match self.run_loop(cyclic, slaves) {
+            Exit::Recover(why) => Exit::Recover(self.explained(why, slaves)),
+            stop => stop,
+        }
+    }
+
+    fn run_loop(&mut self, cyclic: Option<&mut Cyclic>, slaves: usize) -> Exit {
+        let mut cyclic = cyclic;
         let mut fifo_pending = false;
         let mut last_poll = Instant::now();
         let mut lost_before = self.port.stats().lost;
         let mut lost_run = 0u32;
-        let slaves = self.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
         let mut last_census = Instant::now();
         let mut wkc_errors = self.port.status().wkc_errors;
         // (first WKC error of a streak, last one seen)
@@ -83,25 +181,29 @@ impl<L: Link> Engine<L> {
         // is cleared, not reported.
         let mut fifo_dry = true;
         self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
+        if let Some(c) = cyclic.as_deref() {
+            self.intake.start(c, &self.telemetry, Instant::now());
+        }
+        let mut flowing = false;
         loop {
             if !self.take_commands() {
-                return self.safe_stop(cyclic.as_mut());
+                return self.safe_stop(cyclic.as_deref_mut());
             }
             while let Ok(w) = self.outputs.try_recv() {
-                self.assembler.push(w, cyclic.as_mut().map(|c| c.outputs.as_mut_slice()));
+                self.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice()));
             }
             if self.writers.take_gone() {
-                self.last_writer_gone(cyclic.as_mut());
+                self.last_writer_gone(cyclic.as_deref_mut());
             }
             if self.take_new_config() {
-                return Exit::Recover("new configuration from a client".into());
+                return Exit::Recover(RecoverCause::NewConfig);
             }
             match self.action.take() {
-                Some(NetworkAction::Reinit) => return Exit::Recover("re-init requested by a client".into()),
+                Some(NetworkAction::Reinit) => return Exit::Recover(RecoverCause::ReinitRequested),
                 Some(NetworkAction::WarmReset) => {
                     // The chip resets at once; its answer may never come.
                     let _ = self.port.call(&WarmReset);
-                    return Exit::Recover("warm reset requested by a client".into());
+                    return Exit::Recover(RecoverCause::WarmResetRequested);
                 }
                 None => {}
             }
@@ -111,34 +213,49 @@ impl<L: Link> Engine<L> {
                 last_census = now;
                 match self.port.call(&SlaveCountGet) {
                     Ok(a) if usize::from(a.header.return_value) != slaves => {
-                        let found = a.header.return_value;
-                        return Exit::Recover(format!("slave count changed from {slaves} to {found}"));
+                        let to = usize::from(a.header.return_value);
+                        return Exit::Recover(RecoverCause::SlaveCount { from: slaves, to });
                     }
                     Ok(_) => {}
-                    Err(e) => return Exit::Recover(e.to_string()),
+                    Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
                 }
                 // Its first exchange carried the answer to the last FIFO
                 // packet: those inputs are published, not dropped.
                 if fifo_pending {
-                    if let (Some(c), Some(prev)) = (cyclic.as_mut(), self.port.previous()) {
-                        Self::fifo_answer(c, &self.telemetry, &prev.header, prev.data, now);
+                    if let (Some(c), Some(prev)) = (cyclic.as_deref(), self.port.previous()) {
+                        self.intake.answer(c, &self.telemetry, &prev.header, prev.data, now);
                     }
                     fifo_pending = false;
                 }
             }
-            let result = match cyclic.as_mut() {
+            let result = match cyclic.as_deref_mut() {
                 Some(c) if self.fifo_due(c, now) => self.fifo_exchange(c, now, &mut fifo_pending).map(|()| true),
-                _ => self.transaction_step(cyclic.as_mut(), &mut fifo_pending, &mut last_poll),
+                _ => self.transaction_step(cyclic.as_deref_mut(), &mut fifo_pending, &mut last_poll),
             };
             let progressed = match result {
                 Ok(p) => p,
-                Err(e) => return Exit::Recover(e.to_string()),
+                Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
             };
             let lost = self.port.stats().lost;
             lost_run = if lost > lost_before { lost_run + 1 } else { 0 };
             lost_before = lost;
             if lost_run >= LOST_IN_A_ROW {
-                return Exit::Recover(format!("{LOST_IN_A_ROW} cyclic answers lost in a row"));
+                return Exit::Recover(RecoverCause::LostAnswers(LOST_IN_A_ROW));
+            }
+            if self.held_below_target {
+                // Slaves held below OP on purpose may deliver nothing.
+                self.intake.flow.excuse(Instant::now());
+            } else if let Some(stall) = self.intake.stall.take() {
+                if let RecoverCause::InputStall { age, .. } = &stall {
+                    let age_us = age.as_micros() as u64;
+                    self.events.emit(EventKind::ProcessData { flowing: false, age_us });
+                }
+                return Exit::Recover(stall);
+            }
+            if !flowing && cyclic.is_some() && self.intake.flow.flowed() {
+                // Running means process data flows: said at the first frame.
+                flowing = true;
+                self.set_phase(Phase::Running);
             }
             let h = *self.port.status();
             self.publish_status();
@@ -157,15 +274,13 @@ impl<L: Link> Engine<L> {
                 let first = wkc_streak.map_or(now, |(f, _)| f);
                 wkc_streak = Some((first, now));
                 if now.duration_since(first) > WKC_STREAK {
-                    return Exit::Recover(format!(
-                        "working-counter errors for {WKC_STREAK:?}: a slave is not exchanging"
-                    ));
+                    return Exit::Recover(RecoverCause::WkcStreak(WKC_STREAK));
                 }
             } else if wkc_streak.is_some_and(|(_, last)| now.duration_since(last) > WKC_QUIET) {
                 wkc_streak = None;
             }
             if cyclic.is_some() && !h.status.flags.contains(StatusFlags::PDO_CONFIGURED) {
-                return Exit::Recover("process-data exchange stopped (working-counter limit)".into());
+                return Exit::Recover(RecoverCause::ExchangeStopped);
             }
             // The FIFO error bit stays set until cleared, and headers lag the
             // clear: one alarm per rising edge, not one per header showing it.
@@ -181,14 +296,14 @@ impl<L: Link> Engine<L> {
             fifo_dry = dry;
             if !progressed {
                 let now = Instant::now();
-                let wake = match cyclic.as_ref() {
+                let wake = match cyclic.as_deref() {
                     Some(c) => c.next_exchange(now, self.rx_room(c), self.port.data_size() / c.tx_size.max(1)),
                     None => now + Duration::from_millis(50),
                 };
                 let until = if self.active.is_some() { now + POLL } else { wake };
                 match self.idle_until(until) {
                     Some(Command::Job(j)) => self.queue.push(j),
-                    Some(Command::Stop) => return self.safe_stop(cyclic.as_mut()),
+                    Some(Command::Stop) => return self.safe_stop(cyclic.as_deref_mut()),
                     None => {}
                 }
             }
@@ -248,7 +363,7 @@ impl<L: Link> Engine<L> {
         let count = match answer {
             Some(a) => {
                 if *fifo_pending {
-                    Self::fifo_answer(c, &self.telemetry, &a.header, a.data, now);
+                    self.intake.answer(c, &self.telemetry, &a.header, a.data, now);
                 }
                 Some(self.port.status().rx_fifo_count)
             }
@@ -265,7 +380,7 @@ impl<L: Link> Engine<L> {
 
     fn transaction_step(
         &mut self,
-        mut cyclic: Option<&mut Cyclic>,
+        cyclic: Option<&mut Cyclic>,
         fifo_pending: &mut bool,
         last_poll: &mut Instant,
     ) -> Result<bool, PortError> {
@@ -292,8 +407,8 @@ impl<L: Link> Engine<L> {
         }
         let sent = self.port.stats().exchanges != exchanges;
         if sent && *fifo_pending {
-            if let (Some(c), Some(prev)) = (cyclic.as_deref_mut(), self.port.previous()) {
-                Self::fifo_answer(c, &self.telemetry, &prev.header, prev.data, now);
+            if let (Some(c), Some(prev)) = (cyclic.as_deref(), self.port.previous()) {
+                self.intake.answer(c, &self.telemetry, &prev.header, prev.data, now);
             }
             *fifo_pending = false;
         }

@@ -4,6 +4,7 @@
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering::Relaxed};
+use std::time::Duration;
 
 use ecmxf_wire::{EcatState, ResponseHeader};
 
@@ -45,20 +46,32 @@ pub struct Telemetry {
     ecat_state: AtomicU8,
     error_byte: AtomicU8,
     status_byte: AtomicU8,
-    crc_errors: AtomicU8,
-    wkc_errors: AtomicU8,
     rx_fifo: AtomicU8,
     tx_fifo: AtomicU8,
+    /// CRC errors the chip counted, since the daemon started (accumulated
+    /// from its 8-bit counter: see [`CounterTotal`]).
+    pub crc_errors: AtomicU64,
+    /// Working-counter errors the chip counted, since the daemon started.
+    pub wkc_errors: AtomicU64,
     /// Exchanges clocked.
     pub exchanges: AtomicU64,
     /// Answers that failed validation.
     pub corrupt: AtomicU64,
     /// Not-ready answers.
     pub not_ready: AtomicU64,
-    /// Input frames published.
+    /// Input frames received from the chip.
     pub input_frames: AtomicU64,
-    /// Input frames lost (corrupt FIFO answers).
+    /// FIFO answers lost (corrupt): each held a batch of input frames.
     pub input_batches_lost: AtomicU64,
+    /// Input frames dropped because the distributor fell behind the engine.
+    pub ring_overflows: AtomicU64,
+    /// When the newest input frame arrived (for networks without inputs:
+    /// the newest intact FIFO answer), ns since the engine's epoch.
+    pub newest_input_ns: AtomicU64,
+    /// How old the newest input may be before process data counts as not
+    /// flowing, ns; 0 while no cyclic exchange runs (see
+    /// `supervisor::flow_limit`).
+    pub flow_limit_ns: AtomicU64,
     /// Output frames pushed.
     pub output_frames: AtomicU64,
     /// Times the chip reported its RxFIFO empty in OP (FIFO error bit).
@@ -83,6 +96,36 @@ pub struct Telemetry {
     last_error: Mutex<Option<String>>,
 }
 
+/// A total accumulated from one of the chip's 8-bit counters (CRC errors,
+/// WKC errors: v049 header bytes 21/22), which wrap at 256 and restart at
+/// 0 when the chip resets. Each header adds the rise since the one before
+/// it (mod 256); after a reset or re-init the first header is a new
+/// baseline. Headers come at least every few ms, far fewer than 256 errors
+/// apart.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct CounterTotal {
+    last: Option<u8>,
+    /// Errors counted since the start.
+    pub total: u64,
+}
+
+impl CounterTotal {
+    /// Adds what the counter rose by since the last header; returns the total.
+    pub fn update(&mut self, raw: u8) -> u64 {
+        if let Some(last) = self.last {
+            self.total += u64::from(raw.wrapping_sub(last));
+        }
+        self.last = Some(raw);
+        self.total
+    }
+
+    /// The next value is a baseline (the chip reset, or its counter was
+    /// cleared).
+    pub fn rebase(&mut self) {
+        self.last = None;
+    }
+}
+
 /// A consistent-enough copy for display.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Snapshot {
@@ -94,10 +137,10 @@ pub struct Snapshot {
     pub error_byte: u8,
     /// ECM status byte.
     pub status_byte: u8,
-    /// SPI CRC error counter.
-    pub crc_errors: u8,
-    /// WKC error counter.
-    pub wkc_errors: u8,
+    /// SPI CRC errors since the daemon started.
+    pub crc_errors: u64,
+    /// WKC errors since the daemon started.
+    pub wkc_errors: u64,
     /// RxFIFO frames (header, two exchanges late).
     pub rx_fifo: u8,
     /// TxFIFO frames.
@@ -110,6 +153,12 @@ pub struct Snapshot {
     pub not_ready: u64,
     /// Batches of input frames lost with a corrupt FIFO answer.
     pub input_batches_lost: u64,
+    /// Input frames dropped because the distributor fell behind.
+    pub ring_overflows: u64,
+    /// When the newest input frame arrived, ns since the engine's epoch.
+    pub newest_input_ns: u64,
+    /// Process-data freshness limit, ns (0: no cyclic exchange running).
+    pub flow_limit_ns: u64,
     /// Blocking-slot transactions completed.
     pub transactions: u64,
     /// Input frames published.
@@ -124,6 +173,19 @@ pub struct Snapshot {
     pub max_fifo_gap_us: u64,
     /// The last applied configuration the engine has taken (0: the first).
     pub config_generation: u64,
+}
+
+impl Snapshot {
+    /// How old the newest input frame is at `now_ns` (ns since the
+    /// engine's epoch), and the limit; `None` while no cyclic exchange runs.
+    pub fn input_age(&self, now_ns: u64) -> Option<(Duration, Duration)> {
+        (self.flow_limit_ns > 0).then(|| {
+            (
+                Duration::from_nanos(now_ns.saturating_sub(self.newest_input_ns)),
+                Duration::from_nanos(self.flow_limit_ns),
+            )
+        })
+    }
 }
 
 impl Telemetry {
@@ -142,10 +204,15 @@ impl Telemetry {
         self.ecat_state.store(h.ecat_state.to_u8(), Relaxed);
         self.error_byte.store(h.errors.bits(), Relaxed);
         self.status_byte.store(h.status.to_byte(), Relaxed);
-        self.crc_errors.store(h.crc_errors, Relaxed);
-        self.wkc_errors.store(h.wkc_errors, Relaxed);
         self.rx_fifo.store(h.rx_fifo_count, Relaxed);
         self.tx_fifo.store(h.tx_fifo_count, Relaxed);
+    }
+
+    /// Forgets the network's state: the engine is bringing it up again, and
+    /// until it answers, the state from before the fault is not the truth.
+    pub fn forget_network(&self) {
+        self.ecat_state.store(EcatState::None.to_u8(), Relaxed);
+        self.flow_limit_ns.store(0, Relaxed);
     }
 
     /// Records why bring-up failed or recovery started.
@@ -173,6 +240,9 @@ impl Telemetry {
             corrupt: self.corrupt.load(Relaxed),
             not_ready: self.not_ready.load(Relaxed),
             input_batches_lost: self.input_batches_lost.load(Relaxed),
+            ring_overflows: self.ring_overflows.load(Relaxed),
+            newest_input_ns: self.newest_input_ns.load(Relaxed),
+            flow_limit_ns: self.flow_limit_ns.load(Relaxed),
             transactions: self.transactions.load(Relaxed),
             input_frames: self.input_frames.load(Relaxed),
             output_frames: self.output_frames.load(Relaxed),
@@ -181,5 +251,41 @@ impl Telemetry {
             max_fifo_gap_us: self.max_fifo_gap_us.load(Relaxed),
             config_generation: self.config_generation.load(Relaxed),
         }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn totals_survive_the_8_bit_wrap() {
+        let mut c = CounterTotal::default();
+        assert_eq!(c.update(5), 0, "the first header is the baseline");
+        assert_eq!(c.update(248), 243);
+        // 248 -> 163 is 171 more, not 85 fewer.
+        assert_eq!(c.update(163), 243 + 171);
+        assert_eq!(c.update(163), 414, "no rise, no count");
+    }
+
+    #[test]
+    fn a_chip_reset_starts_a_new_baseline() {
+        let mut c = CounterTotal::default();
+        c.update(0);
+        c.update(200);
+        c.rebase();
+        assert_eq!(c.update(3), 200, "the reset's 0..3 is not counted as 59");
+        assert_eq!(c.update(4), 201);
+    }
+
+    #[test]
+    fn the_age_counts_from_the_newest_frame() {
+        let t = Telemetry::default();
+        assert_eq!(t.snapshot().input_age(5), None, "nothing expected before the cyclic exchange runs");
+        t.newest_input_ns.store(1_000_000, Relaxed);
+        t.flow_limit_ns.store(50_000_000, Relaxed);
+        assert_eq!(t.snapshot().input_age(31_000_000), Some((Duration::from_millis(30), Duration::from_millis(50))));
+        t.forget_network();
+        assert_eq!(t.snapshot().input_age(31_000_000), None);
     }
 }

@@ -151,6 +151,17 @@ impl Link for HardwareLink {
         self.int1_active_high = int1_active_high;
     }
 
+    /// Opens the SPI device and requests the lines again (a device node
+    /// that went away and came back, a GPIO request the kernel revoked),
+    /// keeping the polarities the chip was told.
+    fn reopen(&mut self) -> Result<(), LinkError> {
+        let mut fresh = Self::open(self.config.clone())?;
+        fresh.int0_active_high = self.int0_active_high;
+        fresh.int1_active_high = self.int1_active_high;
+        *self = fresh;
+        Ok(())
+    }
+
     fn describe(&self) -> String {
         let line = |l: Option<u32>| l.map_or("not wired".to_string(), |l| format!("line {l}"));
         format!(

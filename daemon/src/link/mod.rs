@@ -27,6 +27,10 @@ pub enum LinkError {
     },
     /// The far end went away (simulator socket closed).
     Closed,
+    /// The link waits for INT0 as part of the transfer (the simulator
+    /// socket), and INT0 did not say ready in the time it was given; nothing
+    /// was clocked. The port gives it the rest of its ready timeout.
+    NotReady,
 }
 
 impl fmt::Display for LinkError {
@@ -34,6 +38,7 @@ impl fmt::Display for LinkError {
         match self {
             Self::Io { what, source } => write!(f, "{what}: {source}"),
             Self::Closed => f.write_str("link closed"),
+            Self::NotReady => f.write_str("chip not ready (INT0)"),
         }
     }
 }
@@ -42,7 +47,7 @@ impl std::error::Error for LinkError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             Self::Io { source, .. } => Some(source),
-            Self::Closed => None,
+            Self::Closed | Self::NotReady => None,
         }
     }
 }
@@ -70,6 +75,13 @@ pub trait Link: Send {
     /// active-high). Links that read electrical levels need them.
     fn set_polarity(&mut self, _int0_active_high: bool, _int1_active_high: bool) {}
 
+    /// Opens the device again after the link failed (a simulator that was
+    /// restarted, a device node that came back). Links with nothing to
+    /// reopen succeed.
+    fn reopen(&mut self) -> Result<(), LinkError> {
+        Ok(())
+    }
+
     /// A description for logs.
     fn describe(&self) -> String;
 }
@@ -86,6 +98,9 @@ impl<L: Link + ?Sized> Link for Box<L> {
     }
     fn set_polarity(&mut self, int0_active_high: bool, int1_active_high: bool) {
         (**self).set_polarity(int0_active_high, int1_active_high);
+    }
+    fn reopen(&mut self) -> Result<(), LinkError> {
+        (**self).reopen()
     }
     fn describe(&self) -> String {
         (**self).describe()

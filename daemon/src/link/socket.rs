@@ -28,7 +28,7 @@ impl SocketLink {
     }
 
     fn err(&self, what: &str, e: std::io::Error) -> LinkError {
-        if e.kind() == ErrorKind::UnexpectedEof || e.kind() == ErrorKind::BrokenPipe {
+        if matches!(e.kind(), ErrorKind::UnexpectedEof | ErrorKind::BrokenPipe | ErrorKind::ConnectionReset) {
             LinkError::Closed
         } else {
             LinkError::io(format!("{what} on {}", self.path.display()), e)
@@ -41,7 +41,7 @@ impl Link for SocketLink {
         let result = match self.pending_wait.take() {
             Some(timeout) => match self.client.transfer_when_ready(timeout, tx, rx) {
                 Ok(Some(_)) => Ok(()),
-                Ok(None) => Err(std::io::Error::new(ErrorKind::TimedOut, format!("INT0 not ready within {timeout:?}"))),
+                Ok(None) => return Err(LinkError::NotReady),
                 Err(e) => Err(e),
             },
             None => self.client.transfer(tx, rx).map(|_| ()),
@@ -61,6 +61,15 @@ impl Link for SocketLink {
             Ok(r) => Ok(r),
             Err(e) => Err(self.err("read INT1", e)),
         }
+    }
+
+    /// Connects again: the simulator may have been restarted on the same
+    /// path (its chip is then at power-up; bring-up finds the packet size).
+    fn reopen(&mut self) -> Result<(), LinkError> {
+        self.client = SocketClient::connect(&self.path)
+            .map_err(|e| LinkError::io(format!("reconnect to simulator at {}", self.path.display()), e))?;
+        self.pending_wait = None;
+        Ok(())
     }
 
     fn describe(&self) -> String {

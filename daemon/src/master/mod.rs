@@ -21,16 +21,17 @@ use tokio::sync::{broadcast, oneshot};
 
 use crate::config::{Config, LinkConfig};
 use crate::engine::bringup::NetworkLayout;
-use crate::engine::cyclic::read_record;
 use crate::engine::error::EngineError;
 use crate::engine::events::Event;
+use crate::engine::inputs::read_record;
 use crate::engine::job::{Job, PendingAction, Request, TransferProgress, Writers};
-use crate::engine::telemetry::{Snapshot, Telemetry};
+use crate::engine::telemetry::{Phase, Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
 use crate::link::sim::{SimHandle, SimLink};
 use crate::link::{Link, LinkError};
 use crate::outputs::OutputSender;
 pub use crate::outputs::OutputWriter;
+use ecmxf_wire::EcatState;
 pub use transactions::RawAnswer;
 
 mod network;
@@ -46,10 +47,13 @@ pub const EVENT_BACKLOG: usize = 1024;
 /// One input frame (one DC cycle's inputs).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct InputFrame {
-    /// Sequence number, +1 per frame received.
+    /// DC-cycle sequence number: +1 per cycle, across recoveries too.
     pub seq: u64,
     /// When the engine received it, ns since start.
     pub time_ns: u64,
+    /// Cycles just before this frame that the engine never received (the
+    /// network was down, being recovered): 0 in steady operation.
+    pub gap: u64,
     /// The frame.
     pub data: Vec<u8>,
 }
@@ -65,6 +69,67 @@ tokio::task_local! {
 /// one turn.
 pub async fn as_client<F: std::future::Future>(id: u64, work: F) -> F::Output {
     CLIENT.scope(id, work).await
+}
+
+/// The verdict of [`Master::health`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Health {
+    /// Running in the target state, process data flowing.
+    Healthy,
+    /// The engine is not running (bringing up, recovering, stopped...).
+    NotRunning(Phase),
+    /// Running, but the network is not in the target state.
+    WrongState {
+        /// The state now.
+        state: EcatState,
+        /// The configured target.
+        target: EcatState,
+    },
+    /// Running in the target state, but no input frame arrived for `age`,
+    /// longer than `limit`.
+    Stalled {
+        /// Time since the newest input frame.
+        age: Duration,
+        /// The limit.
+        limit: Duration,
+    },
+}
+
+impl Health {
+    /// The verdict on a snapshot at `now_ns` (engine epoch).
+    pub fn judge(s: &Snapshot, target: EcatState, now_ns: u64) -> Self {
+        if s.phase != Phase::Running {
+            return Self::NotRunning(s.phase);
+        }
+        if s.ecat_state != target {
+            return Self::WrongState { state: s.ecat_state, target };
+        }
+        match s.input_age(now_ns) {
+            Some((age, limit)) if age > limit => Self::Stalled { age, limit },
+            _ => Self::Healthy,
+        }
+    }
+
+    /// Healthy or not.
+    pub fn is_healthy(&self) -> bool {
+        *self == Self::Healthy
+    }
+}
+
+impl std::fmt::Display for Health {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Healthy => f.write_str("healthy: process data flowing"),
+            Self::NotRunning(p) => write!(f, "engine not running ({p:?})"),
+            Self::WrongState { state, target } => write!(f, "network in {state}, not {target}"),
+            Self::Stalled { age, limit } => write!(
+                f,
+                "process data stalled: no input frame for {} ms (limit {} ms)",
+                age.as_millis(),
+                limit.as_millis()
+            ),
+        }
+    }
 }
 
 /// Why the master could not start.
@@ -97,6 +162,7 @@ pub struct Master {
     inputs: broadcast::Sender<Arc<InputFrame>>,
     events: broadcast::Sender<Event>,
     threads: Mutex<Vec<JoinHandle<()>>>,
+    stop_engine: Arc<AtomicBool>,
     stop_distributor: Arc<AtomicBool>,
     writers: Arc<Writers>,
     action: Arc<PendingAction>,
@@ -164,6 +230,7 @@ impl Master {
         let (event_producer, mut event_consumer) = rtrb::RingBuffer::new(crate::engine::events::RING);
         let event_tx = events.clone();
         let stop_distributor = Arc::new(AtomicBool::new(false));
+        let stop_engine = Arc::new(AtomicBool::new(false));
 
         let tx = inputs.clone();
         let stop = Arc::clone(&stop_distributor);
@@ -173,7 +240,8 @@ impl Master {
                 while !stop.load(Ordering::Relaxed) {
                     while let Some(r) = read_record(&mut consumer) {
                         // No subscribers is fine: the frame is dropped.
-                        let _ = tx.send(Arc::new(InputFrame { seq: r.seq, time_ns: r.time_ns, data: r.data }));
+                        let frame = InputFrame { seq: r.seq, time_ns: r.time_ns, gap: r.gap, data: r.data };
+                        let _ = tx.send(Arc::new(frame));
                     }
                     while let Ok(e) = event_consumer.pop() {
                         let _ = event_tx.send(e);
@@ -194,6 +262,7 @@ impl Master {
             writers: Arc::clone(&writers),
             events: event_producer,
             action: Arc::clone(&action),
+            stop: Arc::clone(&stop_engine),
             reconfigure: reconfigure_rx,
         };
         let rt = config.realtime.clone();
@@ -212,6 +281,7 @@ impl Master {
             inputs,
             events,
             threads: Mutex::new(vec![engine, distributor]),
+            stop_engine,
             stop_distributor,
             writers,
             action,
@@ -302,6 +372,22 @@ impl Master {
         self.telemetry.epoch_monotonic_ns.load(Ordering::Relaxed)
     }
 
+    /// Now, ns since the engine's epoch (the time base of frames, events
+    /// and the snapshot's `newest_input_ns`).
+    pub fn now_ns(&self) -> u64 {
+        crate::realtime::monotonic_ns().saturating_sub(self.epoch_monotonic_ns())
+    }
+
+    /// Whether the network does what the configuration asks, judged from
+    /// one snapshot: the engine runs, the network is in the target state,
+    /// and process data flows (the newest input frame is younger than the
+    /// limit). Health, `diag`, the systemd watchdog and READY all use this.
+    pub fn health(&self) -> Health {
+        let s = self.status();
+        let target = self.config.lock().unwrap_or_else(|e| e.into_inner()).cycle.target();
+        Health::judge(&s, target, self.now_ns())
+    }
+
     /// Why bring-up last failed or recovery last started.
     pub fn last_error(&self) -> Option<String> {
         self.telemetry.last_error()
@@ -312,8 +398,10 @@ impl Master {
         self.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
-    /// Safe stop, then waits for the threads (blocking).
+    /// Safe stop, then waits for the threads (blocking). A bring-up or
+    /// recovery in progress is abandoned at once (see `Port::set_abort`).
     pub fn stop(&self) {
+        self.stop_engine.store(true, Ordering::Relaxed);
         // A full queue still takes the stop: retry briefly.
         for _ in 0..100 {
             match self.commands.try_send(Command::Stop) {
@@ -338,5 +426,37 @@ impl Master {
 impl Drop for Master {
     fn drop(&mut self) {
         self.stop();
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn running(state: EcatState, newest_ms: u64, limit_ms: u64) -> Snapshot {
+        let t = Telemetry::default();
+        t.set_phase(Phase::Running);
+        t.header(&ecmxf_wire::ResponseHeader { ecat_state: state, ..Default::default() });
+        t.newest_input_ns.store(newest_ms * 1_000_000, Ordering::Relaxed);
+        t.flow_limit_ns.store(limit_ms * 1_000_000, Ordering::Relaxed);
+        t.snapshot()
+    }
+
+    #[test]
+    fn health_needs_the_target_state_and_fresh_inputs() {
+        let ms = |v: u64| v * 1_000_000;
+        let s = running(EcatState::Op, 100, 50);
+        assert_eq!(Health::judge(&s, EcatState::Op, ms(140)), Health::Healthy);
+        assert_eq!(
+            Health::judge(&s, EcatState::Op, ms(151)),
+            Health::Stalled { age: Duration::from_millis(51), limit: Duration::from_millis(50) }
+        );
+        assert!(matches!(Health::judge(&s, EcatState::SafeOp, ms(101)), Health::WrongState { .. }));
+        let mut r = s;
+        r.phase = Phase::Recovering;
+        assert_eq!(Health::judge(&r, EcatState::Op, ms(101)), Health::NotRunning(Phase::Recovering));
+        // No cyclic exchange (target PRE-OP): nothing to flow.
+        let p = running(EcatState::PreOp, 0, 0);
+        assert_eq!(Health::judge(&p, EcatState::PreOp, ms(10_000)), Health::Healthy);
     }
 }

@@ -1,0 +1,418 @@
+//! The fault matrix: the real `ecmxfd` on `ecmxf-sim serve` (its own
+//! process, faults injected with `ecmxf-sim ctl`) at a 1 ms cycle. For each
+//! fault it checks what flows, not what a status says:
+//!
+//! - detection: how long until GetStatus stops saying "healthy" (phase,
+//!   state and process-data freshness together);
+//! - recovery: how long until it is healthy again;
+//! - afterwards: a fresh pattern written to the digital-IO slave comes back
+//!   through its loopback on the input stream that was opened before the
+//!   first fault (subscribers keep their stream across recoveries), the
+//!   input frame counter rises, an SDO write reads back;
+//! - throughout: no wrong value ever arrives: every looped-back byte is one
+//!   the test wrote, every SDO read after an acknowledged write returns it.
+//!
+//! Then SIGTERM with the stream still open: the daemon exits within 1 s and
+//! leaves the slaves in INIT.
+//!
+//! Figures: `ECMXF_FAULT_REPEATS=3 cargo test -p ecmxf-e2e --test faults --
+//! --nocapture` prints min/median/max detection and recovery times per
+//! fault (CI runs each fault once).
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+use ecmxf_e2e::{Daemon, Simulator, run};
+use ecmxf_proto::v1 as pb;
+use pb::master_client::MasterClient;
+use pb::process_data_client::ProcessDataClient;
+use pb::sdo_client::SdoClient;
+use pb::value::Kind;
+use tokio_stream::StreamExt;
+use tonic::transport::Channel;
+
+/// The IO slave's ring position in the demo network.
+const IO: u32 = 2;
+
+/// What the input stream saw, shared with its reader task.
+#[derive(Debug, Default)]
+struct Seen {
+    /// Samples received.
+    samples: u64,
+    /// The newest IO input byte and when it came.
+    last: Option<(u8, Instant)>,
+    /// Bytes that were never written: must stay empty.
+    wrong: Vec<u8>,
+    /// The newest sequence number; it only rises.
+    seq: u64,
+    backwards: u64,
+    /// Cycles the daemon reported it never received (recoveries).
+    gaps: u64,
+    ended: Option<String>,
+}
+
+struct Bench {
+    ch: Channel,
+    lease: String,
+    out_offset: u32,
+    written: Arc<Mutex<BTreeSet<u8>>>,
+    seen: Arc<Mutex<Seen>>,
+    next: u8,
+    sdo_value: u32,
+}
+
+impl Bench {
+    async fn status(&self) -> Option<pb::MasterStatus> {
+        let mut m = MasterClient::new(self.ch.clone());
+        m.get_status(pb::GetStatusRequest {}).await.ok().map(|r| r.into_inner())
+    }
+
+    async fn healthy(&self) -> bool {
+        self.status().await.is_some_and(|s| {
+            s.phase == pb::EnginePhase::Running as i32 && s.process_data_flowing && s.health.starts_with("healthy")
+        })
+    }
+
+    /// Waits until `healthy()` equals `want`; the time it took.
+    async fn until_health(&self, want: bool, limit: Duration) -> Option<Duration> {
+        let start = Instant::now();
+        while start.elapsed() < limit {
+            if self.healthy().await == want {
+                return Some(start.elapsed());
+            }
+            tokio::time::sleep(Duration::from_millis(2)).await;
+        }
+        None
+    }
+
+    /// Writes a new pattern to the IO slave and waits for it in the stream.
+    async fn loopback(&mut self, what: &str) {
+        self.next = self.next % 250 + 1;
+        let pattern = self.next;
+        self.written.lock().unwrap().insert(pattern);
+        let mut pd = ProcessDataClient::new(self.ch.clone());
+        let start = Instant::now();
+        loop {
+            // A lease lapses when a recovery outlasts it: take a new one.
+            let w = pd
+                .write_outputs(pb::WriteOutputsRequest {
+                    lease_id: self.lease.clone(),
+                    writes: vec![pb::OutputWrite {
+                        target: Some(pb::output_write::Target::Offset(self.out_offset)),
+                        value: Some(pb::Value { kind: Some(Kind::Raw(vec![pattern])) }),
+                    }],
+                })
+                .await;
+            if w.is_ok() {
+                break;
+            }
+            if let Ok(l) = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![IO], ttl_ms: 60_000 }).await {
+                self.lease = l.into_inner().id;
+            }
+            assert!(start.elapsed() < Duration::from_secs(5), "{what}: outputs not writable: {w:?}");
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        let written = Instant::now();
+        loop {
+            let (ended, last) = {
+                let s = self.seen.lock().unwrap();
+                (s.ended.clone(), s.last)
+            };
+            if let Some(e) = ended {
+                panic!("{what}: the input stream ended: {e}");
+            }
+            if last.is_some_and(|(v, at)| v == pattern && at >= written) {
+                return;
+            }
+            assert!(
+                written.elapsed() < Duration::from_secs(3),
+                "{what}: pattern {pattern:#04x} never came back through the loopback ({:?})",
+                last.map(|(v, at)| (v, at.elapsed()))
+            );
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+    }
+
+    /// An SDO write and its read-back; a value read after an acknowledged
+    /// write must be that value. Returns whether both calls succeeded.
+    async fn sdo_pair(&mut self) -> bool {
+        self.sdo_value = self.sdo_value.wrapping_add(0x0101_0101) | 1;
+        let v = self.sdo_value;
+        let mut sdo = SdoClient::new(self.ch.clone());
+        let w = sdo
+            .download(pb::SdoDownloadRequest {
+                slave: 1,
+                index: 0x6083,
+                subindex: 0,
+                complete_access: false,
+                data_type: pb::DataType::Unsigned32 as i32,
+                value: Some(pb::Value { kind: Some(Kind::Unsigned(v.into())) }),
+            })
+            .await;
+        if w.is_err() {
+            return false;
+        }
+        let r = sdo
+            .upload(pb::SdoUploadRequest {
+                slave: 1,
+                index: 0x6083,
+                subindex: 0,
+                complete_access: false,
+                data_type: pb::DataType::Unsigned32 as i32,
+            })
+            .await;
+        match r {
+            Ok(r) => {
+                let got = r.into_inner().raw;
+                assert_eq!(got, v.to_le_bytes(), "SDO read back another value than was written");
+                true
+            }
+            Err(_) => false,
+        }
+    }
+
+    async fn input_frames(&self) -> u64 {
+        self.status().await.and_then(|s| s.counters).map_or(0, |c| c.input_frames)
+    }
+}
+
+/// One fault: how to inject it, how to end it, and whether the daemon must
+/// notice it (bit errors at these rates are absorbed without a recovery).
+struct Fault {
+    name: &'static str,
+    inject: &'static [&'static str],
+    hold: Duration,
+    clear: &'static [&'static str],
+    detected: bool,
+}
+
+const FAULTS: &[Fault] = &[
+    Fault {
+        name: "mosi bit errors 1e-4",
+        inject: &["flip mosi 0.0001"],
+        hold: MS_800,
+        clear: &["flip mosi 0"],
+        detected: false,
+    },
+    Fault {
+        name: "mosi bit errors 1e-3",
+        inject: &["flip mosi 0.001"],
+        hold: MS_800,
+        clear: &["flip mosi 0"],
+        detected: false,
+    },
+    Fault {
+        name: "miso bit errors 1e-4",
+        inject: &["flip miso 0.0001"],
+        hold: MS_800,
+        clear: &["flip miso 0"],
+        detected: false,
+    },
+    Fault {
+        name: "miso bit errors 1e-3",
+        inject: &["flip miso 0.001"],
+        hold: MS_800,
+        clear: &["flip miso 0"],
+        detected: false,
+    },
+    Fault {
+        name: "INT0 stuck low",
+        inject: &["int0 stuck low"],
+        hold: MS_800,
+        clear: &["int0 stuck off"],
+        detected: true,
+    },
+    Fault {
+        name: "INT0 stuck high",
+        inject: &["int0 stuck high"],
+        hold: MS_800,
+        clear: &["int0 stuck off"],
+        detected: true,
+    },
+    Fault { name: "IO slave unplugged", inject: &["unplug 2"], hold: MS_800, clear: &["replug 2"], detected: true },
+    Fault { name: "AL error 0x001A", inject: &["al-error 1 0x001A"], hold: Duration::ZERO, clear: &[], detected: true },
+    Fault {
+        name: "drive fault",
+        inject: &["drive-fault 1 0 0x2310"],
+        hold: Duration::ZERO,
+        clear: &["clear-fault 1 0"],
+        detected: false,
+    },
+    Fault { name: "warm reset", inject: &["warm-reset"], hold: Duration::ZERO, clear: &[], detected: true },
+];
+
+const MS_800: Duration = Duration::from_millis(800);
+
+fn spread(v: &[Duration]) -> String {
+    let mut v = v.to_vec();
+    v.sort();
+    match v.len() {
+        0 => "-".into(),
+        n => format!("{:.0}/{:.0}/{:.0} ms", ms(v[0]), ms(v[n / 2]), ms(v[n - 1])),
+    }
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1000.0
+}
+
+#[test]
+fn after_every_fault_process_data_flows_again() {
+    let repeats: usize = std::env::var("ECMXF_FAULT_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    run(async move {
+        let dir = ecmxf_e2e::temp_dir("faults");
+        let mut sim = Simulator::serve(&dir, &["--seed", "7"]);
+        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+        // 1 ms cycle, as a gateway runs; a fast first retry.
+        let config = ecmxf_e2e::config(&link, "[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n")
+            .replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
+        let mut d = Daemon::with_config(&config);
+        let ch = d.connect().await;
+        let slaves = ecmxf_proto::v1::slaves_client::SlavesClient::new(ch.clone())
+            .list_slaves(pb::ListSlavesRequest {})
+            .await
+            .unwrap()
+            .into_inner();
+        let io = slaves.slaves.iter().find(|s| s.position == IO).expect("the IO slave").clone();
+        let in_offset = io.input_offset as usize;
+
+        // One stream for the whole run: it must survive every recovery.
+        let written = Arc::new(Mutex::new(BTreeSet::from([0u8])));
+        let seen = Arc::new(Mutex::new(Seen::default()));
+        let mut stream = ProcessDataClient::new(ch.clone())
+            .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
+            .await
+            .unwrap()
+            .into_inner();
+        let reader = {
+            let (seen, written) = (Arc::clone(&seen), Arc::clone(&written));
+            tokio::spawn(async move {
+                loop {
+                    let item = stream.next().await;
+                    let mut s = seen.lock().unwrap();
+                    match item {
+                        Some(Ok(sample)) => {
+                            s.samples += 1;
+                            if sample.seq <= s.seq {
+                                s.backwards += 1;
+                            }
+                            s.seq = sample.seq;
+                            s.gaps += sample.gap;
+                            if let Some(&v) = sample.image.get(in_offset) {
+                                if !written.lock().unwrap().contains(&v) {
+                                    s.wrong.push(v);
+                                }
+                                s.last = Some((v, Instant::now()));
+                            }
+                        }
+                        Some(Err(e)) => {
+                            s.ended = Some(e.to_string());
+                            return;
+                        }
+                        None => {
+                            s.ended = Some("end of stream".into());
+                            return;
+                        }
+                    }
+                }
+            })
+        };
+        let lease = ProcessDataClient::new(ch.clone())
+            .acquire_lease(pb::AcquireLeaseRequest { slaves: vec![IO], ttl_ms: 60_000 })
+            .await
+            .unwrap()
+            .into_inner()
+            .id;
+        let mut b = Bench { ch, lease, out_offset: io.output_offset, written, seen, next: 0, sdo_value: 0 };
+        b.loopback("before any fault").await;
+        assert!(b.sdo_pair().await, "SDO before any fault");
+
+        let mut detection: BTreeMap<&str, Vec<Duration>> = BTreeMap::new();
+        let mut recovery: BTreeMap<&str, Vec<Duration>> = BTreeMap::new();
+        let mut sdo_pairs = 0u32;
+        for round in 0..repeats {
+            for f in FAULTS {
+                let what = format!("{} (round {round})", f.name);
+                assert!(b.healthy().await, "{what}: not healthy before the fault");
+                let t0 = Instant::now();
+                for c in f.inject {
+                    sim.ctl(c);
+                }
+                if f.detected {
+                    let t = b.until_health(false, Duration::from_secs(5)).await;
+                    let t = t.unwrap_or_else(|| panic!("{what}: never reported as unhealthy"));
+                    detection.entry(f.name).or_default().push(t);
+                }
+                // Keep SDO traffic going through the fault: errors are
+                // allowed, wrong values are not (sdo_pair asserts).
+                while t0.elapsed() < f.hold {
+                    sdo_pairs += u32::from(b.sdo_pair().await);
+                }
+                for c in f.clear {
+                    sim.ctl(c);
+                }
+                if b.until_health(true, Duration::from_secs(20)).await.is_none() {
+                    panic!("{what}: not healthy again within 20 s: {:?}", b.status().await);
+                }
+                if f.detected {
+                    recovery.entry(f.name).or_default().push(t0.elapsed());
+                }
+                let frames = b.input_frames().await;
+                b.loopback(&what).await;
+                assert!(b.input_frames().await > frames, "{what}: input frames do not rise");
+                let start = Instant::now();
+                while !b.sdo_pair().await {
+                    assert!(start.elapsed() < Duration::from_secs(3), "{what}: SDO does not work afterwards");
+                }
+            }
+            // The simulator dies and a fresh one comes up on the same socket:
+            // the daemon reconnects by itself.
+            let what = format!("simulator restarted (round {round})");
+            let t0 = Instant::now();
+            sim.kill();
+            let t = b.until_health(false, Duration::from_secs(5)).await.unwrap_or_else(|| panic!("{what}: unnoticed"));
+            detection.entry("simulator restarted").or_default().push(t);
+            sim.restart();
+            if b.until_health(true, Duration::from_secs(20)).await.is_none() {
+                panic!("{what}: not healthy again: {:?}", b.status().await);
+            }
+            recovery.entry("simulator restarted").or_default().push(t0.elapsed());
+            b.loopback(&what).await;
+        }
+
+        let s = b.status().await.unwrap();
+        {
+            let seen = b.seen.lock().unwrap();
+            assert!(seen.wrong.is_empty(), "bytes that were never written came through the loopback: {:?}", seen.wrong);
+            assert_eq!(seen.backwards, 0, "sequence numbers went backwards");
+            assert!(seen.gaps > 0, "recoveries must show as gaps in the stream");
+            println!(
+                "stream: {} samples, {} cycles reported as never received; {sdo_pairs} SDO pairs during faults; {} recoveries",
+                seen.samples,
+                seen.gaps,
+                s.counters.as_ref().map_or(0, |c| c.recoveries)
+            );
+        }
+        println!("{:<24} {:>24} {:>24}", "fault", "detected min/med/max", "healthy again min/med/max");
+        for f in FAULTS.iter().map(|f| f.name).chain(["simulator restarted"]) {
+            let none = Vec::new();
+            println!(
+                "{f:<24} {:>24} {:>24}",
+                spread(detection.get(f).unwrap_or(&none)),
+                spread(recovery.get(f).unwrap_or(&none))
+            );
+        }
+
+        // SIGTERM with the stream still open: out within a second, slaves in INIT.
+        let t0 = Instant::now();
+        let code = d.stop();
+        let took = t0.elapsed();
+        println!("SIGTERM with a stream open: exit {code:?} after {:.0} ms", ms(took));
+        assert_eq!(code, Some(0), "{}", d.log());
+        assert!(took <= Duration::from_secs(1), "SIGTERM took {took:?}");
+        let state = sim.ctl("status");
+        assert!(state.contains("state=INIT"), "slaves not in INIT after the stop: {state}");
+        reader.abort();
+    });
+}
