@@ -287,3 +287,64 @@ fn a_lost_lease_applies_the_safe_action() {
         assert_eq!(e.code(), Code::PermissionDenied);
     });
 }
+
+/// A channel to the daemon whose HTTP/2 receive window is small (16 KiB),
+/// so what a slow reader has not read yet stays in the daemon, where the
+/// stream's age bound applies, not in a large client buffer.
+async fn small_window(socket: &std::path::Path) -> tonic::transport::Channel {
+    let path = socket.to_path_buf();
+    tonic::transport::Endpoint::from_static("http://localhost")
+        .initial_stream_window_size(Some(16 * 1024))
+        .initial_connection_window_size(Some(16 * 1024))
+        .connect_with_connector(tower::service_fn(move |_: tonic::transport::Uri| {
+            let path = path.clone();
+            async move {
+                Ok::<_, std::io::Error>(hyper_util::rt::TokioIo::new(tokio::net::UnixStream::connect(path).await?))
+            }
+        }))
+        .await
+        .expect("connect")
+}
+
+fn monotonic_ns() -> u64 {
+    let t = nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC).expect("clock");
+    t.tv_sec() as u64 * 1_000_000_000 + t.tv_nsec() as u64
+}
+
+/// A subscriber that stops reading for 2 s at a 125 us cycle (16000
+/// frames) does not get a queue of old samples when it reads again: past
+/// what its own 16 KiB window held, samples are at most the stream's age
+/// bound (100 ms) old, and the skipped frames are counted in `lost`.
+#[test]
+fn a_slow_subscriber_gets_recent_samples_and_a_loss_count() {
+    run(async {
+        let mut d = Daemon::sim();
+        d.connect().await;
+        let mut stream = ProcessDataClient::new(small_window(&d.socket).await)
+            .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
+            .await
+            .unwrap()
+            .into_inner();
+        let first = stream.next().await.unwrap().unwrap();
+        let sample_bytes = prost::Message::encoded_len(&first) + 5;
+        tokio::time::sleep(Duration::from_secs(2)).await;
+        // What the client's window held when it stopped reading is old by
+        // nature; everything after it must be recent.
+        let buffered = 16 * 1024 / sample_bytes + 2 * 32;
+        let (mut lost, mut ages) = (0u64, Vec::new());
+        for _ in 0..buffered + 400 {
+            let s = stream.next().await.unwrap().unwrap();
+            lost += s.lost;
+            ages.push(Duration::from_nanos(monotonic_ns().saturating_sub(s.monotonic_ns)));
+        }
+        let fresh_from = ages.iter().position(|a| *a < Duration::from_millis(150));
+        let fresh_from = fresh_from.unwrap_or_else(|| panic!("no recent sample after the pause: {ages:?}"));
+        assert!(
+            fresh_from <= buffered,
+            "{fresh_from} stale samples after the pause, more than the {buffered} the client window holds"
+        );
+        let late: Vec<&Duration> = ages[fresh_from..].iter().filter(|a| **a > Duration::from_millis(250)).collect();
+        assert!(late.len() <= 5, "old samples after fresh ones: {late:?}");
+        assert!(lost > 10_000, "the frames skipped during the pause are counted: lost = {lost}");
+    });
+}

@@ -26,6 +26,7 @@ pub mod image;
 pub mod leases;
 pub mod master;
 pub mod objects;
+pub mod paced;
 pub mod pdo;
 pub mod peripherals;
 pub mod sdo;

@@ -323,7 +323,7 @@ impl ProcessDataApi for ProcessDataService {
             };
             Some(Ok(sample))
         });
-        Ok(Response::new(Box::pin(samples)))
+        Ok(Response::new(Box::pin(super::paced::Paced::new(samples))))
     }
 
     async fn acquire_lease(&self, request: Request<pb::AcquireLeaseRequest>) -> Result<Response<pb::Lease>, Status> {
