@@ -11,6 +11,7 @@ status                          counters, state, FIFO levels
 flip mosi|miso RATE             flip one bit in a byte with probability RATE (0..1)
 seed N                          seed the bit-flip generator
 int0 stuck high|low|off         hold INT0 at a level, or release it
+tx-fifo stall|resume            stop (or resume) queuing input frames; all else goes on
 unplug SLAVE | replug SLAVE     pull a slave out of the ring / plug it back (powers up in INIT)
 al-error SLAVE CODE             force an AL error (drops to SAFE-OP at most)
 drive-fault SLAVE AXIS CODE     raise a CiA402 fault with an error code (emergency sent)
@@ -97,6 +98,17 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 ok()
             }
             _ => Err("int0 stuck high|low|off".into()),
+        },
+        "tx-fifo" => match w.next() {
+            Some("stall") => {
+                chip.faults.tx_stalled = true;
+                ok()
+            }
+            Some("resume") => {
+                chip.faults.tx_stalled = false;
+                ok()
+            }
+            _ => Err("tx-fifo stall|resume".into()),
         },
         "unplug" => {
             let i = slave_index(chip, w.next())?;
@@ -202,5 +214,10 @@ mod tests {
         assert!(execute(&mut c, "bogus").unwrap_err().contains("unknown command"));
         assert!(execute(&mut c, "status").unwrap().starts_with("ok time_ns=0"));
         assert!(execute(&mut c, "gpio 25 high").is_err());
+        execute(&mut c, "tx-fifo stall").unwrap();
+        assert!(c.faults.tx_stalled);
+        execute(&mut c, "tx-fifo resume").unwrap();
+        assert!(!c.faults.tx_stalled);
+        assert!(execute(&mut c, "tx-fifo sometimes").is_err());
     }
 }

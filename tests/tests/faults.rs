@@ -185,15 +185,27 @@ struct Fault {
     hold: Duration,
     clear: &'static [&'static str],
     detected: bool,
+    /// The longest the daemon may take to stop saying "healthy".
+    detect_within: Option<Duration>,
 }
 
 const FAULTS: &[Fault] = &[
+    // OP on paper, no input frame: health must say so within 100 ms.
+    Fault {
+        name: "input frames stop",
+        inject: &["tx-fifo stall"],
+        hold: Duration::from_millis(300),
+        clear: &["tx-fifo resume"],
+        detected: true,
+        detect_within: Some(Duration::from_millis(100)),
+    },
     Fault {
         name: "mosi bit errors 1e-4",
         inject: &["flip mosi 0.0001"],
         hold: MS_800,
         clear: &["flip mosi 0"],
         detected: false,
+        detect_within: None,
     },
     Fault {
         name: "mosi bit errors 1e-3",
@@ -201,6 +213,7 @@ const FAULTS: &[Fault] = &[
         hold: MS_800,
         clear: &["flip mosi 0"],
         detected: false,
+        detect_within: None,
     },
     Fault {
         name: "miso bit errors 1e-4",
@@ -208,6 +221,7 @@ const FAULTS: &[Fault] = &[
         hold: MS_800,
         clear: &["flip miso 0"],
         detected: false,
+        detect_within: None,
     },
     Fault {
         name: "miso bit errors 1e-3",
@@ -215,6 +229,7 @@ const FAULTS: &[Fault] = &[
         hold: MS_800,
         clear: &["flip miso 0"],
         detected: false,
+        detect_within: None,
     },
     Fault {
         name: "INT0 stuck low",
@@ -222,6 +237,7 @@ const FAULTS: &[Fault] = &[
         hold: MS_800,
         clear: &["int0 stuck off"],
         detected: true,
+        detect_within: None,
     },
     Fault {
         name: "INT0 stuck high",
@@ -229,17 +245,40 @@ const FAULTS: &[Fault] = &[
         hold: MS_800,
         clear: &["int0 stuck off"],
         detected: true,
+        detect_within: None,
     },
-    Fault { name: "IO slave unplugged", inject: &["unplug 2"], hold: MS_800, clear: &["replug 2"], detected: true },
-    Fault { name: "AL error 0x001A", inject: &["al-error 1 0x001A"], hold: Duration::ZERO, clear: &[], detected: true },
+    Fault {
+        name: "IO slave unplugged",
+        inject: &["unplug 2"],
+        hold: MS_800,
+        clear: &["replug 2"],
+        detected: true,
+        detect_within: None,
+    },
+    Fault {
+        name: "AL error 0x001A",
+        inject: &["al-error 1 0x001A"],
+        hold: Duration::ZERO,
+        clear: &[],
+        detected: true,
+        detect_within: None,
+    },
     Fault {
         name: "drive fault",
         inject: &["drive-fault 1 0 0x2310"],
         hold: Duration::ZERO,
         clear: &["clear-fault 1 0"],
         detected: false,
+        detect_within: None,
     },
-    Fault { name: "warm reset", inject: &["warm-reset"], hold: Duration::ZERO, clear: &[], detected: true },
+    Fault {
+        name: "warm reset",
+        inject: &["warm-reset"],
+        hold: Duration::ZERO,
+        clear: &[],
+        detected: true,
+        detect_within: None,
+    },
 ];
 
 const MS_800: Duration = Duration::from_millis(800);
@@ -335,14 +374,18 @@ fn after_every_fault_process_data_flows_again() {
             for f in FAULTS {
                 let what = format!("{} (round {round})", f.name);
                 assert!(b.healthy().await, "{what}: not healthy before the fault");
-                let t0 = Instant::now();
                 for c in f.inject {
                     sim.ctl(c);
                 }
+                // From when the fault is in effect (ctl has answered).
+                let t0 = Instant::now();
                 if f.detected {
                     let t = b.until_health(false, Duration::from_secs(5)).await;
                     let t = t.unwrap_or_else(|| panic!("{what}: never reported as unhealthy"));
                     detection.entry(f.name).or_default().push(t);
+                    if let Some(limit) = f.detect_within {
+                        assert!(t <= limit, "{what}: reported after {t:?}, more than {limit:?}");
+                    }
                 }
                 // Keep SDO traffic going through the fault: errors are
                 // allowed, wrong values are not (sdo_pair asserts).

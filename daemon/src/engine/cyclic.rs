@@ -103,13 +103,15 @@ impl Cyclic {
 
     /// When the next exchange should happen: when the level has fallen one
     /// packet (`rx_room` frames) below the target, so one exchange brings it
-    /// back; before the TxFIFO holds more than one packet of inputs; and
+    /// back; before the TxFIFO holds more than one packet of inputs
+    /// (`tx_room`: frames that may still queue before it does; 0 = now); and
     /// never later than half the gap between the marks, so an estimate that
     /// is off (the lag is the chip's, not a law) is corrected soon.
     pub fn next_exchange(&self, now: Instant, rx_room: usize, tx_room: usize) -> Instant {
         let refill_at = self.target() - rx_room as i64;
         let by_level = self.cycle * (self.estimate(now) - refill_at).max(0) as u32;
-        let by_inputs = self.cycle * (tx_room.max(1) as u32);
+        // A packet's worth of inputs already waiting: now.
+        let by_inputs = self.cycle * (tx_room as u32);
         let cap = (self.cycle * u32::from((self.high - self.low).max(2) / 2)).min(MAX_EXCHANGE_INTERVAL);
         now + by_level.min(by_inputs).min(cap)
     }
@@ -213,6 +215,8 @@ mod tests {
         cy.exchanged(t0, 0, None);
         cy.exchanged(t0, 0, None);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
+        assert_eq!(cy.next_exchange(t0, 4, 0), t0, "a packet of inputs waiting: now");
+        assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "room for 3 more input frames");
     }
 
     #[test]

@@ -297,7 +297,7 @@ impl<L: Link> Engine<L> {
             if !progressed {
                 let now = Instant::now();
                 let wake = match cyclic.as_deref() {
-                    Some(c) => c.next_exchange(now, self.rx_room(c), self.port.data_size() / c.tx_size.max(1)),
+                    Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)),
                     None => now + Duration::from_millis(50),
                 };
                 let until = if self.active.is_some() { now + POLL } else { wake };
@@ -339,9 +339,20 @@ impl<L: Link> Engine<L> {
         self.port.data_size().checked_div(c.rx_size).unwrap_or(0)
     }
 
+    /// Input frames that may still queue in the TxFIFO before they fill
+    /// one packet: what one exchange reads. Counting the frames already
+    /// queued (header, two exchanges late) keeps the TxFIFO drained: a
+    /// backlog left from bring-up would otherwise never shrink (one packet
+    /// read per packet produced), and every input would arrive that many
+    /// cycles old, and keep arriving that long after the chip stopped
+    /// producing them.
+    fn tx_room_left(&self, c: &Cyclic) -> usize {
+        let per_packet = self.port.data_size() / c.tx_size.max(1);
+        per_packet.saturating_sub(usize::from(self.port.status().tx_fifo_count))
+    }
+
     fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
-        let tx_room = self.port.data_size() / c.tx_size.max(1);
-        now >= c.next_exchange(now, self.rx_room(c), tx_room) || c.estimate(now) < i64::from(c.low()) + 2
+        now >= c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)) || c.estimate(now) < i64::from(c.low()) + 2
     }
 
     pub(super) fn fifo_exchange(

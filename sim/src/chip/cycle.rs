@@ -102,7 +102,7 @@ impl Chip {
                 self.master.wkc_streak = 0;
             }
         }
-        if running && self.fifo.enabled {
+        if running && self.fifo.enabled && !self.faults.tx_stalled {
             let frame = self.master.inputs.clone();
             self.fifo.push_input(frame);
         }

@@ -165,6 +165,10 @@ pub struct Faults {
     pub flip_miso: f64,
     /// INT0 held at this level regardless of readiness.
     pub int0_stuck: Option<bool>,
+    /// The TxFIFO stops taking input frames while everything else goes on
+    /// (answers, state, outputs): the "OP on paper, nothing flows" fault a
+    /// host must notice by itself.
+    pub tx_stalled: bool,
     rng: u64,
 }
 
