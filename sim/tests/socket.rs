@@ -105,10 +105,16 @@ fn check_and_ctl_commands() {
     let bad = std::env::temp_dir().join(format!("ecmxf-bad-{}.toml", std::process::id()));
     std::fs::write(&bad, "version = 1\n[[slave]]\nprofile = \"coupler\"\nspeed = 3\n").unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim")).args(["check", bad.to_str().unwrap()]).output().unwrap();
-    std::fs::remove_file(&bad).ok();
-    assert!(!out.status.success());
+    assert_eq!(out.status.code(), Some(2), "a bad file is a usage error, as in ecmxfd --check-config");
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("speed") && err.contains("line 4"), "{err}");
+    // A value out of the chip's range, with its line.
+    std::fs::write(&bad, "version = 1\n[chip]\nspi_hz = 0\n[[slave]]\nprofile = \"coupler\"\n").unwrap();
+    let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim")).args(["check", bad.to_str().unwrap()]).output().unwrap();
+    std::fs::remove_file(&bad).ok();
+    assert_eq!(out.status.code(), Some(2));
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("chip.spi_hz") && err.contains("line 3"), "{err}");
 
     let s = serve(&[]);
     let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))
@@ -117,4 +123,5 @@ fn check_and_ctl_commands() {
         .unwrap();
     assert!(out.status.success());
     assert!(String::from_utf8_lossy(&out.stdout).contains("drive-fault"));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("tx-fifo"));
 }

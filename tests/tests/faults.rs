@@ -357,6 +357,21 @@ fn after_every_fault_process_data_flows_again() {
                 }
             })
         };
+        // Every event, for the checks at the end.
+        let events = Arc::new(Mutex::new(Vec::<pb::Event>::new()));
+        let mut event_stream = pb::diagnostics_client::DiagnosticsClient::new(ch.clone())
+            .stream_events(pb::StreamEventsRequest {})
+            .await
+            .unwrap()
+            .into_inner();
+        let event_reader = {
+            let events = Arc::clone(&events);
+            tokio::spawn(async move {
+                while let Some(Ok(e)) = event_stream.next().await {
+                    events.lock().unwrap().push(e);
+                }
+            })
+        };
         let lease = ProcessDataClient::new(ch.clone())
             .acquire_lease(pb::AcquireLeaseRequest { slaves: vec![IO], ttl_ms: 60_000 })
             .await
@@ -385,6 +400,11 @@ fn after_every_fault_process_data_flows_again() {
                     detection.entry(f.name).or_default().push(t);
                     if let Some(limit) = f.detect_within {
                         assert!(t <= limit, "{what}: reported after {t:?}, more than {limit:?}");
+                    }
+                    if f.hold >= Duration::from_millis(300) {
+                        // The fault lasts: diag says something is wrong.
+                        let diag = d.ctl(&["diag"]);
+                        assert_eq!(diag.code, 8, "{what}: diag during the fault:\n{}{}", diag.stdout, diag.stderr);
                     }
                 }
                 // Keep SDO traffic going through the fault: errors are
@@ -426,6 +446,25 @@ fn after_every_fault_process_data_flows_again() {
 
         let s = b.status().await.unwrap();
         {
+            let events = events.lock().unwrap();
+            let kinds = |k: pb::EventKind| events.iter().filter(move |e| e.kind == k as i32);
+            assert!(
+                kinds(pb::EventKind::AlStatus).any(|e| e.slave == 1 && e.al_status_code == 0x001A),
+                "the AL error's code reached the event stream: {:?}",
+                kinds(pb::EventKind::AlStatus).collect::<Vec<_>>()
+            );
+            assert!(
+                kinds(pb::EventKind::ProcessData).any(|e| !e.flag && e.counter > 0),
+                "the stall was an event of its own"
+            );
+            let recovering: Vec<&str> = kinds(pb::EventKind::Recovering).map(|e| e.detail.as_str()).collect();
+            assert!(
+                recovering.iter().any(|d| d.contains("process data stalled")),
+                "the stall was the recovery's cause: {recovering:?}"
+            );
+        }
+        event_reader.abort();
+        {
             let seen = b.seen.lock().unwrap();
             assert!(seen.wrong.is_empty(), "bytes that were never written came through the loopback: {:?}", seen.wrong);
             assert_eq!(seen.backwards, 0, "sequence numbers went backwards");
@@ -457,5 +496,59 @@ fn after_every_fault_process_data_flows_again() {
         let state = sim.ctl("status");
         assert!(state.contains("state=INIT"), "slaves not in INIT after the stop: {state}");
         reader.abort();
+    });
+}
+
+/// Waits until the daemon's API answers GetStatus with a phase in `phases`.
+async fn until_phase(d: &Daemon, phases: &[pb::EnginePhase]) -> pb::MasterStatus {
+    let start = Instant::now();
+    loop {
+        if let Ok(ch) = ecmxf_proto::connect_unix(&d.socket).await {
+            if let Ok(s) = MasterClient::new(ch).get_status(pb::GetStatusRequest {}).await {
+                let s = s.into_inner();
+                if phases.iter().any(|p| *p as i32 == s.phase) {
+                    return s;
+                }
+            }
+        }
+        assert!(start.elapsed() < Duration::from_secs(15), "no phase {phases:?}:\n{}", d.log());
+        tokio::time::sleep(Duration::from_millis(20)).await;
+    }
+}
+
+/// SIGTERM within a second whatever the engine is doing: bringing the
+/// network up against a chip whose INT0 never says ready (each wait 1 s),
+/// and retrying after the simulator died (link closed, back-off).
+#[test]
+fn sigterm_is_honoured_during_bring_up_and_recovery() {
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("stop");
+        let mut sim = Simulator::serve(&dir, &[]);
+        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+        let config = ecmxf_e2e::config(&link, "");
+
+        sim.ctl("int0 stuck low");
+        let mut d = Daemon::with_config(&config);
+        until_phase(&d, &[pb::EnginePhase::BringingUp, pb::EnginePhase::Recovering]).await;
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let t0 = Instant::now();
+        let code = d.stop();
+        let took = t0.elapsed();
+        println!("SIGTERM during bring-up (INT0 stuck): exit {code:?} after {:.0} ms", ms(took));
+        assert_eq!(code, Some(0), "{}", d.log());
+        assert!(took <= Duration::from_secs(1), "SIGTERM during bring-up took {took:?}:\n{}", d.log());
+        sim.ctl("int0 stuck off");
+
+        let mut d = Daemon::with_config(&config);
+        d.connect().await;
+        sim.kill();
+        until_phase(&d, &[pb::EnginePhase::Recovering]).await;
+        tokio::time::sleep(Duration::from_millis(300)).await;
+        let t0 = Instant::now();
+        let code = d.stop();
+        let took = t0.elapsed();
+        println!("SIGTERM while the link is gone: exit {code:?} after {:.0} ms", ms(took));
+        assert_eq!(code, Some(0), "{}", d.log());
+        assert!(took <= Duration::from_secs(1), "SIGTERM while recovering took {took:?}:\n{}", d.log());
     });
 }

@@ -216,11 +216,24 @@ pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
     let target = info.into_inner().target_state;
     let status = api.master().get_status(api.req(pb::GetStatusRequest {})).await;
     let status = status.map_err(CliError::rpc("master status"))?.into_inner();
-    let list = api.slaves().list_slaves(api.req(pb::ListSlavesRequest {})).await;
-    let list = list.map_err(CliError::rpc("list slaves"))?.into_inner();
     let mut problems = Vec::new();
-    if status.phase != pb::EnginePhase::Running as i32 {
-        problems.push(format!("the engine is {}", crate::values::phase_name(status.phase)));
+    let running = status.phase == pb::EnginePhase::Running as i32;
+    // While the engine brings the network up or recovers, the slaves cannot
+    // be read: that is the diagnosis, not a failure of diag.
+    let list = match api.slaves().list_slaves(api.req(pb::ListSlavesRequest {})).await {
+        Ok(l) => l.into_inner(),
+        Err(e) if e.code() == tonic::Code::Unavailable => {
+            if running {
+                // It stopped running between the two calls.
+                problems.push(format!("the engine stopped serving the slaves: {}", e.message()));
+            }
+            pb::ListSlavesResponse::default()
+        }
+        Err(e) => return Err(CliError::rpc("list slaves")(e)),
+    };
+    if !running {
+        let why = if status.last_error.is_empty() { String::new() } else { format!(" ({})", status.last_error) };
+        problems.push(format!("the engine is {}{why}", crate::values::phase_name(status.phase)));
     } else if status.flow_limit_us > 0 && !status.process_data_flowing {
         // The daemon's own verdict: OP on paper is not OP when no input
         // frame arrives.
