@@ -24,6 +24,8 @@ fn master_slaves_and_states() {
         let status = master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
         assert_eq!(status.phase, pb::EnginePhase::Running as i32);
         assert_eq!(status.ecat_state, pb::EcatState::Op as i32);
+        assert!(status.process_data_flowing && status.health.starts_with("healthy"), "{status:?}");
+        assert!(status.flow_limit_us > 0 && status.input_age_us <= status.flow_limit_us, "{status:?}");
         let counters = status.counters.unwrap();
         assert!(counters.exchanges > 0 && counters.input_frames > 0, "{counters:?}");
 
@@ -65,6 +67,9 @@ fn master_slaves_and_states() {
             .unwrap_or_else(|e| panic!("{e:?}\n{}", d.log()))
             .into_inner();
         assert_eq!(one.state, pb::EcatState::SafeOp as i32);
+        // A slave held in SAFE-OP on request reports no AL error, and says so.
+        assert_eq!(one.al_status_code, 0, "{one:?}");
+        assert!(!one.al_status_text.is_empty(), "{one:?}");
         let r = state
             .set_state(pb::SetStateRequest {
                 slave: Some(2),
@@ -151,6 +156,9 @@ fn health_follows_the_bus_and_reflection_lists_the_services() {
             .unwrap_or_else(|e| panic!("{e:?}\n{}", d.log()))
             .into_inner();
         assert_eq!(one.state, pb::EcatState::SafeOp as i32);
+        // A slave held in SAFE-OP on request reports no AL error, and says so.
+        assert_eq!(one.al_status_code, 0, "{one:?}");
+        assert!(!one.al_status_text.is_empty(), "{one:?}");
         state.set_state(set(pb::EcatState::Op)).await.unwrap_or_else(|e| panic!("{e:?}\n{}", d.log()));
         wait_for(tonic_health::pb::health_check_response::ServingStatus::Serving).await;
 
