@@ -94,7 +94,10 @@ pub struct MetricsConfig {
 #[serde(deny_unknown_fields, default)]
 pub struct OutputsConfig {
     /// What the daemon does when the last client that wrote outputs goes
-    /// away (disconnects, crashes) while the network runs.
+    /// away (disconnects, crashes) while the network runs; also what the
+    /// outputs are when the network comes back after a fault (hold-last and
+    /// quick-stop: the image the lease holders last wrote; zero: zeros).
+    /// Whatever it is, configured axes come up disabled after a fault.
     pub on_last_writer_gone: WriterGoneAction,
 }
 

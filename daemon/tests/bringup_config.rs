@@ -8,9 +8,16 @@ use ecmxf_sim::Chip;
 use ecmxf_wire::payload::cia402::Cia402State;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
+use ecmxfd::engine::job::Immediate;
 use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::SimLink;
 use ecmxfd::master::Master;
+
+/// Asks the chip's CiA402 helper to enable axis 0, as Cia402.Command ENABLE does.
+async fn enable(m: &Master) {
+    let set = ecmxf_wire::payload::cia402::Cia402StateSet { axis: 0, state: Cia402State::OperationEnabled };
+    m.immediate(Immediate::Cia402StateSet(set), None).await.expect("402_STATE_SET");
+}
 
 const CONFIG: &str = r#"
 version = 1
@@ -93,9 +100,14 @@ fn configured_mapping_sdos_and_helper_are_applied() {
     rt.block_on(async {
         assert_eq!(m.sdo_read(0, 0x6083, 0, false, None).await.unwrap(), 5555u32.to_le_bytes());
         assert_eq!(m.sdo_read(1, 0x6085, 0, false, None).await.unwrap(), 10_000u32.to_le_bytes());
-        // The helper walks TI axis 1 to operation enabled.
+        // Restart interlock: the axis comes up disabled; enabled on request,
+        // the helper walks TI axis 1 to operation enabled.
         let mut inputs = m.subscribe();
         let at = l.slaves[1].tx_offset;
+        let f = inputs.recv().await.unwrap();
+        let sw = u16::from_le_bytes([f.data[at], f.data[at + 1]]);
+        assert_ne!(Cia402State::from_statusword(sw), Cia402State::OperationEnabled, "enabled without a request");
+        enable(&m).await;
         let t = Instant::now();
         loop {
             let f = inputs.recv().await.unwrap();
@@ -192,6 +204,7 @@ fn axes_quick_stop_when_the_last_writer_goes() {
     let state = move |d: &[u8]| Cia402State::from_statusword(u16::from_le_bytes([d[at], d[at + 1]]));
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
+        enable(&m).await;
         until(&m, "operation enabled", |d| state(d) == Cia402State::OperationEnabled).await;
         drop(m.output_writer());
         until(&m, "the axis stopped and disabled", |d| state(d) == Cia402State::SwitchOnDisabled).await;

@@ -552,3 +552,99 @@ fn sigterm_is_honoured_during_bring_up_and_recovery() {
         assert!(took <= Duration::from_secs(1), "SIGTERM while recovering took {took:?}:\n{}", d.log());
     });
 }
+
+/// After a fault (here a warm reset of the chip), every configured axis
+/// comes up disabled until a client enables it (restart interlock), and the
+/// IO slave's outputs are what `outputs.on_last_writer_gone` says from the
+/// very first frame after the recovery: the image the lease holder wrote
+/// (hold-last, quick-stop) or zeros (zero), seen through its loopback.
+#[test]
+fn after_a_fault_axes_stay_disabled_and_outputs_follow_the_policy() {
+    use pb::cia402_client::Cia402Client;
+    for (policy, expected) in [("hold-last", 0x5Au8), ("zero", 0), ("quick-stop", 0x5A)] {
+        run(async move {
+            let dir = ecmxf_e2e::temp_dir("interlock");
+            let sim = Simulator::serve(&dir, &[]);
+            let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+            let extra = format!("{}[outputs]\non_last_writer_gone = \"{policy}\"\n", ecmxf_e2e::TI_AXIS);
+            let config = ecmxf_e2e::config(&link, &extra).replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
+            let mut d = Daemon::with_config(&config);
+            let ch = d.connect().await;
+            let io = ecmxf_proto::v1::slaves_client::SlavesClient::new(ch.clone())
+                .list_slaves(pb::ListSlavesRequest {})
+                .await
+                .unwrap()
+                .into_inner()
+                .slaves
+                .into_iter()
+                .find(|s| s.position == IO)
+                .unwrap();
+            let mut cia = Cia402Client::new(ch.clone());
+            let axis = cia.get_axis(pb::GetAxisRequest { axis: 0 }).await.unwrap().into_inner();
+            assert_ne!(axis.state, pb::DriveState::OperationEnabled as i32, "{policy}: enabled at start: {axis:?}");
+            let enable = pb::AxisCommandRequest {
+                axis: 0,
+                command: pb::AxisCommand::Enable as i32,
+                wait: true,
+                timeout_ms: 3000,
+            };
+            let s = cia.command(enable).await.unwrap().into_inner();
+            assert_eq!(s.state, pb::DriveState::OperationEnabled as i32, "{policy}: {s:?}");
+
+            let mut pd = ProcessDataClient::new(ch.clone());
+            let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![IO], ttl_ms: 60_000 }).await.unwrap();
+            pd.write_outputs(pb::WriteOutputsRequest {
+                lease_id: lease.into_inner().id,
+                writes: vec![pb::OutputWrite {
+                    target: Some(pb::output_write::Target::Offset(io.output_offset)),
+                    value: Some(pb::Value { kind: Some(Kind::Raw(vec![0x5A])) }),
+                }],
+            })
+            .await
+            .unwrap();
+            let mut stream = pd
+                .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
+                .await
+                .unwrap()
+                .into_inner();
+            let at = io.input_offset as usize;
+            let start = Instant::now();
+            while stream.next().await.unwrap().unwrap().image[at] != 0x5A {
+                assert!(start.elapsed() < Duration::from_secs(3), "{policy}: no loopback");
+            }
+            let mut events = pb::diagnostics_client::DiagnosticsClient::new(ch.clone())
+                .stream_events(pb::StreamEventsRequest {})
+                .await
+                .unwrap()
+                .into_inner();
+
+            sim.ctl("warm-reset");
+            // The first sample after the outage carries the gap.
+            let first = loop {
+                let s = tokio::time::timeout(Duration::from_secs(10), stream.next())
+                    .await
+                    .unwrap_or_else(|_| panic!("{policy}: no sample after the recovery"))
+                    .unwrap()
+                    .unwrap();
+                if s.gap > 0 {
+                    break s;
+                }
+            };
+            assert_eq!(first.image[at], expected, "{policy}: the first frame after the recovery: {first:?}");
+            let recovered = loop {
+                let e = tokio::time::timeout(Duration::from_secs(5), events.next()).await.unwrap().unwrap().unwrap();
+                if e.kind == pb::EventKind::Recovered as i32 {
+                    break e;
+                }
+            };
+            assert_eq!(recovered.counter, 1, "{policy}: one axis held disabled: {recovered:?}");
+            // Still disabled a while later: nothing enables it but a client.
+            tokio::time::sleep(Duration::from_millis(300)).await;
+            let axis = cia.get_axis(pb::GetAxisRequest { axis: 0 }).await.unwrap().into_inner();
+            assert_ne!(axis.state, pb::DriveState::OperationEnabled as i32, "{policy}: re-enabled by itself");
+            let s = cia.command(enable).await.unwrap().into_inner();
+            assert_eq!(s.state, pb::DriveState::OperationEnabled as i32, "{policy}: enable after the fault: {s:?}");
+            d.stop();
+        });
+    }
+}

@@ -86,6 +86,18 @@ pub fn event_pb(e: &Event) -> pb::Event {
             out.detail = why.clone();
             K::Recovering
         }
+        EventKind::Recovered { axes_disabled, outputs } => {
+            out.counter = *axes_disabled as u64;
+            out.detail = format!("{outputs:?}");
+            out.text = format!(
+                "network back after a fault: {axes_disabled} axes disabled until enabled again, outputs {}",
+                match outputs {
+                    crate::config::WriterGoneAction::Zero => "zeroed",
+                    _ => "as last written",
+                }
+            );
+            K::Recovered
+        }
         EventKind::LastWriterGone(action) => {
             out.detail = format!("{action:?}");
             K::LastWriterGone

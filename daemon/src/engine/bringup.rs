@@ -341,8 +341,14 @@ pub fn bring_up<L: Link>(port: &mut Port<L>, config: &Config, outputs: &[u8]) ->
             port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
             return Err(step("CiA402 helper", format!("axis {n} on slave {} refused", a.slave)));
         }
-        let target = if op { Cia402State::OperationEnabled } else { Cia402State::SwitchOnDisabled };
-        port.call(&Cia402StateSet { axis: n as u8, state: target })?;
+        // Restart interlock (IEC 60204-1 9.2.5.4.2; every drive safety
+        // guide): a machine must not start moving by itself when power or
+        // the network comes back. Axes come up disabled after every
+        // bring-up, the first one and each recovery, re-init or warm reset
+        // alike; a client enables them (Cia402.Command ENABLE). There is no
+        // opt-out: a drive that re-enables itself after an unexplained fault
+        // moves with whatever setpoint it last had.
+        port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::SwitchOnDisabled })?;
     }
 
     // 7. FIFO sizes.

@@ -86,6 +86,16 @@ pub enum EventKind {
     Recovering(String),
     /// The last output writer went away and this was done.
     LastWriterGone(WriterGoneAction),
+    /// The network is back after a fault: every configured axis came up
+    /// disabled (restart interlock: a client must enable it again), and
+    /// the outputs are as the policy says (hold-last and quick-stop: the
+    /// image the lease holders last wrote; zero: zeros).
+    Recovered {
+        /// Axes held disabled.
+        axes_disabled: usize,
+        /// The outputs policy applied.
+        outputs: WriterGoneAction,
+    },
     /// Events dropped because no one read them in time.
     Lost(u64),
 }

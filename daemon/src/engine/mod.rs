@@ -33,7 +33,7 @@ use ecmxf_wire::payload::fifo::FifoEnable;
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
 use tracing::{error, info, warn};
 
-use crate::config::Config;
+use crate::config::{Config, WriterGoneAction};
 use crate::link::Link;
 use crate::port::Port;
 use bringup::{NetworkLayout, bring_up};
@@ -174,6 +174,12 @@ impl<L: Link> Engine<L> {
             self.events.rebase();
             self.crc_errors.rebase();
             self.wkc_errors.rebase();
+            // After a fault the outputs are what the policy says: the image
+            // the lease holders last wrote (hold-last, quick-stop: the axes
+            // come up disabled anyway), or zeros.
+            if !first && self.config.outputs.on_last_writer_gone == WriterGoneAction::Zero {
+                self.saved_outputs.fill(0);
+            }
             // A stop during bring-up ends its waits at once (Port::set_abort).
             self.port.set_abort(Some(Arc::clone(&self.stop)));
             let result = bring_up(&mut self.port, &self.config, &self.saved_outputs);
@@ -207,6 +213,11 @@ impl<L: Link> Engine<L> {
             };
             info!(slaves = layout.slaves.len(), state = %layout.state, rx = layout.rx_size, tx = layout.tx_size, "network up");
             backoff = Duration::from_millis(self.config.recovery.backoff_ms);
+            if !first {
+                let (axes, outputs) = (self.config.axes.len(), self.config.outputs.on_last_writer_gone);
+                warn!(axes, ?outputs, "back after a fault: axes disabled until a client enables them");
+                self.events.emit(EventKind::Recovered { axes_disabled: axes, outputs });
+            }
             first = false;
             let cyclic = (layout.state == EcatState::Op && (layout.rx_size > 0 || layout.tx_size > 0)).then(|| {
                 let cycle = Duration::from_micros(u64::from(if self.config.cycle.dc_assign_activate != 0 {
