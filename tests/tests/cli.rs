@@ -292,6 +292,14 @@ fn errors_say_what_went_wrong_with_the_documented_exit_code() {
         assert!(err.contains("--type"), "{err}");
         let err = d.ctl(&["download", "-p", "1", "0x605A", "0", "70000"]).fails(2).to_owned();
         assert!(err.contains("70000") && err.contains("INTEGER16"), "{err}");
+        // A type narrower than the object: an error naming both sizes, not
+        // a truncated value.
+        for (ty, name, n) in [("int8", "INTEGER8", "1 byte"), ("bool", "BOOLEAN", "1 byte")] {
+            let err = d.ctl(&["upload", "-p", "1", "0x6041", "--type", ty]).fails(2).to_owned();
+            assert!(err.contains("holds 2 bytes") && err.contains(name) && err.contains(n), "{ty}: {err}");
+        }
+        let err = d.ctl(&["upload", "-p", "1", "0x6064", "--type", "uint16"]).fails(2).to_owned();
+        assert!(err.contains("holds 4 bytes") && err.contains("2 bytes"), "{err}");
         let err = d.ctl(&["cia402", "status"]).fails(0).to_owned();
         assert!(err.is_empty(), "no axes is not an error: {err}");
 

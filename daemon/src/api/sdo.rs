@@ -9,7 +9,7 @@ use tonic::{Request, Response, Status};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{data_type, decode_value, encode_value, index, subindex};
+use super::convert::{data_type, decode_value, encode_value, index, subindex, type_size};
 use super::objects::{KNOWN, axis_index, lookup};
 use super::status::to_status;
 use crate::engine::error::EngineError;
@@ -38,6 +38,20 @@ impl SdoApi for SdoService {
         let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await;
         self.0.sdo_latency.observe(started.elapsed());
         let raw = raw?;
+        // A type narrower than the object would show part of it as if it
+        // were the value (0x3716 read as int8 shows 22): refused, naming
+        // both sizes. Complete access reads several subindices on purpose.
+        if let Some(n) = type_size(t).filter(|n| r.data_type != 0 && !r.complete_access && raw.len() > *n) {
+            return Err(super::status::bad_argument(
+                "data_type",
+                format!(
+                    "object {i:#06x}:{sub:02x} of slave {s} holds {} bytes; {} is {n} byte{}",
+                    raw.len(),
+                    t.as_str_name(),
+                    if n == 1 { "" } else { "s" }
+                ),
+            ));
+        }
         let value = decode_value(t, &raw)
             .map_err(|e| Status::invalid_argument(format!("data_type: object {i:#06x}:{sub:02x} of slave {s}: {e}")))?;
         Ok(Response::new(pb::SdoUploadResponse { raw, value, data_type: t as i32 }))

@@ -107,7 +107,16 @@ fn bind_socket(path: &Path, config: &ApiConfig) -> Result<UnixListener, ServeErr
     if let Some(dir) = path.parent() {
         std::fs::create_dir_all(dir).map_err(|e| err(format!("cannot create its folder: {e}")))?;
     }
-    if path.exists() {
+    // Only a socket nobody serves may be replaced: anything else at that
+    // path (a regular file, a folder, a typo pointing at a config) stays.
+    if let Ok(meta) = std::fs::symlink_metadata(path) {
+        use std::os::unix::fs::FileTypeExt;
+        if !meta.file_type().is_socket() {
+            return Err(err(format!(
+                "something that is not a socket is there ({}); remove it or give another api.socket",
+                describe(&meta.file_type())
+            )));
+        }
         if std::os::unix::net::UnixStream::connect(path).is_ok() {
             return Err(err("another daemon is serving it (stop it, or give another api.socket)".into()));
         }
@@ -128,6 +137,18 @@ fn bind_socket(path: &Path, config: &ApiConfig) -> Result<UnixListener, ServeErr
         nix::unistd::chown(path, None, Some(gid)).map_err(|e| err(format!("cannot give it to group {group}: {e}")))?;
     }
     Ok(listener)
+}
+
+fn describe(t: &std::fs::FileType) -> &'static str {
+    if t.is_dir() {
+        "a folder"
+    } else if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "a special file"
+    }
 }
 
 fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
@@ -228,4 +249,38 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
     tasks.abort_all();
     let _ = std::fs::remove_file(&path);
     result.map_err(|e| ServeError::Transport(e.to_string()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn dir(tag: &str) -> PathBuf {
+        let d = std::env::temp_dir().join(format!("ecmxfd-sock-{tag}-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&d);
+        std::fs::create_dir_all(&d).unwrap();
+        d
+    }
+
+    #[tokio::test]
+    async fn only_a_stale_socket_is_replaced() {
+        let d = dir("rule");
+        let config = ApiConfig::default();
+        let file = d.join("ecmxfd.sock");
+        std::fs::write(&file, "precious").unwrap();
+        let e = bind_socket(&file, &config).unwrap_err().to_string();
+        assert!(e.contains(&file.display().to_string()) && e.contains("a regular file"), "{e}");
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "precious", "left as it was");
+
+        let stale = d.join("stale.sock");
+        drop(std::os::unix::net::UnixListener::bind(&stale).unwrap());
+        assert!(stale.exists(), "a socket nobody serves");
+        bind_socket(&stale, &config).expect("a stale socket is replaced");
+
+        let served = d.join("served.sock");
+        let _live = std::os::unix::net::UnixListener::bind(&served).unwrap();
+        let e = bind_socket(&served, &config).unwrap_err().to_string();
+        assert!(e.contains("another daemon"), "{e}");
+        let _ = std::fs::remove_dir_all(&d);
+    }
 }
