@@ -52,7 +52,7 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
         "status" => {
             let s = chip.stats;
             Ok(format!(
-                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={}",
+                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={} tx_dropped={}",
                 chip.now_ns,
                 s.packets,
                 s.not_ready,
@@ -64,7 +64,8 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 chip.fifo.tx.len(),
                 chip.ecat_state(),
                 chip.crc_errors,
-                chip.wkc_errors
+                chip.wkc_errors,
+                chip.fifo.tx_dropped
             ))
         }
         "flip" => {

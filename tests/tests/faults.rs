@@ -49,6 +49,10 @@ struct Seen {
     backwards: u64,
     /// Cycles the daemon reported it never received (recoveries).
     gaps: u64,
+    /// Frames this subscriber was told it lost.
+    lost: u64,
+    /// Sequence jumps that neither `lost` nor `gap` explain: must stay 0.
+    unexplained: Vec<(u64, u64, u64, u64)>,
     ended: Option<String>,
 }
 
@@ -283,6 +287,13 @@ const FAULTS: &[Fault] = &[
 
 const MS_800: Duration = Duration::from_millis(800);
 
+/// One counter of `ecmxf-sim ctl status` (`name=value`).
+fn sim_counter(sim: &Simulator, name: &str) -> u64 {
+    let status = sim.ctl("status");
+    let value = status.split_whitespace().find_map(|w| w.strip_prefix(&format!("{name}=")));
+    value.and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("no {name} in {status}"))
+}
+
 fn spread(v: &[Duration]) -> String {
     let mut v = v.to_vec();
     v.sort();
@@ -336,8 +347,17 @@ fn after_every_fault_process_data_flows_again() {
                             if sample.seq <= s.seq {
                                 s.backwards += 1;
                             }
+                            // Every frame between two samples is accounted
+                            // for: lost by this subscriber, or never
+                            // received by the daemon (gap).
+                            let jump = sample.seq.saturating_sub(s.seq + 1);
+                            if s.samples > 1 && jump != sample.lost + sample.gap {
+                                let prev = s.seq;
+                                s.unexplained.push((prev, sample.seq, sample.lost, sample.gap));
+                            }
                             s.seq = sample.seq;
                             s.gaps += sample.gap;
+                            s.lost += sample.lost;
                             if let Some(&v) = sample.image.get(in_offset) {
                                 if !written.lock().unwrap().contains(&v) {
                                     s.wrong.push(v);
@@ -389,6 +409,7 @@ fn after_every_fault_process_data_flows_again() {
             for f in FAULTS {
                 let what = format!("{} (round {round})", f.name);
                 assert!(b.healthy().await, "{what}: not healthy before the fault");
+                let before = (b.status().await, sim_counter(&sim, "tx_dropped"));
                 for c in f.inject {
                     sim.ctl(c);
                 }
@@ -414,6 +435,17 @@ fn after_every_fault_process_data_flows_again() {
                 }
                 for c in f.clear {
                     sim.ctl(c);
+                }
+                if !f.detected {
+                    // Bit errors are absorbed: no input frame lost on the way
+                    // (a corrupt answer is fetched again, never dropped) and
+                    // none dropped from a full TxFIFO.
+                    let after = (b.status().await, sim_counter(&sim, "tx_dropped"));
+                    let lost = |s: &Option<pb::MasterStatus>| {
+                        s.as_ref().and_then(|s| s.counters.as_ref()).map_or(0, |c| c.input_batches_lost)
+                    };
+                    assert_eq!(lost(&after.0), lost(&before.0), "{what}: input batches lost");
+                    assert_eq!(after.1, before.1, "{what}: input frames dropped from the chip's TxFIFO");
                 }
                 if b.until_health(true, Duration::from_secs(20)).await.is_none() {
                     panic!("{what}: not healthy again within 20 s: {:?}", b.status().await);
@@ -468,11 +500,17 @@ fn after_every_fault_process_data_flows_again() {
             let seen = b.seen.lock().unwrap();
             assert!(seen.wrong.is_empty(), "bytes that were never written came through the loopback: {:?}", seen.wrong);
             assert_eq!(seen.backwards, 0, "sequence numbers went backwards");
+            assert!(
+                seen.unexplained.is_empty(),
+                "sequence jumps not told as lost or gap (prev, seq, lost, gap): {:?}",
+                seen.unexplained
+            );
             assert!(seen.gaps > 0, "recoveries must show as gaps in the stream");
             println!(
-                "stream: {} samples, {} cycles reported as never received; {sdo_pairs} SDO pairs during faults; {} recoveries",
+                "stream: {} samples, {} cycles reported as never received, {} lost by the subscriber; {sdo_pairs} SDO pairs during faults; {} recoveries",
                 seen.samples,
                 seen.gaps,
+                seen.lost,
                 s.counters.as_ref().map_or(0, |c| c.recoveries)
             );
         }

@@ -4,8 +4,9 @@
 //! avoid.
 //!
 //! The header's FIFO counts are two exchanges late (vendor comment;
-//! PROTOCOL-NOTES). The estimate of the level therefore starts from the
-//! count as it was two exchanges ago, adds what was pushed since, and takes
+//! PROTOCOL-NOTES): the answer to a FIFO call, fetched by its guarded
+//! resend, reports the level just before the call's own push. The estimate
+//! of the level therefore starts from that count, adds the push, and takes
 //! off one frame per cycle elapsed since then.
 //!
 //! Input frames go on through [`super::inputs`]. Nothing here allocates or
@@ -46,10 +47,10 @@ pub struct Cyclic {
     push_buf: Vec<u8>,
     low: u8,
     high: u8,
-    /// (time, frames pushed) of the last three exchanges, newest last.
-    recent: [(Instant, u8); 3],
-    /// Level reported, and when it was true.
-    reported: (u8, Instant),
+    /// (time, frames pushed) of the last FIFO call.
+    last_push: (Instant, u8),
+    /// Level reported just before that push.
+    reported: u8,
     started: Instant,
 }
 
@@ -69,8 +70,8 @@ impl Cyclic {
             push_buf: Vec::with_capacity(data_size),
             low,
             high,
-            recent: [(now, 0); 3],
-            reported: (0, now),
+            last_push: (now, 0),
+            reported: 0,
             started: now,
         }
     }
@@ -86,9 +87,8 @@ impl Cyclic {
 
     /// The estimated RxFIFO level now.
     pub fn estimate(&self, now: Instant) -> i64 {
-        let (count, at) = self.reported;
-        let pushed: i64 = self.recent.iter().filter(|(t, _)| *t >= at).map(|(_, n)| i64::from(*n)).sum();
-        i64::from(count) + pushed - self.cycles_since(at, now) as i64
+        let (at, pushed) = self.last_push;
+        i64::from(self.reported) + i64::from(pushed) - self.cycles_since(at, now) as i64
     }
 
     /// The level aimed at: midway between the marks.
@@ -125,20 +125,16 @@ impl Cyclic {
         &self.push_buf
     }
 
-    /// Records an exchange that pushed `n` frames and whose answer (if
-    /// intact) reported `count` frames queued.
-    pub fn exchanged(&mut self, now: Instant, pushed: u8, count: Option<u8>) {
-        self.recent.rotate_left(1);
-        self.recent[2] = (now, pushed);
-        if let Some(c) = count {
-            // The count was true two exchanges ago.
-            self.reported = (c, self.recent[0].0);
-        }
+    /// Records a FIFO call at `now` that pushed `pushed` frames and whose
+    /// answer reported `count` frames queued just before the push.
+    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8) {
+        self.last_push = (now, pushed);
+        self.reported = count;
     }
 
     /// When the last exchange was, if any.
     pub fn last_exchange(&self) -> Option<Instant> {
-        let (t, _) = self.recent[2];
+        let (t, _) = self.last_push;
         (t > self.started).then_some(t)
     }
 
@@ -161,11 +157,11 @@ mod tests {
     fn estimate_counts_pushes_and_consumption_since_the_report() {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
-        cy.exchanged(t0, 10, None);
-        cy.exchanged(t0 + Duration::from_micros(100), 5, None);
-        cy.exchanged(t0 + Duration::from_micros(200), 0, Some(12));
-        // Reported 12 as of t0, 15 pushed since, 8 cycles gone at t0+1 ms.
-        assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 15 - 8);
+        cy.answered(t0, 5, 3);
+        cy.answered(t0 + Duration::from_micros(100), 10, 12);
+        // 12 queued before this push, 10 pushed, 7 cycles gone 0.9 ms later;
+        // the earlier push is in the 12 already.
+        assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 10 - 7);
         assert_eq!(cy.frames_to_push(t0 + Duration::from_millis(1), 9), 0);
         assert_eq!(cy.frames_to_push(t0 + Duration::from_millis(4), 9), 9);
     }
@@ -175,15 +171,11 @@ mod tests {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
         // Target 14, packet room 4: refill when the level reaches 10.
-        cy.exchanged(t0, 0, Some(14));
-        cy.exchanged(t0, 0, None);
-        cy.exchanged(t0, 0, None);
+        cy.answered(t0, 0, 14);
         let at = cy.next_exchange(t0, 4, 100);
         assert_eq!(at.duration_since(t0), Duration::from_micros(125 * 4));
         // Far below target: now.
-        cy.exchanged(t0, 0, Some(2));
-        cy.exchanged(t0, 0, None);
-        cy.exchanged(t0, 0, None);
+        cy.answered(t0, 0, 2);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0);
     }
 
@@ -211,9 +203,7 @@ mod tests {
         let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_millis(1), low: 128, high: 240 };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
-        cy.exchanged(t0, 0, Some(240));
-        cy.exchanged(t0, 0, None);
-        cy.exchanged(t0, 0, None);
+        cy.answered(t0, 0, 240);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
         assert_eq!(cy.next_exchange(t0, 4, 0), t0, "a packet of inputs waiting: now");
         assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "room for 3 more input frames");

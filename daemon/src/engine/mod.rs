@@ -400,7 +400,6 @@ impl<L: Link> Engine<L> {
         self.port.set_ready_timeout(self.config.ready_timeout().min(Duration::from_millis(200)));
         self.set_phase(Phase::Stopping);
         info!("safe stop");
-        let mut fifo_pending = false;
         for n in 0..self.config.axes.len() {
             let _ = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::SwitchOnDisabled });
         }
@@ -408,7 +407,7 @@ impl<L: Link> Engine<L> {
             // Let the helper walk the axes down while outputs keep flowing.
             let until = Instant::now() + Duration::from_millis(50);
             while Instant::now() < until {
-                if self.fifo_exchange(c, Instant::now(), &mut fifo_pending).is_err() {
+                if self.fifo_exchange(c, Instant::now()).is_err() {
                     break;
                 }
                 std::thread::sleep(Duration::from_micros(500));
