@@ -11,10 +11,10 @@
 //!   intact answer that does not echo `C` means `C` failed its check word
 //!   and never ran, so resending it is safe too. Every command whose answer
 //!   matters goes this way.
-//! - **Pipelined** ([`Port::pipelined`]): send once; the answer (to the packet
-//!   before) comes back now. Used for cyclic FIFO data, where a lost answer
-//!   costs one batch of inputs (counted) and is never worth a second
-//!   execution.
+//! - **Once** ([`Port::send_once`]): send, and look at the answer when the
+//!   next exchange brings it ([`Port::previous`]); a lost one is asked
+//!   again later. Only for questions that cost nothing to repeat. Cyclic
+//!   FIFO data goes guarded: a lost answer would lose its input frames.
 //!
 //! A packet the chip was not ready for comes back with the "not ready" check
 //! word and was not taken: it is resent as is.
@@ -99,8 +99,6 @@ pub struct PortStats {
     pub corrupt: u64,
     /// Guarded commands resent after a corrupt answer or a refused packet.
     pub retries: u64,
-    /// Pipelined answers lost.
-    pub lost: u64,
 }
 
 /// What an exchange brought back.
@@ -358,24 +356,22 @@ impl<L: Link> Port<L> {
         Err(PortError::NoAnswer { code, attempts: self.max_attempts * 2, last })
     }
 
-    /// Sends `req` once (cyclic data). Returns the answer to the packet
-    /// before, if intact; a lost one is counted.
-    pub fn pipelined<'a, R: Request<'a>>(&mut self, req: &R) -> Result<Option<Answer<'_>>, PortError> {
+    /// Sends `req` once, without waiting for its answer: that arrives with
+    /// the next exchange and is then [`Port::previous`] (a corrupt one is
+    /// simply absent). For questions worth asking again rather than
+    /// waiting for (the emergency watch); whatever answered the packet
+    /// before is dropped.
+    pub fn send_once<'a, R: Request<'a>>(&mut self, req: &R) -> Result<(), PortError> {
         let index = self.fresh_index();
         self.encode(req, index, self.check)?;
         loop {
             match self.clock(self.check)? {
                 Received::NotReady => continue,
-                Received::Answer(h) => {
-                    self.last_sent = Some((index, R::CODE));
-                    return Ok(Some(self.current(h)));
-                }
-                Received::Corrupt(_) => {
-                    self.last_sent = Some((index, R::CODE));
-                    self.stats.lost += 1;
-                    return Ok(None);
-                }
+                Received::Answer(h) => self.keep_prev(Some(h)),
+                Received::Corrupt(_) => self.keep_prev(None),
             }
+            self.last_sent = Some((index, R::CODE));
+            return Ok(());
         }
     }
 

@@ -20,9 +20,6 @@ use crate::engine::events::{Event, EventKind};
 use crate::master::Master;
 use crate::master::transactions::Immediate;
 
-/// How often the emergency history is polled for the event stream.
-pub const EMERGENCY_POLL: Duration = Duration::from_millis(500);
-
 /// The `Diagnostics` service.
 #[derive(Debug, Clone)]
 pub struct DiagnosticsService(pub Arc<Context>);
@@ -106,6 +103,14 @@ pub fn event_pb(e: &Event) -> pb::Event {
             out.counter = *n;
             K::Lost
         }
+        EventKind::Emergency(r) => {
+            out.emergency = Some(emergency_pb(r));
+            out.text = format!(
+                "emergency {:#06x} from slave {} (error register {:#04x})",
+                r.error_code, r.slave, r.error_register
+            );
+            K::Emergency
+        }
         EventKind::AlStatus { slave, state, code } => {
             out.slave = (*slave).into();
             out.to_state = state_to_pb(*state) as i32;
@@ -129,24 +134,6 @@ pub fn event_pb(e: &Event) -> pb::Event {
     out
 }
 
-/// Polls the emergency history and publishes new records (by running
-/// number) as events, until the context's master stops answering for good.
-pub async fn watch_emergencies(ctx: Arc<Context>) {
-    let mut seen: Option<u16> = None;
-    let mut tick = tokio::time::interval(EMERGENCY_POLL);
-    loop {
-        tick.tick().await;
-        let Ok(records) = emergencies(&ctx.master, EMERGENCY_MAX, Some(Duration::from_secs(1))).await else { continue };
-        let newest = records.first().map(|r| r.number);
-        if let Some(last) = seen {
-            for r in records.iter().rev().filter(|r| r.number > last) {
-                let _ = ctx.emergencies.send(*r);
-            }
-        }
-        seen = newest.or(seen).or(Some(0));
-    }
-}
-
 #[tonic::async_trait]
 impl DiagnosticsApi for DiagnosticsService {
     type StreamEventsStream = BoxStream<pb::Event>;
@@ -157,26 +144,18 @@ impl DiagnosticsApi for DiagnosticsService {
     ) -> Result<Response<Self::StreamEventsStream>, Status> {
         self.0.authorize(&request, Role::Observer)?;
         let mut events = self.0.master.events();
-        let mut emergencies = self.0.emergencies.subscribe();
         let (tx, rx) = tokio::sync::mpsc::channel(64);
         tokio::spawn(async move {
             loop {
-                let msg = tokio::select! {
-                    e = events.recv() => match e {
-                        Ok(e) => event_pb(&e),
-                        Err(RecvError::Lagged(n)) => pb::Event { kind: pb::EventKind::Lost as i32, counter: n, text: format!("{n} events missed"), ..Default::default() },
-                        Err(RecvError::Closed) => break,
+                let msg = match events.recv().await {
+                    Ok(e) => event_pb(&e),
+                    Err(RecvError::Lagged(n)) => pb::Event {
+                        kind: pb::EventKind::Lost as i32,
+                        counter: n,
+                        text: format!("{n} events missed"),
+                        ..Default::default()
                     },
-                    e = emergencies.recv() => match e {
-                        Ok(r) => pb::Event {
-                            kind: pb::EventKind::Emergency as i32,
-                            text: format!("emergency {:#06x} from slave {} (register {:#04x})", r.error_code, r.slave, r.error_register),
-                            emergency: Some(emergency_pb(&r)),
-                            ..Default::default()
-                        },
-                        Err(RecvError::Lagged(n)) => pb::Event { kind: pb::EventKind::Lost as i32, counter: n, text: format!("{n} emergencies missed"), ..Default::default() },
-                        Err(RecvError::Closed) => break,
-                    },
+                    Err(RecvError::Closed) => break,
                 };
                 if tx.send(Ok(msg)).await.is_err() {
                     break;

@@ -61,8 +61,6 @@ pub struct Context {
     /// The output image as the API last wrote it (bit-sized entries are
     /// merged into it, so writing one bit keeps its neighbours).
     pub shadow: Mutex<Vec<u8>>,
-    /// New CoE emergencies (polled; see `diagnostics::watch_emergencies`).
-    pub emergencies: tokio::sync::broadcast::Sender<ecmxf_wire::payload::emergency::EmergencyRecord>,
 }
 
 impl Context {
@@ -78,7 +76,6 @@ impl Context {
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             latest: Mutex::new(None),
             shadow: Mutex::new(Vec::new()),
-            emergencies: tokio::sync::broadcast::channel(64).0,
         })
     }
 

@@ -22,7 +22,7 @@ use super::Context;
 use super::admin::{FoeService, RegistersService};
 use super::cia402::Cia402Service;
 use super::config::ApiConfig;
-use super::diagnostics::{DiagnosticsService, watch_emergencies};
+use super::diagnostics::DiagnosticsService;
 use super::master::{MasterService, SlavesService, StateService};
 use super::pdo::ProcessDataService;
 use super::peripherals::PeripheralsService;
@@ -216,7 +216,6 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
     let mut tasks = tokio::task::JoinSet::new();
     tasks.spawn(track_health(Arc::clone(&ctx.master), reporter));
     tasks.spawn(track_inputs(Arc::clone(&ctx)));
-    tasks.spawn(watch_emergencies(Arc::clone(&ctx)));
     let sweeper = Arc::clone(&ctx);
     tasks.spawn(async move {
         let mut tick = tokio::time::interval(Duration::from_millis(50));

@@ -13,6 +13,7 @@ use std::thread::Thread;
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
+use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::{EcatState, ResponseHeader};
 
 use super::telemetry::Phase;
@@ -96,6 +97,9 @@ pub enum EventKind {
         /// The outputs policy applied.
         outputs: WriterGoneAction,
     },
+    /// A CoE emergency the chip received (read within
+    /// `emergencies::POLL`; the event's time is when it was read).
+    Emergency(EmergencyRecord),
     /// Events dropped because no one read them in time.
     Lost(u64),
 }

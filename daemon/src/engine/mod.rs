@@ -10,6 +10,7 @@
 
 pub mod bringup;
 pub mod cyclic;
+pub mod emergencies;
 pub mod error;
 pub mod events;
 mod fair;
@@ -82,6 +83,7 @@ pub struct Engine<L> {
     saved_outputs: Vec<u8>,
     crc_errors: CounterTotal,
     wkc_errors: CounterTotal,
+    emergencies: emergencies::EmergencyWatch,
     /// Set by [`crate::master::Master::stop`]: abandon bring-up and waits.
     stop: Arc<AtomicBool>,
     distributor: Option<Thread>,
@@ -151,6 +153,7 @@ impl<L: Link> Engine<L> {
             saved_outputs: Vec::new(),
             crc_errors: CounterTotal::default(),
             wkc_errors: CounterTotal::default(),
+            emergencies: emergencies::EmergencyWatch::default(),
             stop: p.stop,
             distributor: p.distributor,
             held_below_target: false,
@@ -377,7 +380,6 @@ impl<L: Link> Engine<L> {
         self.telemetry.exchanges.store(s.exchanges, Relaxed);
         self.telemetry.corrupt.store(s.corrupt, Relaxed);
         self.telemetry.not_ready.store(s.not_ready, Relaxed);
-        self.telemetry.input_batches_lost.store(s.lost, Relaxed);
         self.telemetry.ring_overflows.store(self.intake.inputs.ring_overflows, Relaxed);
     }
 

@@ -33,11 +33,6 @@ const WKC_STREAK: Duration = Duration::from_millis(50);
 /// A streak ends after this long without a new WKC error.
 const WKC_QUIET: Duration = Duration::from_millis(20);
 
-/// This many cyclic answers lost in a row means the link or the chip is
-/// not what the port thinks (e.g. the chip reset to its power-up packet
-/// size): recover, which resynchronises.
-const LOST_IN_A_ROW: u32 = 16;
-
 /// How often the engine counts the slaves while idle.
 const CENSUS: Duration = Duration::from_secs(1);
 
@@ -170,9 +165,8 @@ impl<L: Link> Engine<L> {
     fn run_loop(&mut self, cyclic: Option<&mut Cyclic>, slaves: usize) -> Exit {
         let mut cyclic = cyclic;
         let mut last_poll = Instant::now();
-        let mut lost_before = self.port.stats().lost;
-        let mut lost_run = 0u32;
         let mut last_census = Instant::now();
+        let mut last_emergency_poll = Instant::now();
         let mut wkc_errors = self.port.status().wkc_errors;
         // (first WKC error of a streak, last one seen)
         let mut wkc_streak: Option<(Instant, Instant)> = None;
@@ -219,19 +213,42 @@ impl<L: Link> Engine<L> {
                     Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
                 }
             }
+            // An emergency question whose answer no exchange has brought
+            // yet: fetch it with a status exchange.
+            if self.emergencies.asked()
+                && self.active.is_none()
+                && now.duration_since(last_emergency_poll) >= super::emergencies::ANSWER_WAIT
+            {
+                let fetched = self.port.send_once(&InfoUpdate);
+                let events = &mut self.events;
+                let checked = fetched
+                    .and_then(|()| self.emergencies.check(&mut self.port, |r| events.emit(EventKind::Emergency(r))));
+                if let Err(e) = checked {
+                    return Exit::Recover(RecoverCause::from_port(&e));
+                }
+            }
+            // Emergencies are read when the slot is idle; during a
+            // transaction, its status polls do it (see transaction_step).
+            if self.active.is_none()
+                && self.queue.is_empty()
+                && now.duration_since(last_emergency_poll) >= super::emergencies::POLL
+                && !cyclic.as_deref().is_some_and(|c| self.fifo_due(c, now))
+            {
+                if let Err(e) = self.poll_emergencies(&mut last_emergency_poll, now) {
+                    return Exit::Recover(RecoverCause::from_port(&e));
+                }
+            }
             let result = match cyclic.as_deref_mut() {
                 Some(c) if self.fifo_due(c, now) => self.fifo_exchange(c, now).map(|()| true),
-                _ => self.transaction_step(cyclic.as_deref_mut(), &mut last_poll),
+                _ => self.transaction_step(cyclic.as_deref_mut(), &mut last_poll, &mut last_emergency_poll),
             };
             let progressed = match result {
                 Ok(p) => p,
                 Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
             };
-            let lost = self.port.stats().lost;
-            lost_run = if lost > lost_before { lost_run + 1 } else { 0 };
-            lost_before = lost;
-            if lost_run >= LOST_IN_A_ROW {
-                return Exit::Recover(RecoverCause::LostAnswers(LOST_IN_A_ROW));
+            let events = &mut self.events;
+            if let Err(e) = self.emergencies.check(&mut self.port, |r| events.emit(EventKind::Emergency(r))) {
+                return Exit::Recover(RecoverCause::from_port(&e));
             }
             if self.held_below_target {
                 // Slaves held below OP on purpose may deliver nothing.
@@ -291,7 +308,11 @@ impl<L: Link> Engine<L> {
                     Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)),
                     None => now + Duration::from_millis(50),
                 };
-                let until = if self.active.is_some() { now + POLL } else { wake };
+                // Idle, the next emergency question (or the exchange that
+                // brings its answer) is due too.
+                let emergency = last_emergency_poll
+                    + if self.emergencies.asked() { super::emergencies::ANSWER_WAIT } else { super::emergencies::POLL };
+                let until = if self.active.is_some() { now + POLL } else { wake.min(emergency) };
                 match self.idle_until(until) {
                     Some(Command::Job(j)) => self.queue.push(j),
                     Some(Command::Stop) => return self.safe_stop(cyclic.as_deref_mut()),
@@ -375,7 +396,19 @@ impl<L: Link> Engine<L> {
         Ok(())
     }
 
-    fn transaction_step(&mut self, cyclic: Option<&mut Cyclic>, last_poll: &mut Instant) -> Result<bool, PortError> {
+    /// Asks for the newest CoE emergency (see `emergencies`); the answer is
+    /// looked at after the next exchange.
+    fn poll_emergencies(&mut self, last: &mut Instant, now: Instant) -> Result<(), PortError> {
+        *last = now;
+        self.emergencies.ask(&mut self.port)
+    }
+
+    fn transaction_step(
+        &mut self,
+        cyclic: Option<&mut Cyclic>,
+        last_poll: &mut Instant,
+        last_emergency_poll: &mut Instant,
+    ) -> Result<bool, PortError> {
         let now = Instant::now();
         if self.active.is_none() {
             while let Some(j) = self.queue.pop() {
@@ -399,13 +432,18 @@ impl<L: Link> Engine<L> {
         }
         let sent = self.port.stats().exchanges != exchanges;
         if progress == Progress::Waiting && now.duration_since(*last_poll) >= POLL {
-            // The busy bit only changes in answers: fetch one now. With
-            // cyclic data running, a FIFO exchange is the poll (it reads
-            // inputs and tops up outputs anyway).
-            match cyclic {
-                Some(c) => self.fifo_exchange(c, now)?,
-                None => {
-                    self.port.call(&InfoUpdate)?;
+            // The busy bit only changes in answers: fetch one now. An
+            // emergency read that is due is the poll; else, with cyclic
+            // data running, a FIFO exchange (it reads inputs and tops up
+            // outputs anyway).
+            if now.duration_since(*last_emergency_poll) >= super::emergencies::POLL {
+                self.poll_emergencies(last_emergency_poll, now)?;
+            } else {
+                match cyclic {
+                    Some(c) => self.fifo_exchange(c, now)?,
+                    None => {
+                        self.port.call(&InfoUpdate)?;
+                    }
                 }
             }
             *last_poll = now;

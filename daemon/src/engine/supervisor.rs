@@ -29,8 +29,6 @@ pub enum RecoverCause {
         /// Slaves now.
         to: usize,
     },
-    /// This many cyclic answers were lost in a row.
-    LostAnswers(u32),
     /// Working-counter errors for at least this long.
     WkcStreak(Duration),
     /// The chip stopped the process-data exchange (working-counter limit).
@@ -74,7 +72,6 @@ impl fmt::Display for RecoverCause {
             Self::ChipReset => f.write_str("chip reset (status back to power-up values)"),
             Self::SlaveError(s) => write!(f, "a slave reports an error or is missing: {s}"),
             Self::SlaveCount { from, to } => write!(f, "slave count changed from {from} to {to}"),
-            Self::LostAnswers(n) => write!(f, "{n} cyclic answers lost in a row"),
             Self::WkcStreak(d) => write!(f, "working-counter errors for {d:?}: a slave is not exchanging"),
             Self::ExchangeStopped => f.write_str("process-data exchange stopped (working-counter limit)"),
             Self::InputStall { age, limit } => write!(

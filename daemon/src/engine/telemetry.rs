@@ -61,7 +61,8 @@ pub struct Telemetry {
     pub not_ready: AtomicU64,
     /// Input frames received from the chip.
     pub input_frames: AtomicU64,
-    /// FIFO answers lost (corrupt): each held a batch of input frames.
+    /// FIFO answers lost for good. Always 0 since FIFO calls are guarded
+    /// (a corrupt answer is fetched again); kept for API clients.
     pub input_batches_lost: AtomicU64,
     /// Input frames dropped because the distributor fell behind the engine.
     pub ring_overflows: AtomicU64,
