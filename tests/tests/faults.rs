@@ -53,6 +53,9 @@ struct Seen {
     lost: u64,
     /// Sequence jumps that neither `lost` nor `gap` explain: must stay 0.
     unexplained: Vec<(u64, u64, u64, u64)>,
+    /// The IO input bytes since the newest outage (the first sample after
+    /// it carries a gap), up to a few.
+    after_gap: Option<Vec<u8>>,
     ended: Option<String>,
 }
 
@@ -176,6 +179,21 @@ impl Bench {
         }
     }
 
+    /// Enables the axis (as a client must after every fault) and checks it.
+    async fn enable_axis(&self, what: &str) {
+        let mut cia = pb::cia402_client::Cia402Client::new(self.ch.clone());
+        let enable =
+            pb::AxisCommandRequest { axis: 0, command: pb::AxisCommand::Enable as i32, wait: true, timeout_ms: 3000 };
+        let s = cia.command(enable).await.unwrap_or_else(|e| panic!("{what}: enable: {e:?}")).into_inner();
+        assert_eq!(s.state, pb::DriveState::OperationEnabled as i32, "{what}: {s:?}");
+    }
+
+    async fn axis_enabled(&self) -> bool {
+        let mut cia = pb::cia402_client::Cia402Client::new(self.ch.clone());
+        let s = cia.get_axis(pb::GetAxisRequest { axis: 0 }).await.expect("get axis").into_inner();
+        s.state == pb::DriveState::OperationEnabled as i32
+    }
+
     async fn input_frames(&self) -> u64 {
         self.status().await.and_then(|s| s.counters).map_or(0, |c| c.input_frames)
     }
@@ -287,6 +305,25 @@ const FAULTS: &[Fault] = &[
 
 const MS_800: Duration = Duration::from_millis(800);
 
+/// After a recovery: the axis came up disabled and stays so (restart
+/// interlock), and the first frame after the outage looped back the
+/// pattern the lease holder wrote before the fault (hold-last). A slave
+/// that was itself powered up again (`io_restarted`) shows its power-up
+/// inputs (0) for the one cycle before its loopback has seen an output.
+async fn after_recovery(b: &Bench, what: &str, io_restarted: bool) {
+    let start = Instant::now();
+    let frames = loop {
+        if let Some(v) = b.seen.lock().unwrap().after_gap.clone().filter(|v| v.len() >= 3) {
+            break v;
+        }
+        assert!(start.elapsed() < Duration::from_secs(3), "{what}: no samples after the outage");
+        tokio::time::sleep(Duration::from_millis(5)).await;
+    };
+    let held = if io_restarted { frames.iter().copied().find(|v| *v != 0) } else { frames.first().copied() };
+    assert_eq!(held, Some(b.next), "{what}: the frames after the recovery are not the held outputs: {frames:?}");
+    assert!(!b.axis_enabled().await, "{what}: the axis came back enabled by itself");
+}
+
 /// One counter of `ecmxf-sim ctl status` (`name=value`).
 fn sim_counter(sim: &Simulator, name: &str) -> u64 {
     let status = sim.ctl("status");
@@ -315,8 +352,8 @@ fn after_every_fault_process_data_flows_again() {
         let mut sim = Simulator::serve(&dir, &["--seed", "7"]);
         let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
         // 1 ms cycle, as a gateway runs; a fast first retry.
-        let config = ecmxf_e2e::config(&link, "[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n")
-            .replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
+        let extra = format!("{}[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n", ecmxf_e2e::TI_AXIS);
+        let config = ecmxf_e2e::config(&link, &extra).replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
         let mut d = Daemon::with_config(&config);
         let ch = d.connect().await;
         let slaves = ecmxf_proto::v1::slaves_client::SlavesClient::new(ch.clone())
@@ -363,6 +400,11 @@ fn after_every_fault_process_data_flows_again() {
                                     s.wrong.push(v);
                                 }
                                 s.last = Some((v, Instant::now()));
+                                if sample.gap > 0 {
+                                    s.after_gap = Some(vec![v]);
+                                } else if let Some(a) = s.after_gap.as_mut().filter(|a| a.len() < 4) {
+                                    a.push(v);
+                                }
                             }
                         }
                         Some(Err(e)) => {
@@ -409,6 +451,10 @@ fn after_every_fault_process_data_flows_again() {
             for f in FAULTS {
                 let what = format!("{} (round {round})", f.name);
                 assert!(b.healthy().await, "{what}: not healthy before the fault");
+                if f.detected {
+                    b.enable_axis(&what).await;
+                    b.seen.lock().unwrap().after_gap = None;
+                }
                 let before = (b.status().await, sim_counter(&sim, "tx_dropped"));
                 for c in f.inject {
                     sim.ctl(c);
@@ -452,6 +498,7 @@ fn after_every_fault_process_data_flows_again() {
                 }
                 if f.detected {
                     recovery.entry(f.name).or_default().push(t0.elapsed());
+                    after_recovery(&b, &what, f.name.contains("IO slave")).await;
                 }
                 let frames = b.input_frames().await;
                 b.loopback(&what).await;
@@ -464,15 +511,18 @@ fn after_every_fault_process_data_flows_again() {
             // The simulator dies and a fresh one comes up on the same socket:
             // the daemon reconnects by itself.
             let what = format!("simulator restarted (round {round})");
+            b.enable_axis(&what).await;
             let t0 = Instant::now();
             sim.kill();
             let t = b.until_health(false, Duration::from_secs(5)).await.unwrap_or_else(|| panic!("{what}: unnoticed"));
             detection.entry("simulator restarted").or_default().push(t);
+            b.seen.lock().unwrap().after_gap = None;
             sim.restart();
             if b.until_health(true, Duration::from_secs(20)).await.is_none() {
                 panic!("{what}: not healthy again: {:?}", b.status().await);
             }
             recovery.entry("simulator restarted").or_default().push(t0.elapsed());
+            after_recovery(&b, &what, true).await;
             b.loopback(&what).await;
         }
 

@@ -178,11 +178,15 @@ fn pdo_config(slave: u8, assign: u16, pdos: &[crate::config::PdoConfig]) -> Resu
     PdoConfig::new(slave, assign, &refs).map_err(|e| step("PDO mapping", format!("slave {slave}: {e}")))
 }
 
-/// Brings the network up as `config` says. `outputs` is the output image
-/// clients wrote before a recovery (empty at the first bring-up): the
-/// RxFIFO is prefilled with it when it still fits the mapping, so the
-/// slaves enter OP with what the lease holders last wrote, not zeros.
-pub fn bring_up<L: Link>(port: &mut Port<L>, config: &Config, outputs: &[u8]) -> Result<NetworkLayout, BringUpError> {
+/// Brings the network up as `config` says. `held` are the outputs clients
+/// wrote before a recovery (none at the first bring-up): the RxFIFO is
+/// prefilled with them, slave by slave, so the slaves enter OP with what
+/// the lease holders last wrote, not zeros.
+pub fn bring_up<L: Link>(
+    port: &mut Port<L>,
+    config: &Config,
+    held: &super::held::HeldOutputs,
+) -> Result<NetworkLayout, BringUpError> {
     const SLOW: Duration = Duration::from_secs(5);
 
     // Link: find where the chip is, then CRC-32 and the packet size.
@@ -384,8 +388,7 @@ pub fn bring_up<L: Link>(port: &mut Port<L>, config: &Config, outputs: &[u8]) ->
         // Outputs must be waiting when the slaves enter OP.
         let per_packet = port.data_size().checked_div(rx_size).unwrap_or(0);
         let mut left = usize::from(high);
-        let image = if outputs.len() == rx_size { outputs.to_vec() } else { vec![0u8; rx_size] };
-        let frames = image.repeat(per_packet.max(1));
+        let frames = held.image_for(&slaves, rx_size).repeat(per_packet.max(1));
         while left > 0 && per_packet > 0 {
             let n = left.min(per_packet);
             port.call(&PdoFifoOp { op: FifoOpFlags::WRITE, frames: n as u8, outputs: &frames[..n * rx_size] })?;

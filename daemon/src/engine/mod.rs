@@ -14,6 +14,7 @@ pub mod emergencies;
 pub mod error;
 pub mod events;
 mod fair;
+pub mod held;
 pub mod inputs;
 pub mod job;
 mod running;
@@ -77,10 +78,10 @@ pub struct Engine<L> {
     telemetry: Arc<Telemetry>,
     layout: Arc<Mutex<NetworkLayout>>,
     intake: running::Intake,
-    /// The output image clients wrote, kept across a recovery: bring-up
-    /// prefills the RxFIFO with it and the next run starts from it, so the
-    /// slaves see what the lease holders last wrote, not zeros.
-    saved_outputs: Vec<u8>,
+    /// The outputs clients wrote, kept per slave across recoveries:
+    /// bring-up prefills the RxFIFO with them and the next run starts from
+    /// them, so the slaves see what the lease holders last wrote, not zeros.
+    held: held::HeldOutputs,
     crc_errors: CounterTotal,
     wkc_errors: CounterTotal,
     emergencies: emergencies::EmergencyWatch,
@@ -150,7 +151,7 @@ impl<L: Link> Engine<L> {
             telemetry: p.telemetry,
             layout: p.layout,
             intake: running::Intake::new(InputPublisher::new(p.ring, epoch), epoch),
-            saved_outputs: Vec::new(),
+            held: held::HeldOutputs::default(),
             crc_errors: CounterTotal::default(),
             wkc_errors: CounterTotal::default(),
             emergencies: emergencies::EmergencyWatch::default(),
@@ -181,11 +182,11 @@ impl<L: Link> Engine<L> {
             // the lease holders last wrote (hold-last, quick-stop: the axes
             // come up disabled anyway), or zeros.
             if !first && self.config.outputs.on_last_writer_gone == WriterGoneAction::Zero {
-                self.saved_outputs.fill(0);
+                self.held.clear();
             }
             // A stop during bring-up ends its waits at once (Port::set_abort).
             self.port.set_abort(Some(Arc::clone(&self.stop)));
-            let result = bring_up(&mut self.port, &self.config, &self.saved_outputs);
+            let result = bring_up(&mut self.port, &self.config, &self.held);
             self.port.set_abort(None);
             if self.stop.load(Relaxed) {
                 return self.abandon_bring_up(result.is_ok());
@@ -235,7 +236,7 @@ impl<L: Link> Engine<L> {
                     low: layout.fifo_low,
                     high: layout.fifo_high,
                 };
-                Cyclic::new(plan, self.port.data_size(), std::mem::take(&mut self.saved_outputs))
+                Cyclic::new(plan, self.port.data_size(), self.held.image_for(&layout.slaves, layout.rx_size))
             });
             *self.layout.lock().unwrap_or_else(|e| e.into_inner()) = layout;
             self.held_below_target = false;
@@ -248,7 +249,8 @@ impl<L: Link> Engine<L> {
             let mut cyclic = cyclic;
             let exit = self.running(cyclic.as_mut());
             if let Some(c) = cyclic {
-                self.saved_outputs = c.outputs;
+                let layout = self.layout.lock().unwrap_or_else(|e| e.into_inner());
+                self.held.keep(&layout.slaves, &c.outputs);
             }
             match exit {
                 Exit::Stop => return self.stopped(),
