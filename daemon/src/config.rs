@@ -118,7 +118,7 @@ pub enum WriterGoneAction {
 
 /// `[link]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
-#[serde(deny_unknown_fields, tag = "backend", rename_all = "kebab-case")]
+#[serde(try_from = "RawLink")]
 pub enum LinkConfig {
     /// The in-process simulator.
     Sim {
@@ -135,7 +135,6 @@ pub enum LinkConfig {
         /// SPI device.
         device: PathBuf,
         /// SPI clock, Hz.
-        #[serde(default = "default_spi_hz")]
         spi_hz: u32,
         /// GPIO chip of INT0/INT1.
         gpio_chip: Option<PathBuf>,
@@ -146,17 +145,76 @@ pub enum LinkConfig {
         /// Kernel debounce on the lines, us.
         debounce_us: Option<u32>,
         /// Idle time after a transfer without INT0, us (vendor: 150-200).
-        #[serde(default = "default_idle_us")]
         idle_us: u32,
     },
 }
 
-fn default_spi_hz() -> u32 {
-    20_000_000
+/// `[link]` as written: one flat table, so a value of the wrong type is
+/// reported at its own line (an internally tagged enum buffers the table
+/// and toml can then only point at `[link]`); which keys go with which
+/// backend is checked in [`LinkConfig::try_from`].
+#[derive(Deserialize)]
+#[serde(deny_unknown_fields)]
+struct RawLink {
+    backend: String,
+    network: Option<PathBuf>,
+    socket: Option<PathBuf>,
+    device: Option<PathBuf>,
+    spi_hz: Option<u32>,
+    gpio_chip: Option<PathBuf>,
+    int0_line: Option<u32>,
+    int1_line: Option<u32>,
+    debounce_us: Option<u32>,
+    idle_us: Option<u32>,
 }
 
-fn default_idle_us() -> u32 {
-    200
+impl TryFrom<RawLink> for LinkConfig {
+    type Error = String;
+
+    fn try_from(r: RawLink) -> Result<Self, String> {
+        let only = |backend: &str, allowed: &[&str]| -> Result<(), String> {
+            let given = [
+                ("network", r.network.is_some()),
+                ("socket", r.socket.is_some()),
+                ("device", r.device.is_some()),
+                ("spi_hz", r.spi_hz.is_some()),
+                ("gpio_chip", r.gpio_chip.is_some()),
+                ("int0_line", r.int0_line.is_some()),
+                ("int1_line", r.int1_line.is_some()),
+                ("debounce_us", r.debounce_us.is_some()),
+                ("idle_us", r.idle_us.is_some()),
+            ];
+            match given.iter().find(|(k, set)| *set && !allowed.contains(k)) {
+                Some((k, _)) => Err(format!("link.{k} does not go with backend = \"{backend}\"")),
+                None => Ok(()),
+            }
+        };
+        match r.backend.as_str() {
+            "sim" => {
+                only("sim", &["network"])?;
+                Ok(Self::Sim { network: r.network })
+            }
+            "sim-socket" => {
+                only("sim-socket", &["socket"])?;
+                let socket = r.socket.ok_or("link.socket is needed with backend = \"sim-socket\"")?;
+                Ok(Self::SimSocket { socket })
+            }
+            "spidev" => {
+                only("spidev", &["device", "spi_hz", "gpio_chip", "int0_line", "int1_line", "debounce_us", "idle_us"])?;
+                let device = r.device.ok_or("link.device is needed with backend = \"spidev\"")?;
+                Ok(Self::Spidev {
+                    device,
+                    spi_hz: r.spi_hz.unwrap_or(20_000_000),
+                    gpio_chip: r.gpio_chip,
+                    int0_line: r.int0_line,
+                    int1_line: r.int1_line,
+                    debounce_us: r.debounce_us,
+                    idle_us: r.idle_us.unwrap_or(200),
+                })
+            }
+            other => Err(format!("link.backend {other:?} is not one of sim, sim-socket, spidev")),
+        }
+    }
 }
 
 /// `[chip]`.
@@ -616,6 +674,21 @@ mod tests {
     }
 
     const MINIMAL: &str = "version = 1\n[link]\nbackend = \"sim\"\n";
+
+    #[test]
+    fn link_values_of_the_wrong_type_are_named_at_their_line() {
+        let spi = "version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/x\"\nspi_hz = \"fast\"\n";
+        let e = parse(spi).unwrap_err().to_string();
+        assert!(e.contains("line 5") && e.contains("fast"), "{e}");
+        let e = parse("version = 1\n[link]\nbackend = \"sim\"\ndevice = \"/dev/x\"\n").unwrap_err().to_string();
+        assert!(e.contains("link.device") && e.contains("\"sim\""), "{e}");
+        let e = parse("version = 1\n[link]\nbackend = \"sim-socket\"\n").unwrap_err().to_string();
+        assert!(e.contains("link.socket is needed"), "{e}");
+        let e = parse("version = 1\n[link]\nbackend = \"usb\"\n").unwrap_err().to_string();
+        assert!(e.contains("\"usb\"") && e.contains("spidev"), "{e}");
+        let e = parse("version = 1\n[link]\nbackend = \"sim\"\nspeed = 3\n").unwrap_err().to_string();
+        assert!(e.contains("speed") && e.contains("line 4"), "{e}");
+    }
 
     #[test]
     fn every_mistake_names_its_line() {
