@@ -91,6 +91,8 @@ pub struct NetworkLayout {
     pub state: EcatState,
     /// RxFIFO depth in force (configured, fitted to the FIFO memory).
     pub fifo_rx_depth: u8,
+    /// TxFIFO depth in force.
+    pub fifo_tx_depth: u8,
     /// Low mark in force.
     pub fifo_low: u8,
     /// High mark in force.
@@ -405,6 +407,7 @@ pub fn bring_up<L: Link>(
         tx_size,
         state,
         fifo_rx_depth: rx_depth,
+        fifo_tx_depth: tx_depth,
         fifo_low: low,
         fifo_high: high,
     })

@@ -32,6 +32,8 @@ pub struct Plan {
     pub low: u8,
     /// High mark, frames.
     pub high: u8,
+    /// TxFIFO depth, frames.
+    pub tx_depth: u8,
 }
 
 /// The cyclic state.
@@ -41,6 +43,8 @@ pub struct Cyclic {
     pub rx_size: usize,
     /// Input frame size.
     pub tx_size: usize,
+    /// TxFIFO depth: inputs beyond it are dropped by the chip, oldest first.
+    pub tx_depth: u8,
     cycle: Duration,
     /// The host-side output image, pushed as every new frame.
     pub outputs: Vec<u8>,
@@ -60,11 +64,12 @@ impl Cyclic {
     /// plan's size; otherwise the image starts zeroed.
     pub fn new(plan: Plan, data_size: usize, outputs: Vec<u8>) -> Self {
         let now = Instant::now();
-        let Plan { rx_size, tx_size, cycle, low, high } = plan;
+        let Plan { rx_size, tx_size, cycle, low, high, tx_depth } = plan;
         let outputs = if outputs.len() == rx_size { outputs } else { vec![0; rx_size] };
         Self {
             rx_size,
             tx_size,
+            tx_depth,
             cycle,
             outputs,
             push_buf: Vec::with_capacity(data_size),
@@ -83,6 +88,12 @@ impl Cyclic {
 
     fn cycles_since(&self, t: Instant, now: Instant) -> u64 {
         (now.saturating_duration_since(t).as_nanos() / self.cycle.as_nanos().max(1)) as u64
+    }
+
+    /// Whether the RxFIFO is below its low mark (plus a margin of two
+    /// frames): never for a network without outputs, which has none to keep.
+    pub fn outputs_low(&self, now: Instant) -> bool {
+        self.rx_size > 0 && self.estimate(now) < i64::from(self.low) + 2
     }
 
     /// The estimated RxFIFO level now.
@@ -107,13 +118,19 @@ impl Cyclic {
     /// (`tx_room`: frames that may still queue before it does; 0 = now); and
     /// never later than half the gap between the marks, so an estimate that
     /// is off (the lag is the chip's, not a law) is corrected soon.
+    /// A network without outputs has no RxFIFO level to keep: only inputs
+    /// and the cap decide.
     pub fn next_exchange(&self, now: Instant, rx_room: usize, tx_room: usize) -> Instant {
         let refill_at = self.target() - rx_room as i64;
-        let by_level = self.cycle * (self.estimate(now) - refill_at).max(0) as u32;
-        // A packet's worth of inputs already waiting: now.
-        let by_inputs = self.cycle * (tx_room as u32);
-        let cap = (self.cycle * u32::from((self.high - self.low).max(2) / 2)).min(MAX_EXCHANGE_INTERVAL);
-        now + by_level.min(by_inputs).min(cap)
+        let by_level =
+            if self.rx_size == 0 { Duration::MAX } else { self.cycle * (self.estimate(now) - refill_at).max(0) as u32 };
+        // Both counted from the last exchange, whose header said how many
+        // inputs were waiting (a packet's worth already: now); the level is
+        // an estimate for `now` itself.
+        let since = self.last_push.0;
+        let by_inputs = since + self.cycle * (tx_room as u32);
+        let cap = since + (self.cycle * u32::from((self.high - self.low).max(2) / 2)).min(MAX_EXCHANGE_INTERVAL);
+        now.checked_add(by_level).unwrap_or(cap).min(by_inputs).min(cap)
     }
 
     /// The bytes of `n` output frames, each the current image.
@@ -137,11 +154,6 @@ impl Cyclic {
         let (t, _) = self.last_push;
         (t > self.started).then_some(t)
     }
-
-    /// The low mark.
-    pub fn low(&self) -> u8 {
-        self.low
-    }
 }
 
 #[cfg(test)]
@@ -149,7 +161,7 @@ mod tests {
     use super::*;
 
     fn cyclic() -> (Cyclic, ()) {
-        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_micros(125), low: 8, high: 20 };
+        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_micros(125), low: 8, high: 20, tx_depth: 32 };
         (Cyclic::new(plan, 112, Vec::new()), ())
     }
 
@@ -193,20 +205,37 @@ mod tests {
 
     #[test]
     fn an_image_of_the_right_size_is_kept_across_runs() {
-        let plan = Plan { rx_size: 2, tx_size: 1, cycle: Duration::from_millis(1), low: 8, high: 20 };
+        let plan = Plan { rx_size: 2, tx_size: 1, cycle: Duration::from_millis(1), low: 8, high: 20, tx_depth: 32 };
         assert_eq!(Cyclic::new(plan, 112, vec![7, 9]).outputs, [7, 9]);
         assert_eq!(Cyclic::new(plan, 112, vec![7, 9, 1]).outputs, [0, 0], "another layout starts zeroed");
     }
 
     #[test]
     fn exchanges_happen_at_least_every_max_interval() {
-        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_millis(1), low: 128, high: 240 };
+        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_millis(1), low: 128, high: 240, tx_depth: 40 };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
         cy.answered(t0, 0, 240);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
         assert_eq!(cy.next_exchange(t0, 4, 0), t0, "a packet of inputs waiting: now");
         assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "room for 3 more input frames");
+    }
+
+    #[test]
+    fn a_network_without_outputs_keeps_no_level() {
+        let plan = Plan { rx_size: 0, tx_size: 1, cycle: Duration::from_millis(1), low: 128, high: 240, tx_depth: 40 };
+        let mut cy = Cyclic::new(plan, 512, Vec::new());
+        let t0 = Instant::now();
+        cy.answered(t0, 0, 0);
+        assert!(!cy.outputs_low(t0), "an empty RxFIFO is no shortage without outputs");
+        assert_eq!(cy.next_exchange(t0, 0, 9), t0 + Duration::from_millis(9), "inputs decide");
+        // Counted from the last exchange, not from whenever it is asked.
+        let later = t0 + Duration::from_millis(30);
+        assert!(cy.next_exchange(later, 0, 472) <= later, "the cap has passed: due");
+        let plan = Plan { rx_size: 4, ..plan };
+        let mut cy = Cyclic::new(plan, 512, Vec::new());
+        cy.answered(t0, 0, 0);
+        assert!(cy.outputs_low(t0));
     }
 
     #[test]

@@ -235,6 +235,7 @@ impl<L: Link> Engine<L> {
                     cycle,
                     low: layout.fifo_low,
                     high: layout.fifo_high,
+                    tx_depth: layout.fifo_tx_depth,
                 };
                 Cyclic::new(plan, self.port.data_size(), self.held.image_for(&layout.slaves, layout.rx_size))
             });

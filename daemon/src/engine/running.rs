@@ -292,13 +292,15 @@ impl<L: Link> Engine<L> {
             }
             // The FIFO error bit stays set until cleared, and headers lag the
             // clear: one alarm per rising edge, not one per header showing it.
-            let dry = h.errors.contains(ErrorFlags::FIFO_ERROR);
+            // Without outputs there is nothing to run dry.
+            let has_outputs = cyclic.as_deref().is_some_and(|c| c.rx_size > 0);
+            let dry = has_outputs && h.errors.contains(ErrorFlags::FIFO_ERROR);
             if dry && !fifo_dry {
                 self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
                 self.events.emit(EventKind::FifoUnderrun);
                 warn!("RxFIFO ran dry: outputs repeated");
             }
-            if dry {
+            if h.errors.contains(ErrorFlags::FIFO_ERROR) {
                 self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
             }
             fifo_dry = dry;
@@ -358,13 +360,16 @@ impl<L: Link> Engine<L> {
     /// read per packet produced), and every input would arrive that many
     /// cycles old, and keep arriving that long after the chip stopped
     /// producing them.
+    /// Half the TxFIFO at most, so small input frames (many to a packet)
+    /// are read before the chip has to drop any.
     fn tx_room_left(&self, c: &Cyclic) -> usize {
         let per_packet = self.port.data_size() / c.tx_size.max(1);
-        per_packet.saturating_sub(usize::from(self.port.status().tx_fifo_count))
+        let fits = per_packet.min(usize::from(c.tx_depth / 2).max(1));
+        fits.saturating_sub(usize::from(self.port.status().tx_fifo_count))
     }
 
     fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
-        now >= c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)) || c.estimate(now) < i64::from(c.low()) + 2
+        now >= c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)) || c.outputs_low(now)
     }
 
     /// One FIFO exchange: pushes the output frames the level needs and
@@ -384,8 +389,11 @@ impl<L: Link> Engine<L> {
         let room = self.port.data_size().checked_div(c.rx_size).unwrap_or(0);
         let n = if c.rx_size > 0 { c.frames_to_push(now, room) } else { 0 };
         // Borrowed, not copied: this runs thousands of times a second.
+        let mut op = FifoOpFlags::empty();
+        op.set(FifoOpFlags::WRITE, c.rx_size > 0);
+        op.set(FifoOpFlags::READ, c.tx_size > 0);
         let outputs = c.push_bytes(n);
-        let a = self.port.call(&PdoFifoOp { op: FifoOpFlags::WRITE | FifoOpFlags::READ, frames: n, outputs })?;
+        let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
         let count = a.header.rx_fifo_count;
         self.intake.answer(c, &self.telemetry, &a.header, a.data, now);
         c.answered(now, n, count);

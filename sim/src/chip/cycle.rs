@@ -40,7 +40,10 @@ impl Chip {
         let dt = self.master.cycle_ns;
         let running = self.master.inited && !self.master.exchange_stopped && !self.master.slots.is_empty();
 
-        if running && self.fifo.enabled {
+        // A mapping without outputs has no output frames to play, so no
+        // RxFIFO to run dry (modelling decision: the manual describes the
+        // underrun as repeating the last outputs, and there are none).
+        if running && self.fifo.enabled && self.master.rx_size > 0 {
             match self.fifo.rx.pop_front() {
                 Some(frame) if frame.len() == self.master.outputs.len() => self.master.outputs = frame,
                 Some(_) => {}

@@ -1,0 +1,64 @@
+//! Networks of a shape the demo does not have. A coupler with an input
+//! terminal (the real Beckhoff EL1008 from ../shared/fixtures: inputs, no
+//! outputs, no CoE) at 125 us and 1 ms with the simulator configuration's
+//! FIFO marks: once, such a network wedged the engine (the RxFIFO level it
+//! could never raise made it exchange FIFO packets back to back, every
+//! slave call ended in "deadline exceeded" and the log filled with "RxFIFO
+//! ran dry"). Skipped without the fixtures unless ECMXF_REQUIRE_FIXTURES.
+
+use std::time::Duration;
+
+use ecmxf_e2e::{Daemon, run};
+use ecmxf_proto::v1 as pb;
+use pb::master_client::MasterClient;
+
+#[test]
+fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
+    let esi = ecmxf_e2e::repo().join("../shared/fixtures/esi_beckhoff_EL1xxx.xml");
+    if !esi.exists() {
+        assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", esi.display());
+        eprintln!("skipped: {} missing", esi.display());
+        return;
+    }
+    for sync0_us in [125, 1000] {
+        let esi = esi.clone();
+        run(async move {
+            let dir = ecmxf_e2e::temp_dir("inputs-only");
+            let network = dir.join("net.toml");
+            let net = format!(
+                "version = 1\n[[slave]]\nprofile = \"coupler\"\n[[slave]]\nesi = \"{}\"\nproduct_code = 0x03f03052\n",
+                esi.display()
+            );
+            std::fs::write(&network, net).unwrap();
+            let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
+            let config =
+                ecmxf_e2e::config(&link, "").replace("[cycle]\n", &format!("[cycle]\nsync0_us = {sync0_us}\n"));
+            let mut d = Daemon::with_config(&config);
+            let ch = d.connect().await;
+            let at = format!("at {sync0_us} us");
+            let mut m = MasterClient::new(ch);
+            let s = m.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+            let frames = s.counters.as_ref().unwrap().input_frames;
+            tokio::time::sleep(Duration::from_millis(500)).await;
+            let s = m.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+            assert!(s.process_data_flowing, "{at}: {s:?}");
+            let c = s.counters.unwrap();
+            assert!(c.input_frames > frames, "{at}: inputs do not flow: {c:?}");
+            assert_eq!(c.fifo_alarms, 0, "{at}: no outputs, nothing to run dry: {c:?}");
+            // Every read command answers within its deadline.
+            let slaves = d.ctl(&["--json", "slaves"]).json();
+            let slaves = slaves["slaves"].as_array().unwrap();
+            assert_eq!(slaves.len(), 2, "{at}");
+            assert_eq!(slaves[1]["input_bytes"], 1, "{at}: {slaves:?}");
+            d.ctl(&["master"]).ok();
+            d.ctl(&["states"]).ok();
+            d.ctl(&["sii", "read", "-p", "1", "--count", "16"]).ok();
+            let diag = d.ctl(&["diag"]);
+            assert_eq!(diag.code, 0, "{at}: {}{}", diag.stdout, diag.stderr);
+            let log = d.log();
+            assert!(!log.contains("ran dry"), "{at}: the log warns of a dry RxFIFO:\n{log}");
+            drop(d);
+            let _ = std::fs::remove_dir_all(&dir);
+        });
+    }
+}
