@@ -53,6 +53,9 @@ pub struct Cyclic {
     high: u8,
     /// (time, frames pushed) of the last FIFO call.
     last_push: (Instant, u8),
+    /// Whether the last FIFO call read every input frame waiting (fewer
+    /// than a packet's worth came back), so the TxFIFO was empty then.
+    drained: bool,
     /// Level reported just before that push.
     reported: u8,
     started: Instant,
@@ -76,6 +79,7 @@ impl Cyclic {
             low,
             high,
             last_push: (now, 0),
+            drained: true,
             reported: 0,
             started: now,
         }
@@ -114,8 +118,8 @@ impl Cyclic {
 
     /// When the next exchange should happen: when the level has fallen one
     /// packet (`rx_room` frames) below the target, so one exchange brings it
-    /// back; before the TxFIFO holds more than one packet of inputs
-    /// (`tx_room`: frames that may still queue before it does; 0 = now); and
+    /// back; when `tx_room` input frames have queued since the last
+    /// exchange drained the TxFIFO (at once if it could not drain it); and
     /// never later than half the gap between the marks, so an estimate that
     /// is off (the lag is the chip's, not a law) is corrected soon.
     /// A network without outputs has no RxFIFO level to keep: only inputs
@@ -124,11 +128,14 @@ impl Cyclic {
         let refill_at = self.target() - rx_room as i64;
         let by_level =
             if self.rx_size == 0 { Duration::MAX } else { self.cycle * (self.estimate(now) - refill_at).max(0) as u32 };
-        // Both counted from the last exchange, whose header said how many
-        // inputs were waiting (a packet's worth already: now); the level is
-        // an estimate for `now` itself.
+        // Counted from the last exchange (one input frame per cycle since
+        // it); the level is an estimate for `now` itself.
         let since = self.last_push.0;
-        let by_inputs = since + self.cycle * (tx_room as u32);
+        let by_inputs = match (self.tx_size, self.drained) {
+            (0, _) => since + MAX_EXCHANGE_INTERVAL,
+            (_, true) => since + self.cycle * (tx_room.max(1) as u32),
+            (_, false) => now,
+        };
         let cap = since + (self.cycle * u32::from((self.high - self.low).max(2) / 2)).min(MAX_EXCHANGE_INTERVAL);
         now.checked_add(by_level).unwrap_or(cap).min(by_inputs).min(cap)
     }
@@ -142,11 +149,13 @@ impl Cyclic {
         &self.push_buf
     }
 
-    /// Records a FIFO call at `now` that pushed `pushed` frames and whose
-    /// answer reported `count` frames queued just before the push.
-    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8) {
+    /// Records a FIFO call at `now` that pushed `pushed` frames, whose
+    /// answer reported `count` frames queued just before the push, and that
+    /// read every input frame waiting (`drained`) or a full packet of them.
+    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8, drained: bool) {
         self.last_push = (now, pushed);
         self.reported = count;
+        self.drained = drained;
     }
 
     /// When the last exchange was, if any.
@@ -169,8 +178,8 @@ mod tests {
     fn estimate_counts_pushes_and_consumption_since_the_report() {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
-        cy.answered(t0, 5, 3);
-        cy.answered(t0 + Duration::from_micros(100), 10, 12);
+        cy.answered(t0, 5, 3, true);
+        cy.answered(t0 + Duration::from_micros(100), 10, 12, true);
         // 12 queued before this push, 10 pushed, 7 cycles gone 0.9 ms later;
         // the earlier push is in the 12 already.
         assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 10 - 7);
@@ -183,11 +192,11 @@ mod tests {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
         // Target 14, packet room 4: refill when the level reaches 10.
-        cy.answered(t0, 0, 14);
+        cy.answered(t0, 0, 14, true);
         let at = cy.next_exchange(t0, 4, 100);
         assert_eq!(at.duration_since(t0), Duration::from_micros(125 * 4));
         // Far below target: now.
-        cy.answered(t0, 0, 2);
+        cy.answered(t0, 0, 2, true);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0);
     }
 
@@ -215,10 +224,11 @@ mod tests {
         let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_millis(1), low: 128, high: 240, tx_depth: 40 };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 240);
+        cy.answered(t0, 0, 240, true);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
-        assert_eq!(cy.next_exchange(t0, 4, 0), t0, "a packet of inputs waiting: now");
-        assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "room for 3 more input frames");
+        assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "3 input frames per read");
+        cy.answered(t0, 0, 240, false);
+        assert_eq!(cy.next_exchange(t0, 4, 3), t0, "a full packet read: more may wait, now");
     }
 
     #[test]
@@ -226,7 +236,7 @@ mod tests {
         let plan = Plan { rx_size: 0, tx_size: 1, cycle: Duration::from_millis(1), low: 128, high: 240, tx_depth: 40 };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 0);
+        cy.answered(t0, 0, 0, true);
         assert!(!cy.outputs_low(t0), "an empty RxFIFO is no shortage without outputs");
         assert_eq!(cy.next_exchange(t0, 0, 9), t0 + Duration::from_millis(9), "inputs decide");
         // Counted from the last exchange, not from whenever it is asked.
@@ -234,7 +244,7 @@ mod tests {
         assert!(cy.next_exchange(later, 0, 472) <= later, "the cap has passed: due");
         let plan = Plan { rx_size: 4, ..plan };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
-        cy.answered(t0, 0, 0);
+        cy.answered(t0, 0, 0, true);
         assert!(cy.outputs_low(t0));
     }
 

@@ -73,9 +73,17 @@ impl Intake {
     /// Handles an intact answer to a FIFO exchange: inputs out, freshness
     /// noted. A network without inputs counts the answer itself as the
     /// sign of life.
-    fn answer(&mut self, c: &Cyclic, telemetry: &Telemetry, header: &ResponseHeader, data: &[u8], now: Instant) {
+    /// Returns the input frames the answer held.
+    fn answer(
+        &mut self,
+        c: &Cyclic,
+        telemetry: &Telemetry,
+        header: &ResponseHeader,
+        data: &[u8],
+        now: Instant,
+    ) -> usize {
         if header.code != CommandCode::PdoDataFifoOp {
-            return;
+            return 0;
         }
         let n = self.inputs.publish(data, c.tx_size, now);
         telemetry.input_frames.fetch_add(n as u64, Relaxed);
@@ -86,6 +94,7 @@ impl Intake {
         if let Some(stall) = self.flow.answer(alive, now) {
             self.stall.get_or_insert(stall);
         }
+        n
     }
 }
 
@@ -307,7 +316,7 @@ impl<L: Link> Engine<L> {
             if !progressed {
                 let now = Instant::now();
                 let wake = match cyclic.as_deref() {
-                    Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)),
+                    Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room(c)),
                     None => now + Duration::from_millis(50),
                 };
                 // Idle, the next emergency question (or the exchange that
@@ -353,23 +362,16 @@ impl<L: Link> Engine<L> {
         self.port.data_size().checked_div(c.rx_size).unwrap_or(0)
     }
 
-    /// Input frames that may still queue in the TxFIFO before they fill
-    /// one packet: what one exchange reads. Counting the frames already
-    /// queued (header, two exchanges late) keeps the TxFIFO drained: a
-    /// backlog left from bring-up would otherwise never shrink (one packet
-    /// read per packet produced), and every input would arrive that many
-    /// cycles old, and keep arriving that long after the chip stopped
-    /// producing them.
-    /// Half the TxFIFO at most, so small input frames (many to a packet)
-    /// are read before the chip has to drop any.
-    fn tx_room_left(&self, c: &Cyclic) -> usize {
+    /// Input frames one exchange should read: a packet's worth, and at most
+    /// half the TxFIFO, so small input frames (many to a packet) are read
+    /// before the chip has to drop any.
+    fn tx_room(&self, c: &Cyclic) -> usize {
         let per_packet = self.port.data_size() / c.tx_size.max(1);
-        let fits = per_packet.min(usize::from(c.tx_depth / 2).max(1));
-        fits.saturating_sub(usize::from(self.port.status().tx_fifo_count))
+        per_packet.min(usize::from(c.tx_depth / 2).max(1))
     }
 
     fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
-        now >= c.next_exchange(now, self.rx_room(c), self.tx_room_left(c)) || c.outputs_low(now)
+        now >= c.next_exchange(now, self.rx_room(c), self.tx_room(c)) || c.outputs_low(now)
     }
 
     /// One FIFO exchange: pushes the output frames the level needs and
@@ -395,8 +397,10 @@ impl<L: Link> Engine<L> {
         let outputs = c.push_bytes(n);
         let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
         let count = a.header.rx_fifo_count;
-        self.intake.answer(c, &self.telemetry, &a.header, a.data, now);
-        c.answered(now, n, count);
+        let read = self.intake.answer(c, &self.telemetry, &a.header, a.data, now);
+        // A full packet of inputs: more may be waiting.
+        let drained = read < self.port.data_size() / c.tx_size.max(1);
+        c.answered(now, n, count, drained);
         self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
         if let Some(t) = &self.distributor {
             t.unpark();
