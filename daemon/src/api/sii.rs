@@ -5,7 +5,7 @@ use std::sync::Arc;
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::sii_server::Sii as SiiApi;
-use ecmxf_sim::net::sii::{MailboxArea, PdoRecord, Sii};
+use ecmxf_sim::net::sii::{MailboxArea, PdoRecord, Sii, decode_text};
 use tonic::{Request, Response, Status};
 
 use super::Context;
@@ -60,7 +60,7 @@ fn mailbox(m: &MailboxArea) -> pb::SiiMailbox {
 }
 
 fn pdos(sii: &Sii, list: &[PdoRecord]) -> Vec<pb::SiiPdo> {
-    let text = |i: u8| sii.string(i).map(|b| String::from_utf8_lossy(b).into_owned()).unwrap_or_default();
+    let text = |i: u8| sii.string(i).map(decode_text).unwrap_or_default();
     list.iter()
         .map(|p| pb::SiiPdo {
             index: p.index.into(),
@@ -123,7 +123,7 @@ impl SiiApi for SiiService {
         let words = bounded(&caller, read_image(&self.0.master, s)).await?;
         let image = bytes_of(&words);
         let sii = Sii::parse(&image).map_err(|e| Status::internal(format!("slave {s}'s SII does not parse: {e}")))?;
-        let text = |i: u8| sii.string(i).map(|b| String::from_utf8_lossy(b).into_owned()).unwrap_or_default();
+        let text = |i: u8| sii.string(i).map(decode_text).unwrap_or_default();
         let general = sii.general.clone().unwrap_or_default();
         Ok(Response::new(pb::SiiDecodeResponse {
             vendor_id: sii.vendor_id,
@@ -136,7 +136,7 @@ impl SiiApi for SiiService {
             mailbox_protocols: sii.protocols.into(),
             size_bytes: (u32::from(sii.size_word) + 1) * 128,
             version: sii.version.into(),
-            strings: sii.strings.iter().map(|b| String::from_utf8_lossy(b).into_owned()).collect(),
+            strings: sii.strings.iter().map(|b| decode_text(b)).collect(),
             name: text(general.name),
             group: text(general.group),
             order: text(general.order),

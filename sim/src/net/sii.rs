@@ -100,6 +100,23 @@ impl fmt::Display for SiiError {
 
 impl std::error::Error for SiiError {}
 
+/// An SII string as text. ETG.2010 does not name an encoding; devices
+/// write ASCII, some UTF-8, and many (Beckhoff's "1µs", byte 0xB5) Latin-1
+/// or Windows-1252. Valid UTF-8 is taken as such; anything else byte by
+/// byte as Windows-1252 (Latin-1 with the printable 0x80..0x9F of
+/// Windows), so no string turns into replacement characters.
+pub fn decode_text(bytes: &[u8]) -> String {
+    if let Ok(s) = std::str::from_utf8(bytes) {
+        return s.to_owned();
+    }
+    // Windows-1252 0x80..=0x9F; the five undefined codes stay as Latin-1.
+    const HIGH: [char; 32] = [
+        '€', '\u{81}', '‚', 'ƒ', '„', '…', '†', '‡', 'ˆ', '‰', 'Š', '‹', 'Œ', '\u{8D}', 'Ž', '\u{8F}', '\u{90}', '‘',
+        '’', '“', '”', '•', '–', '—', '˜', '™', 'š', '›', 'œ', '\u{9D}', 'ž', 'Ÿ',
+    ];
+    bytes.iter().map(|&b| if (0x80..0xA0).contains(&b) { HIGH[usize::from(b - 0x80)] } else { char::from(b) }).collect()
+}
+
 /// CRC-8 of the config area (poly 0x07, init 0xFF, ETG.1000.6 Table 16).
 pub fn config_checksum(bytes: &[u8]) -> u8 {
     let mut crc: u8 = 0xFF;
@@ -385,7 +402,7 @@ impl Sii {
     /// The device name from the General category.
     pub fn name(&self) -> Option<String> {
         let g = self.general.as_ref()?;
-        self.string(g.name).map(|b| String::from_utf8_lossy(b).into_owned())
+        self.string(g.name).map(decode_text)
     }
 
     /// Whether the config-area checksum (word 7 low byte) is right.
@@ -499,6 +516,14 @@ impl Sii {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn strings_that_are_not_utf8_are_windows_1252() {
+        assert_eq!(decode_text(b"EL1008"), "EL1008");
+        assert_eq!(decode_text("1µs".as_bytes()), "1µs", "valid UTF-8 stays");
+        assert_eq!(decode_text(b"1\xB5s"), "1µs", "Latin-1 micro sign");
+        assert_eq!(decode_text(b"\x80 5\x96"), "€ 5–", "Windows-1252 specials");
+    }
 
     #[test]
     fn checksum_matches_the_etg_example() {
