@@ -151,6 +151,8 @@ fn power_up_to_op_with_cyclic_fifo_exchange_at_125_us() {
     let ti_in = info(&mut h, 0, SlaveInfoCode::InputBytes) as usize;
     let a = h.call(&PdoDataOp { op: PdoDataOpFlags::READ | PdoDataOpFlags::VALID, outputs: &[] });
     assert_eq!(a.data.len(), tx_size);
+    // The vendor driver copies the inputs only when the op bits come back.
+    assert_eq!(a.header.return_value, 0x06, "PDO_DATA_OP echoes its operation bits (v031)");
     h.call(&FifoSetRxCount(32));
     h.call(&FifoSetTxCount(32));
     h.blocking(&FifoInit);

@@ -138,6 +138,32 @@ fn switching_to_crc32_changes_both_directions() {
     assert_eq!(v.0, 0x24);
 }
 
+/// The vendor's host driver re-sends CRC_TYPE_SET with the fixed check word
+/// until the status shows the new type (and its FIFO path always sends it
+/// so): the chip takes it like SPI_RECONFIG, and counts no CRC error.
+#[test]
+fn crc_type_set_is_taken_with_the_fixed_check_word_in_any_type() {
+    let mut h = Host::new(Network::demo());
+    h.call(&InfoUpdate);
+    h.send(&CrcTypeSet(CheckType::Crc32));
+    h.check = CheckType::Crc32;
+    let before = h.call(&InfoUpdate).header.crc_errors;
+    let mut buf = vec![0u8; h.packet_len()];
+    encode_request(
+        &CrcTypeSet(CheckType::Crc16),
+        CommandHeader::new(CommandCode::CrcTypeSet, 77),
+        CheckType::Fixed,
+        &mut buf,
+    )
+    .unwrap();
+    h.exchange_raw(&buf);
+    h.check = CheckType::Crc16;
+    let a = h.call(&InfoUpdate);
+    assert_eq!(a.header.status.check_type, CheckType::Crc16, "switched");
+    assert_eq!(a.header.crc_errors, before, "no CRC error counted");
+    assert!(!a.header.errors.contains(ErrorFlags::SPI_CRC_ERROR));
+}
+
 #[test]
 fn resizing_counts_one_crc_error_and_changes_the_packet_length() {
     let mut h = Host::new(Network::demo());

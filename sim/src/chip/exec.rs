@@ -56,12 +56,17 @@ impl Chip {
     pub(super) fn take_packet(&mut self, packet: &[u8]) -> Vec<u8> {
         self.note_fifo_levels();
         let is_resize = packet.get(12) == Some(&CommandCode::SpiReconfig.to_u8());
+        let is_check_switch = packet.get(12) == Some(&CommandCode::CrcTypeSet.to_u8());
         let check_word = packet.len().checked_sub(8).and_then(|at| packet.get(at..at + 4));
         let fixed_word = check_word == Some(&CHECK_FIXED.to_le_bytes()[..]);
         // SPI_RECONFIG is always sent with the fixed check word; the size
         // change makes the chip count one CRC error, which is expected
-        // (v049 note under command 23).
-        let check = if is_resize && fixed_word { CheckType::Fixed } else { self.check };
+        // (v049 note under command 23). CRC_TYPE_SET (25) is taken with the
+        // fixed word too, without an error: the vendor's host driver sends
+        // it that way, again and again until the status shows the new type,
+        // and its FIFO path always does; a chip that refused it would never
+        // have worked with that driver (the manual is silent).
+        let check = if (is_resize || is_check_switch) && fixed_word { CheckType::Fixed } else { self.check };
         let cmd = match decode_command(packet, check) {
             Ok(cmd) => cmd,
             Err(e) => {
@@ -162,7 +167,11 @@ impl Chip {
                     }
                     self.master.outputs.copy_from_slice(op.outputs);
                 }
-                reply(&PdoDataReply { inputs: &self.master.inputs.clone() })
+                // The return value echoes the operation bits (v031 PDO_DATA_OP
+                // "回傳值"; v049 leaves it out): the vendor's host driver copies
+                // the inputs only when it reads 0x06 back (READ | VALID).
+                let (_, data) = reply(&PdoDataReply { inputs: &self.master.inputs.clone() });
+                (op.op.bits(), data)
             }
             A::PdoConfigGet(_) => reply(&PdoConfigReply(self.results.pdo_config)),
             A::SdoGet(_) => reply(&SdoGetReply { status: 0, data: &self.results.sdo_data.clone() }),
