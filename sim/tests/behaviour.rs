@@ -232,3 +232,28 @@ fn an_unplugged_slave_cuts_off_the_ones_after_it() {
         "a replugged slave powers up in INIT"
     );
 }
+
+/// SDO_REQ and EEPROM_REQ carry the longest wait (us, v049): a request the
+/// model needs longer for fails when it is up, an SDO with abort
+/// 0x05040000; within the limit it succeeds.
+#[test]
+fn sdo_and_eeprom_requests_fail_when_their_timeout_is_shorter_than_the_work() {
+    use ecmxf_wire::payload::sdo::{SdoAbortCodeGet, SdoAbortReply};
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 8);
+    let mut quick = sdo_read(0, 0x1000);
+    quick.timeout_us = 100; // the model needs 600 us
+    let after = h.blocking(&quick);
+    assert!(after.errors.contains(ErrorFlags::BLOCKING_FAILED), "{after:?}");
+    let a = h.call(&SdoAbortCodeGet);
+    let code = SdoAbortReply::decode(&fields(&a), &a.data).unwrap().0;
+    assert_eq!(code.0, 0x0504_0000, "SDO protocol timed out");
+    h.control = ControlFlags::CLEAR_BLOCKING_ERROR;
+    h.call(&InfoUpdate);
+    let after = h.blocking(&sdo_read(0, 0x1000));
+    assert!(!after.errors.contains(ErrorFlags::BLOCKING_FAILED), "within its timeout: {after:?}");
+
+    let eeprom = EepromRequest { slave: 0, access: EepromAccess::Read { address: 8 }, timeout_us: 10 };
+    let after = h.blocking(&eeprom);
+    assert!(after.errors.contains(ErrorFlags::BLOCKING_FAILED), "EEPROM word in 10 us: {after:?}");
+}

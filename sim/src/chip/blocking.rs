@@ -65,9 +65,25 @@ impl Default for Timing {
     }
 }
 
+/// CoE abort code 0x05040000: SDO protocol timed out (ETG.1000.6).
+const SDO_PROTOCOL_TIMED_OUT: u32 = 0x0504_0000;
+
+/// `op` taking `duration` ns, unless the request's timeout (us, 0: none) is
+/// shorter: then it fails when the timeout runs out.
+fn within(op: BlockingOp, duration: u64, timeout_us: u32, sdo: bool) -> (BlockingOp, u64) {
+    let limit = u64::from(timeout_us) * 1000;
+    if timeout_us != 0 && duration > limit { (BlockingOp::TimedOut { sdo }, limit) } else { (op, duration) }
+}
+
 /// A blocking operation in the slot, with everything it needs owned.
 #[derive(Clone, Debug, PartialEq)]
 pub enum BlockingOp {
+    /// An SDO or EEPROM request whose modelled duration exceeds the
+    /// timeout it carried: it fails when the timeout runs out.
+    TimedOut {
+        /// An SDO (abort 0x05040000 follows) or an EEPROM word.
+        sdo: bool,
+    },
     /// 1.
     EcatInit(EcatInit),
     /// 2 and 73.
@@ -170,6 +186,11 @@ impl Chip {
     }
 
     /// Validates a blocking command and puts it in the slot.
+    ///
+    /// SDO_REQ and EEPROM_REQ carry the longest wait in us (v049 SDO_REQ
+    /// data 0x08, EEPROM_REQ; v031 said ns): an operation the model says
+    /// takes longer fails when that time is up, an SDO with abort
+    /// 0x05040000 (SDO protocol timed out). 0 is taken as no limit.
     pub(super) fn start_blocking(&mut self, req: &AnyRequest<'_>) -> Result<(), CommandError> {
         use AnyRequest as A;
         let t = &self.config.timing;
@@ -200,7 +221,7 @@ impl Chip {
                 };
                 let bytes = write.as_ref().map_or(4, Vec::len).max(4) as u64 - 4;
                 let op = BlockingOp::Sdo { slave, index: r.index, sub: r.subindex, complete: r.complete_access, write };
-                (op, t.sdo_ns + bytes * t.sdo_per_byte_ns)
+                within(op, t.sdo_ns + bytes * t.sdo_per_byte_ns, r.timeout_us, true)
             }
             A::StateSet(ecmxf_wire::payload::state::StateSet { target, state })
             | A::StateCheck(ecmxf_wire::payload::state::StateCheck { target, state }) => {
@@ -213,7 +234,7 @@ impl Chip {
             A::StateUpdate(_) => (BlockingOp::StateUpdate, t.state_ns),
             A::EepromReq(r) => {
                 self.slave_ok(r.slave.into())?;
-                (BlockingOp::Eeprom(r), t.eeprom_ns)
+                within(BlockingOp::Eeprom(r), t.eeprom_ns, r.timeout_us, false)
             }
             A::DcSync(d) => {
                 self.slave_ok(d.slave.into())?;
@@ -299,6 +320,13 @@ impl Chip {
             }
             BlockingOp::PdoConfigSet(c) => self.pdo_config_set(c),
             BlockingOp::PdoConfigReq(r) => self.pdo_config_req(r),
+            BlockingOp::TimedOut { sdo } => {
+                if sdo {
+                    self.results.sdo_data.clear();
+                    self.results.sdo_abort = SDO_PROTOCOL_TIMED_OUT;
+                }
+                false
+            }
             BlockingOp::Sdo { slave, index, sub, complete, write } => {
                 let s = &mut self.net.slaves[slave];
                 let result = match write {
