@@ -228,11 +228,7 @@ impl<L: Link> Engine<L> {
                 && self.active.is_none()
                 && now.duration_since(last_emergency_poll) >= super::emergencies::ANSWER_WAIT
             {
-                let fetched = self.port.send_once(&InfoUpdate);
-                let events = &mut self.events;
-                let checked = fetched
-                    .and_then(|()| self.emergencies.check(&mut self.port, |r| events.emit(EventKind::Emergency(r))));
-                if let Err(e) = checked {
+                if let Err(e) = self.port.send_once(&InfoUpdate).and_then(|()| self.check_emergencies()) {
                     return Exit::Recover(RecoverCause::from_port(&e));
                 }
             }
@@ -255,8 +251,7 @@ impl<L: Link> Engine<L> {
                 Ok(p) => p,
                 Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
             };
-            let events = &mut self.events;
-            if let Err(e) = self.emergencies.check(&mut self.port, |r| events.emit(EventKind::Emergency(r))) {
+            if let Err(e) = self.check_emergencies() {
                 return Exit::Recover(RecoverCause::from_port(&e));
             }
             if self.held_below_target {
@@ -406,6 +401,13 @@ impl<L: Link> Engine<L> {
             t.unpark();
         }
         Ok(())
+    }
+
+    /// Looks at the answer to an emergency question, once an exchange has
+    /// brought it, and emits what is new.
+    fn check_emergencies(&mut self) -> Result<(), PortError> {
+        let events = &mut self.events;
+        self.emergencies.check(&mut self.port, |r| events.emit(EventKind::Emergency(r)))
     }
 
     /// Asks for the newest CoE emergency (see `emergencies`); the answer is
