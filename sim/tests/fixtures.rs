@@ -97,6 +97,15 @@ fn esi_details_come_through() {
         assert_eq!((f.vendor_id, d.product_code, d.revision), (0x1337, 1234, 0));
         assert_eq!(d.dictionary.entry(0x1000, 0).unwrap().int(), 0x0190_1389, "DefaultValue in #x form");
         assert_eq!(d.dictionary.entry(0x1008, 0).unwrap().value, b"evb9252_dig");
+        // <CoE CompleteAccess="false">: the simulated slave refuses it.
+        assert!(!d.complete_access);
+        let slave = d.to_slave(f.vendor_id, 0);
+        let abort = ecmxf_wire::payload::sdo::SdoAbortCode::NO_COMPLETE_ACCESS;
+        assert_eq!(slave.od.upload(0x1018, 0, true, AlState::PreOp), Err(abort));
+        assert!(slave.od.upload(0x1018, 1, false, AlState::PreOp).is_ok(), "plain access still works");
+    }
+    if let Some(f) = esi("esi_ingenia_EVS-NET-01.xml") {
+        assert!(f.devices.iter().all(|d| d.complete_access), "CompleteAccess=\"true\"");
     }
 }
 

@@ -159,6 +159,8 @@ pub struct EsiDevice {
     pub pdo_assign: bool,
     /// CoE: PDO mapping configurable.
     pub pdo_config: bool,
+    /// CoE: complete access supported (`CompleteAccess`, absent: yes).
+    pub complete_access: bool,
     /// DC op modes (name, AssignActivate).
     pub dc_modes: Vec<(String, u16)>,
     /// EEPROM size in bytes.
@@ -284,7 +286,7 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
         });
     }
     let mut protocols = 0;
-    let (mut pdo_assign, mut pdo_config) = (false, false);
+    let (mut pdo_assign, mut pdo_config, mut complete_access) = (false, false, true);
     if let Some(mb) = child(d, "Mailbox") {
         for (name, bit) in [
             ("AoE", sii::protocol::AOE),
@@ -300,6 +302,10 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
                     let on = |a: &str| p.attribute(a).is_some_and(|v| v == "1" || v.eq_ignore_ascii_case("true"));
                     pdo_assign = on("PdoAssign");
                     pdo_config = on("PdoConfig");
+                    // Absent means the device does not say; only an
+                    // explicit "0"/"false" turns complete access off.
+                    complete_access =
+                        p.attribute("CompleteAccess").is_none_or(|v| v == "1" || v.eq_ignore_ascii_case("true"));
                 }
             }
         }
@@ -342,6 +348,7 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
         protocols,
         pdo_assign,
         pdo_config,
+        complete_access,
         dc_modes,
         eeprom_bytes,
         config_data,
@@ -641,6 +648,7 @@ impl EsiDevice {
     /// for PDO entries the dictionary lacks, and a generated SII image.
     pub fn to_slave(&self, vendor_id: u32, alias: u16) -> Slave {
         let mut od = self.dictionary.clone();
+        od.no_complete_access = !self.complete_access;
         for (pdos, rx) in [(&self.rx_pdos, true), (&self.tx_pdos, false)] {
             for p in pdos {
                 for (e, name, dtype) in &p.entries {

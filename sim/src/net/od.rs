@@ -295,6 +295,10 @@ pub type SdoResult<T> = Result<T, SdoAbortCode>;
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct ObjectDictionary {
     objects: BTreeMap<u16, Object>,
+    /// The device does not do CoE complete access at all (ESI
+    /// `<CoE CompleteAccess="0">`, SII CoE details bit 5 clear): every
+    /// complete access is refused with 0x06010004.
+    pub no_complete_access: bool,
 }
 
 impl ObjectDictionary {
@@ -345,6 +349,9 @@ impl ObjectDictionary {
     pub fn upload(&self, index: u16, sub: u8, complete: bool, state: AlState) -> SdoResult<Vec<u8>> {
         let obj = self.objects.get(&index).ok_or(SdoAbortCode::OBJECT_MISSING)?;
         if complete {
+            if self.no_complete_access {
+                return Err(SdoAbortCode::NO_COMPLETE_ACCESS);
+            }
             obj.allows_complete_access(sub)?;
             let count = obj.entries.get(&0).map_or(0, |e| e.int() as u8);
             let mut out = Vec::new();
@@ -393,6 +400,9 @@ impl ObjectDictionary {
     ) -> SdoResult<()> {
         let obj = self.objects.get(&index).ok_or(SdoAbortCode::OBJECT_MISSING)?;
         if complete {
+            if self.no_complete_access {
+                return Err(SdoAbortCode::NO_COMPLETE_ACCESS);
+            }
             obj.allows_complete_access(sub)?;
             // Split the data over the entries, subindex 0 as 16 bits.
             let mut writes: Vec<(u8, Vec<u8>)> = Vec::new();
