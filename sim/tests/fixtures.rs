@@ -106,6 +106,14 @@ fn esi_details_come_through() {
     }
     if let Some(f) = esi("esi_ingenia_EVS-NET-01.xml") {
         assert!(f.devices.iter().all(|d| d.complete_access), "CompleteAccess=\"true\"");
+        // 0x1003:0 is 00 in the ESI (no error logged yet): kept as written,
+        // not replaced by the highest subindex.
+        let d = &f.devices[0];
+        assert_eq!(d.dictionary.entry(0x1003, 0).map(|e| e.int()), Some(0));
+    }
+    if let Some(f) = esi("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") {
+        let sub0 = f.devices.iter().find_map(|d| d.dictionary.entry(0x1003, 0).map(|e| e.int()));
+        assert_eq!(sub0, Some(0x10), "as the ESI says (DefaultData is hex bytes)");
     }
 }
 

@@ -462,6 +462,8 @@ fn parse_dictionary(dict: Node<'_, '_>) -> Result<ObjectDictionary, EsiError> {
                 let defaults: Vec<Node<'_, '_>> = info.map(|i| children(i, "SubItem").collect()).unwrap_or_default();
                 let mut entries = std::collections::BTreeMap::new();
                 let mut next_sub = 0u8;
+                // Whether the ESI gives subindex 0 a value of its own.
+                let mut sub0_given = false;
                 for (k, s) in subs.iter().enumerate() {
                     if let Some(EsiType { base: Some(base), array: Some((lbound, count)), .. }) =
                         types.get(&s.type_name)
@@ -491,10 +493,14 @@ fn parse_dictionary(dict: Node<'_, '_>) -> Result<ObjectDictionary, EsiError> {
                     let mut en = Entry::new(&s.name, dtype, s.access).mappable(s.mappable);
                     if let Some(v) = dflt {
                         en.value = v;
+                        sub0_given |= sub == 0;
                     }
                     entries.insert(sub, en);
                 }
-                if let Some(e0) = entries.get_mut(&0) {
+                // Subindex 0 without a value in the ESI counts the entries;
+                // one the ESI sets (0x1003:0 = 0: no errors logged yet) is
+                // kept as written.
+                if let Some(e0) = entries.get_mut(&0).filter(|_| !sub0_given) {
                     if e0.int() == 0 {
                         let highest = entries.keys().copied().max().unwrap_or(0);
                         if let Some(e0) = entries.get_mut(&0) {
