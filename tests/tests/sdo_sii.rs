@@ -149,6 +149,16 @@ fn sii_read_write_with_backup_and_decode() {
         // Restore.
         sii.write(pb::SiiWriteRequest { slave: 1, word: 0x0E, data: w.backup.clone() }).await.unwrap();
 
+        // A category whose length runs past the EEPROM's size: an error
+        // naming the offset, not a decode with empty fields.
+        let w =
+            sii.write(pb::SiiWriteRequest { slave: 1, word: 0x41, data: vec![0xFF, 0x7F] }).await.unwrap().into_inner();
+        let e = sii.decode(pb::SiiDecodeRequest { slave: 1 }).await.unwrap_err();
+        assert_eq!(e.code(), Code::FailedPrecondition, "{e:?}");
+        assert!(e.message().contains("corrupt") && e.message().contains("offset 0x0080"), "{e:?}");
+        sii.write(pb::SiiWriteRequest { slave: 1, word: 0x41, data: w.backup }).await.unwrap();
+        sii.decode(pb::SiiDecodeRequest { slave: 1 }).await.expect("restored");
+
         for (req, field) in [
             (pb::SiiWriteRequest { slave: 1, word: 0, data: vec![1] }, "data"),
             (pb::SiiWriteRequest { slave: 1, word: 0x1_0000, data: vec![1, 2] }, "word"),

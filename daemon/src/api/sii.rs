@@ -35,14 +35,27 @@ fn bytes_of(words: &[u16]) -> Vec<u8> {
 /// marker (0xFFFF) or the end of the 64 Kword address space.
 async fn read_image(m: &Master, s: u8) -> Result<Vec<u16>, Status> {
     let mut words = m.eeprom_read_words(s, 0, CATEGORIES, None).await.map_err(to_status)?;
+    // The EEPROM's own size (word 0x3E: (n + 1) x 128 bytes, ETG.1000.6
+    // table 2): a category that runs past it is a corrupt image, said with
+    // its offset, not read on into whatever the EEPROM answers there.
+    let size = words.get(0x3E).map_or(0x1_0000, |&n| (u32::from(n) + 1) * 64).min(0x1_0000);
     let mut at = u32::from(CATEGORIES);
-    while at + 2 <= 0x1_0000 {
+    while at + 2 <= size {
         let head = m.eeprom_read_words(s, at as u16, 2, None).await.map_err(to_status)?;
         words.extend_from_slice(&head);
         if head[0] == 0xFFFF || head[0] == 0 {
             break;
         }
-        let len = u32::from(head[1]).min(0x1_0000 - at - 2);
+        if at + 2 + u32::from(head[1]) > size {
+            return Err(Status::failed_precondition(format!(
+                "slave {s}'s SII is corrupt: category {:#06x} at byte offset {:#06x} is {} bytes long and runs past the EEPROM's size of {} bytes (word 0x3E)",
+                head[0],
+                at * 2,
+                u32::from(head[1]) * 2,
+                size * 2
+            )));
+        }
+        let len = u32::from(head[1]);
         let body = m.eeprom_read_words(s, (at + 2) as u16, len as u16, None).await.map_err(to_status)?;
         words.extend_from_slice(&body);
         at += 2 + len;

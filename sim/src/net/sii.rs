@@ -509,6 +509,13 @@ impl Sii {
         if b.len() < size_bytes {
             b.resize(size_bytes, 0xFF);
         }
+        // The size word (0x3E: (n + 1) x 128 bytes) covers the whole image:
+        // a smaller one would have a reader stop, or call the categories
+        // corrupt, before their end.
+        let needed = (b.len().div_ceil(128).max(1) - 1) as u16;
+        if self.size_word < needed {
+            put16(&mut b, 0x7C, needed);
+        }
         b
     }
 }
