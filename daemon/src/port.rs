@@ -211,8 +211,7 @@ impl<L: Link> Port<L> {
     /// One transfer after INT0 said ready. A link that waits for INT0 as
     /// part of the transfer ([`LinkError::NotReady`]) is given the rest of
     /// the ready timeout, slice by slice.
-    fn transfer(&mut self, tx_rx: (&[u8], &mut [u8])) -> Result<(), PortError> {
-        let (tx, rx) = tx_rx;
+    fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), PortError> {
         let start = Instant::now();
         loop {
             match self.link.transfer(tx, rx) {
@@ -275,7 +274,7 @@ impl<L: Link> Port<L> {
         self.rx.clear();
         self.rx.resize(self.tx.len(), 0);
         let (tx, mut rx) = (std::mem::take(&mut self.tx), std::mem::take(&mut self.rx));
-        let r = self.transfer((&tx, &mut rx));
+        let r = self.transfer(&tx, &mut rx);
         (self.tx, self.rx) = (tx, rx);
         r?;
         self.stats.exchanges += 1;
@@ -440,7 +439,7 @@ impl<L: Link> Port<L> {
             if !self.wait_ready()? {
                 return Err(PortError::NotReady(self.ready_timeout));
             }
-            self.transfer((&[0], &mut byte))?;
+            self.transfer(&[0], &mut byte)?;
             stream.push(byte[0]);
             if stream.ends_with(&END_START) {
                 starts.push(stream.len() - 4);
@@ -453,7 +452,7 @@ impl<L: Link> Port<L> {
         if !self.wait_ready()? {
             return Err(PortError::NotReady(self.ready_timeout));
         }
-        self.transfer((&fill, &mut sink))?;
+        self.transfer(&fill, &mut sink)?;
         self.layout = layout;
         self.last_sent = None;
         for _ in 0..self.max_attempts {

@@ -201,6 +201,19 @@ impl Drop for Simulator {
     }
 }
 
+/// A file of ../shared/fixtures, if there; without it the caller skips
+/// (and says so), unless ECMXF_REQUIRE_FIXTURES is set (CI), where a
+/// missing fixture fails the test.
+pub fn fixture(name: &str) -> Option<PathBuf> {
+    let path = repo().join("../shared/fixtures").join(name);
+    if path.exists() {
+        return Some(path);
+    }
+    assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", path.display());
+    eprintln!("skipped: {} missing", path.display());
+    None
+}
+
 /// A running daemon.
 #[derive(Debug)]
 pub struct Daemon {

@@ -324,6 +324,20 @@ async fn after_recovery(b: &Bench, what: &str, io_restarted: bool) {
     assert!(!b.axis_enabled().await, "{what}: the axis came back enabled by itself");
 }
 
+/// `ecmxfd` on the served simulator at a 1 ms cycle, as a gateway runs,
+/// with the TI drive's first axis and `extra` sections; running, with the
+/// IO slave as it found it.
+async fn on_the_simulator(sim: &Simulator, extra: &str) -> (Daemon, Channel, pb::Slave) {
+    let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+    let extra = format!("{}{extra}", ecmxf_e2e::TI_AXIS);
+    let config = ecmxf_e2e::config(&link, &extra).replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
+    let mut d = Daemon::with_config(&config);
+    let ch = d.connect().await;
+    let slaves = pb::slaves_client::SlavesClient::new(ch.clone()).list_slaves(pb::ListSlavesRequest {}).await;
+    let io = slaves.unwrap().into_inner().slaves.into_iter().find(|s| s.position == IO).expect("the IO slave");
+    (d, ch, io)
+}
+
 /// One counter of `ecmxf-sim ctl status` (`name=value`).
 fn sim_counter(sim: &Simulator, name: &str) -> u64 {
     let status = sim.ctl("status");
@@ -350,18 +364,8 @@ fn after_every_fault_process_data_flows_again() {
     run(async move {
         let dir = ecmxf_e2e::temp_dir("faults");
         let mut sim = Simulator::serve(&dir, &["--seed", "7"]);
-        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
-        // 1 ms cycle, as a gateway runs; a fast first retry.
-        let extra = format!("{}[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n", ecmxf_e2e::TI_AXIS);
-        let config = ecmxf_e2e::config(&link, &extra).replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
-        let mut d = Daemon::with_config(&config);
-        let ch = d.connect().await;
-        let slaves = ecmxf_proto::v1::slaves_client::SlavesClient::new(ch.clone())
-            .list_slaves(pb::ListSlavesRequest {})
-            .await
-            .unwrap()
-            .into_inner();
-        let io = slaves.slaves.iter().find(|s| s.position == IO).expect("the IO slave").clone();
+        // A fast first retry.
+        let (mut d, ch, io) = on_the_simulator(&sim, "[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n").await;
         let in_offset = io.input_offset as usize;
 
         // One stream for the whole run: it must survive every recovery.
@@ -653,20 +657,8 @@ fn after_a_fault_axes_stay_disabled_and_outputs_follow_the_policy() {
         run(async move {
             let dir = ecmxf_e2e::temp_dir("interlock");
             let sim = Simulator::serve(&dir, &[]);
-            let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
-            let extra = format!("{}[outputs]\non_last_writer_gone = \"{policy}\"\n", ecmxf_e2e::TI_AXIS);
-            let config = ecmxf_e2e::config(&link, &extra).replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n");
-            let mut d = Daemon::with_config(&config);
-            let ch = d.connect().await;
-            let io = ecmxf_proto::v1::slaves_client::SlavesClient::new(ch.clone())
-                .list_slaves(pb::ListSlavesRequest {})
-                .await
-                .unwrap()
-                .into_inner()
-                .slaves
-                .into_iter()
-                .find(|s| s.position == IO)
-                .unwrap();
+            let (mut d, ch, io) =
+                on_the_simulator(&sim, &format!("[outputs]\non_last_writer_gone = \"{policy}\"\n")).await;
             let mut cia = Cia402Client::new(ch.clone());
             let axis = cia.get_axis(pb::GetAxisRequest { axis: 0 }).await.unwrap().into_inner();
             assert_ne!(axis.state, pb::DriveState::OperationEnabled as i32, "{policy}: enabled at start: {axis:?}");

@@ -14,12 +14,7 @@ use pb::master_client::MasterClient;
 
 #[test]
 fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
-    let esi = ecmxf_e2e::repo().join("../shared/fixtures/esi_beckhoff_EL1xxx.xml");
-    if !esi.exists() {
-        assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", esi.display());
-        eprintln!("skipped: {} missing", esi.display());
-        return;
-    }
+    let Some(esi) = ecmxf_e2e::fixture("esi_beckhoff_EL1xxx.xml") else { return };
     for sync0_us in [125, 1000] {
         let esi = esi.clone();
         run(async move {

@@ -194,12 +194,7 @@ fn sii_read_write_with_backup_and_decode() {
 /// same file). Skipped without the fixtures unless ECMXF_REQUIRE_FIXTURES.
 #[test]
 fn object_listing_from_an_esi_file() {
-    let esi = ecmxf_e2e::repo().join("../shared/fixtures/esi_soes_lan9252_evb9252_dig.xml");
-    if !esi.exists() {
-        assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", esi.display());
-        eprintln!("skipped: {} missing", esi.display());
-        return;
-    }
+    let Some(esi) = ecmxf_e2e::fixture("esi_soes_lan9252_evb9252_dig.xml") else { return };
     run(async {
         let dir = ecmxf_e2e::temp_dir("esi");
         let network = dir.join("net.toml");

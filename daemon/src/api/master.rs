@@ -28,9 +28,9 @@ pub struct MasterService(pub Arc<Context>);
 /// The status message from the engine's snapshot.
 pub fn status_pb(m: &Master) -> pb::MasterStatus {
     let s = m.status();
-    let target = m.config().cycle.target();
-    let health = crate::master::Health::judge(&s, target, m.now_ns());
-    let age = s.input_age(m.now_ns());
+    let now = m.now_ns();
+    let health = m.health_of(&s, now);
+    let age = s.input_age(now);
     let errors = ecmxf_wire::flags::ErrorFlags::from_bits_retain(s.error_byte);
     let status = ecmxf_wire::flags::StatusFlags::from_bits_retain(s.status_byte);
     pb::MasterStatus {

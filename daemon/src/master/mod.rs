@@ -383,9 +383,13 @@ impl Master {
     /// and process data flows (the newest input frame is younger than the
     /// limit). Health, `diag`, the systemd watchdog and READY all use this.
     pub fn health(&self) -> Health {
-        let s = self.status();
+        self.health_of(&self.status(), self.now_ns())
+    }
+
+    /// [`Master::health`] of a snapshot already taken, at `now_ns`.
+    pub fn health_of(&self, s: &Snapshot, now_ns: u64) -> Health {
         let target = self.config.lock().unwrap_or_else(|e| e.into_inner()).cycle.target();
-        Health::judge(&s, target, self.now_ns())
+        Health::judge(s, target, now_ns)
     }
 
     /// Why bring-up last failed or recovery last started.
