@@ -13,7 +13,7 @@ pub use crate::api::config::ApiConfig;
 /// A configuration mistake: unreadable file, TOML syntax or schema (naming
 /// key and line), or a value not allowed (naming the dotted key). The same
 /// type as the simulator's network files, which follow the same rules.
-pub use ecmxf_sim::config::ConfigError;
+pub use ecmxf_devices::config_file::ConfigError;
 
 /// The file format version this build reads.
 pub const VERSION: u32 = 1;
@@ -563,14 +563,14 @@ impl Config {
                 format!("{} ms is outside backoff_ms..=600000 ({}..=600000)", r.max_backoff_ms, r.backoff_ms),
             );
         }
-        if self.slaves.len() > ecmxf_sim::config::MAX_SLAVES {
+        if self.slaves.len() > ecmxf_wire::limits::MAX_SLAVES {
             return bad(
                 "slave",
-                format!("{} slaves; the chip takes at most {}", self.slaves.len(), ecmxf_sim::config::MAX_SLAVES),
+                format!("{} slaves; the chip takes at most {}", self.slaves.len(), ecmxf_wire::limits::MAX_SLAVES),
             );
         }
         if let LinkConfig::Spidev { spi_hz, idle_us, debounce_us, .. } = &self.link {
-            let range = ecmxf_sim::config::SPI_HZ;
+            let range = ecmxf_wire::limits::SPI_HZ;
             if !range.contains(&u64::from(*spi_hz)) {
                 return bad(
                     "link.spi_hz",

@@ -4,9 +4,11 @@
 //!
 //! # Map
 //! - [`net`]: the network: slaves with their state machine ([`net::esm`]),
-//!   object dictionary ([`net::od`]), PDO mapping ([`net::pdo_map`]), SII
-//!   image ([`net::sii`]), CiA402 drives ([`net::cia402`]) and ready-made
-//!   device profiles ([`net::profiles`]).
+//!   the SDO rules on their object dictionary ([`net::od`]), PDO mapping
+//!   ([`net::pdo_map`]), CiA402 drives ([`net::cia402`]), ready-made device
+//!   profiles ([`net::profiles`]) and slaves from ESI files ([`net::esi`]).
+//!   What a device is (SII, ESI, dictionary) is `ecmxf-devices`'; this crate
+//!   makes it behave.
 //!
 //! - [`chip`]: the chip: SPI byte stream, command execution, blocking slot,
 //!   FIFOs and DC cycle, INT lines, peripherals.

@@ -8,8 +8,9 @@
 
 use std::path::PathBuf;
 
-use ecmxf_sim::net::esi::EsiFile;
+use ecmxf_sim::net::esi::{EsiFile, SimulatedDevice};
 use ecmxf_sim::net::esm::AlState;
+use ecmxf_sim::net::od::SdoServer;
 use ecmxf_sim::net::pdo_map;
 use ecmxf_sim::net::sii::{Sii, protocol, sm_type};
 

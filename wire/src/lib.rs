@@ -33,6 +33,7 @@ pub mod error;
 pub mod flags;
 pub mod framing;
 pub mod header;
+pub mod limits;
 pub mod packet;
 pub mod payload;
 

@@ -189,7 +189,7 @@ fn esi_objects(
     product: u32,
     revision: u32,
 ) -> Result<Vec<pb::ObjectEntry>, Status> {
-    use ecmxf_sim::net::esi::EsiFile;
+    use ecmxf_devices::esi::EsiFile;
     let fail = |why: String| Status::failed_precondition(format!("ESI {}: {why}", path.display()));
     let xml = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
     let file = EsiFile::parse(&xml).map_err(|e| fail(e.to_string()))?;
@@ -222,7 +222,7 @@ fn esi_objects(
                 // Strings have no fixed size: their default value's.
                 bit_length: if e.dtype.bits() == 0 { e.value.len() as u32 * 8 } else { e.dtype.bits() },
                 access: access.into(),
-                pdo_mappable: e.mappable != ecmxf_sim::net::od::Mappable::No,
+                pdo_mappable: e.mappable != ecmxf_devices::od::Mappable::No,
                 value: e.value.clone(),
             });
         }

@@ -3,9 +3,9 @@
 
 use std::sync::Arc;
 
+use ecmxf_devices::sii::{MailboxArea, PdoRecord, Sii, decode_text};
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::sii_server::Sii as SiiApi;
-use ecmxf_sim::net::sii::{MailboxArea, PdoRecord, Sii, decode_text};
 use tonic::{Request, Response, Status};
 
 use super::Context;

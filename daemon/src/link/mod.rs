@@ -12,8 +12,18 @@ use std::time::Duration;
 
 #[cfg(target_os = "linux")]
 pub mod hardware;
+#[cfg(feature = "sim")]
 pub mod sim;
+#[cfg(feature = "sim")]
 pub mod socket;
+
+/// A daemon built without the simulator (cargo feature `sim` off) has no
+/// simulator to hand out: this type has no values.
+#[cfg(not(feature = "sim"))]
+#[derive(Debug)]
+pub enum SimHandle {}
+#[cfg(feature = "sim")]
+pub use sim::SimHandle;
 
 /// Why the link failed.
 #[derive(Debug)]

@@ -27,7 +27,7 @@ use crate::engine::inputs::read_record;
 use crate::engine::job::{Job, PendingAction, Request, TransferProgress, Writers};
 use crate::engine::telemetry::{Phase, Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
-use crate::link::sim::{SimHandle, SimLink};
+use crate::link::SimHandle;
 use crate::link::{Link, LinkError};
 use crate::outputs::OutputSender;
 pub use crate::outputs::OutputWriter;
@@ -139,6 +139,9 @@ pub enum StartError {
     Link(LinkError),
     /// The simulator's network file is wrong.
     Network(String),
+    /// The configuration asks for the simulator, and this daemon was built
+    /// without it.
+    NoSimulator,
 }
 
 impl std::fmt::Display for StartError {
@@ -146,6 +149,10 @@ impl std::fmt::Display for StartError {
         match self {
             Self::Link(e) => write!(f, "{e}"),
             Self::Network(e) => write!(f, "{e}"),
+            Self::NoSimulator => f.write_str(
+                "link.backend asks for the simulator, and this ecmxfd was built without it \
+                 (cargo feature `sim`); use backend = \"spidev\"",
+            ),
         }
     }
 }
@@ -177,7 +184,9 @@ pub struct Master {
 /// also returns the handle to it.
 pub fn open_link(config: &Config) -> Result<(Box<dyn Link>, Option<SimHandle>), StartError> {
     match &config.link {
+        #[cfg(feature = "sim")]
         LinkConfig::Sim { network } => {
+            use crate::link::sim::SimLink;
             let (net, chip_config) = match network {
                 None => (ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()),
                 Some(p) => {
@@ -188,9 +197,12 @@ pub fn open_link(config: &Config) -> Result<(Box<dyn Link>, Option<SimHandle>), 
             let (link, handle) = SimLink::new(ecmxf_sim::Chip::new(net, chip_config));
             Ok((Box::new(link), Some(handle)))
         }
+        #[cfg(feature = "sim")]
         LinkConfig::SimSocket { socket } => {
             Ok((Box::new(crate::link::socket::SocketLink::connect(socket).map_err(StartError::Link)?), None))
         }
+        #[cfg(not(feature = "sim"))]
+        LinkConfig::Sim { .. } | LinkConfig::SimSocket { .. } => Err(StartError::NoSimulator),
         #[cfg(target_os = "linux")]
         LinkConfig::Spidev { device, spi_hz, gpio_chip, int0_line, int1_line, debounce_us, idle_us } => {
             let hw = crate::link::hardware::HardwareConfig {

@@ -7,8 +7,9 @@ pub mod esm;
 pub mod od;
 pub mod pdo_map;
 pub mod profiles;
-pub mod sii;
 pub mod slave;
+
+pub use ecmxf_devices::sii;
 
 pub use slave::{Device, Slave};
 

@@ -7,63 +7,9 @@
 use ecmxf_wire::payload::pdo::PdoEntry;
 use ecmxf_wire::payload::sdo::SdoAbortCode;
 
-use super::od::{Access, DataType, Entry, Mappable, Object, ObjectDictionary, ObjectKind, SdoResult};
+use super::od::{Entry, ObjectDictionary, SdoResult};
 
-/// Outputs' assignment object.
-pub const RX_ASSIGN: u16 = 0x1C12;
-/// Inputs' assignment object.
-pub const TX_ASSIGN: u16 = 0x1C13;
-/// Most entries one mapping object holds here.
-pub const MAX_ENTRIES: usize = 16;
-/// Largest process image of one direction, bytes (SM length limit we model).
-pub const MAX_IMAGE_BYTES: usize = 512;
-
-/// Whether `index` is an RxPDO mapping object.
-pub fn is_rx_mapping(index: u16) -> bool {
-    (0x1600..=0x17FF).contains(&index)
-}
-
-/// Whether `index` is a TxPDO mapping object.
-pub fn is_tx_mapping(index: u16) -> bool {
-    (0x1A00..=0x1BFF).contains(&index)
-}
-
-/// Adds a mapping object with `entries`; `fixed` makes it read-only.
-pub fn add_mapping(od: &mut ObjectDictionary, index: u16, name: &str, entries: &[PdoEntry], fixed: bool) {
-    let access = if fixed { Access::RO } else { Access::RW_PREOP };
-    let mut subs: Vec<Entry> = entries
-        .iter()
-        .enumerate()
-        .map(|(i, e)| {
-            Entry::new(&format!("SubIndex {:03}", i + 1), DataType::UInt32, access).default_int(e.to_u32().into())
-        })
-        .collect();
-    if !fixed {
-        while subs.len() < MAX_ENTRIES {
-            subs.push(Entry::new(&format!("SubIndex {:03}", subs.len() + 1), DataType::UInt32, access));
-        }
-    }
-    let mut obj = Object::record(name, ObjectKind::Record, access, subs);
-    obj.entries.get_mut(&0).expect("sub0").set_int(entries.len() as i64);
-    od.insert(index, obj);
-}
-
-/// Adds an assignment object listing `pdos`; `fixed` makes it read-only.
-pub fn add_assignment(od: &mut ObjectDictionary, index: u16, pdos: &[u16], capacity: usize, fixed: bool) {
-    let access = if fixed { Access::RO } else { Access::RW_PREOP };
-    let mut subs: Vec<Entry> = pdos
-        .iter()
-        .enumerate()
-        .map(|(i, p)| Entry::new(&format!("SubIndex {:03}", i + 1), DataType::UInt16, access).default_int((*p).into()))
-        .collect();
-    while subs.len() < capacity.max(pdos.len()) {
-        subs.push(Entry::new(&format!("SubIndex {:03}", subs.len() + 1), DataType::UInt16, access));
-    }
-    let name = if index == RX_ASSIGN { "Sync manager 2 PDO assignment" } else { "Sync manager 3 PDO assignment" };
-    let mut obj = Object::record(name, ObjectKind::Array, access, subs);
-    obj.entries.get_mut(&0).expect("sub0").set_int(pdos.len() as i64);
-    od.insert(index, obj);
-}
+pub use ecmxf_devices::pdo::*;
 
 /// One mapped object in a process image.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -229,15 +175,11 @@ pub fn od_to_image(od: &ObjectDictionary, layout: &Layout, image: &mut [u8]) {
     }
 }
 
-/// An object mappable in the given direction, for ESI-built dictionaries.
-pub fn mappable_for(rx: bool) -> Mappable {
-    if rx { Mappable::Rx } else { Mappable::Tx }
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::net::esm::AlState;
+    use crate::net::od::{Access, DataType, Mappable, Object, SdoServer};
 
     fn od(fixed: bool) -> ObjectDictionary {
         let mut od = ObjectDictionary::new();

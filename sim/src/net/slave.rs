@@ -11,7 +11,7 @@ use super::esm::{
     AL_INVALID_INPUTS, AL_INVALID_MAILBOX, AL_INVALID_OUTPUTS, AL_INVALID_SYNC_CYCLE, AL_SM_WATCHDOG, AlState, Esm,
     TransitionCheck,
 };
-use super::od::{ObjectDictionary, SdoResult};
+use super::od::{ObjectDictionary, SdoResult, SdoServer};
 use super::pdo_map::{self, Layout};
 use super::sii::Sii;
 
