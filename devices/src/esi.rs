@@ -159,6 +159,13 @@ pub struct EsiDevice {
     pub pdo_config: bool,
     /// CoE: complete access supported (`CompleteAccess`, absent: yes).
     pub complete_access: bool,
+    /// CoE: SDO information service (`SdoInfo`).
+    pub sdo_info: bool,
+    /// Mailbox data link layer (`<Mailbox DataLinkLayer>`).
+    pub data_link_layer: bool,
+    /// Port physics, one letter a port (`Physics="YY"`: Y/H = MII,
+    /// K = E-bus).
+    pub physics: String,
     /// DC op modes (name, AssignActivate).
     pub dc_modes: Vec<(String, u16)>,
     /// EEPROM size in bytes.
@@ -171,6 +178,10 @@ pub struct EsiDevice {
     pub categories: Vec<(u16, Vec<u8>)>,
     /// Object dictionary.
     pub dictionary: ObjectDictionary,
+    /// What the loader had to leave out or correct, in words a user can
+    /// act on (a PDO listed twice, a PDO on a sync manager the device does
+    /// not have).
+    pub warnings: Vec<String>,
 }
 
 /// A parsed ESI file.
@@ -286,8 +297,11 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
         });
     }
     let mut protocols = 0;
-    let (mut pdo_assign, mut pdo_config, mut complete_access) = (false, false, true);
+    let (mut pdo_assign, mut pdo_config, mut complete_access, mut sdo_info) = (false, false, true, false);
+    let yes = |v: &str| v == "1" || v.eq_ignore_ascii_case("true");
+    let mut data_link_layer = false;
     if let Some(mb) = child(d, "Mailbox") {
+        data_link_layer = mb.attribute("DataLinkLayer").is_some_and(yes);
         for (name, bit) in [
             ("AoE", sii::protocol::AOE),
             ("EoE", sii::protocol::EOE),
@@ -302,6 +316,7 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
                     let on = |a: &str| p.attribute(a).is_some_and(|v| v == "1" || v.eq_ignore_ascii_case("true"));
                     pdo_assign = on("PdoAssign");
                     pdo_config = on("PdoConfig");
+                    sdo_info = on("SdoInfo");
                     // Absent means the device does not say; only an
                     // explicit "0"/"false" turns complete access off.
                     complete_access =
@@ -335,6 +350,12 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
         .unwrap_or_default();
     let dictionary =
         child(d, "Profile").and_then(|p| child(p, "Dictionary")).map(parse_dictionary).transpose()?.unwrap_or_default();
+    let mut warnings = Vec::new();
+    let mut rx_pdos: Vec<EsiPdo> = children(d, "RxPdo").map(parse_pdo).collect::<Result<_, _>>()?;
+    let mut tx_pdos: Vec<EsiPdo> = children(d, "TxPdo").map(parse_pdo).collect::<Result<_, _>>()?;
+    for (kind, list) in [("RxPdo", &mut rx_pdos), ("TxPdo", &mut tx_pdos)] {
+        check_pdos(kind, list, sms.len(), &mut warnings);
+    }
     Ok(EsiDevice {
         type_name: ty.text().unwrap_or_default().trim().to_string(),
         product_code,
@@ -343,19 +364,48 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
         group: text(d, "GroupType").unwrap_or_default().to_string(),
         sms,
         fmmus: children(d, "Fmmu").filter_map(|f| f.text()).map(|t| t.trim().to_string()).collect(),
-        rx_pdos: children(d, "RxPdo").map(parse_pdo).collect::<Result<_, _>>()?,
-        tx_pdos: children(d, "TxPdo").map(parse_pdo).collect::<Result<_, _>>()?,
+        rx_pdos,
+        tx_pdos,
         protocols,
         pdo_assign,
         pdo_config,
         complete_access,
+        sdo_info,
+        data_link_layer,
+        physics: d.attribute("Physics").unwrap_or_default().to_string(),
         dc_modes,
         eeprom_bytes,
         config_data,
         bootstrap,
         categories,
         dictionary,
+        warnings,
     })
+}
+
+/// ETG.2000 gives each PDO one index and, for a default assignment, a sync
+/// manager of the device. A PDO listed again under the same index (Beckhoff
+/// EL2252 lists 0x1602 twice) keeps its first description; a PDO on a sync
+/// manager the device does not have is not assigned. Both are said.
+fn check_pdos(kind: &str, list: &mut Vec<EsiPdo>, sms: usize, warnings: &mut Vec<String>) {
+    let mut seen = Vec::new();
+    list.retain(|p| {
+        if seen.contains(&p.index) {
+            warnings.push(format!("{kind} {:#06x} is listed twice; the first description is used", p.index));
+            return false;
+        }
+        seen.push(p.index);
+        true
+    });
+    for p in list.iter_mut() {
+        if let Some(sm) = p.sm.filter(|sm| sms > 0 && usize::from(*sm) >= sms) {
+            warnings.push(format!(
+                "{kind} {:#06x} is assigned to sync manager {sm}, and the device has {sms}: not assigned",
+                p.index
+            ));
+            p.sm = None;
+        }
+    }
 }
 
 /// A `<DataType>` of the dictionary: a base type with array bounds, or
@@ -547,23 +597,38 @@ impl EsiDevice {
         } else {
             mailbox
         };
-        let mut strings =
-            vec![self.group.as_bytes().to_vec(), self.type_name.as_bytes().to_vec(), self.name.as_bytes().to_vec()];
-        strings.retain(|s| !s.is_empty());
-        let idx = |s: &str| strings.iter().position(|x| x == s.as_bytes()).map_or(0, |p| p as u8 + 1);
+        // Strings (ETG.2010 category 10): the device's, then every PDO and
+        // PDO entry name, each once; at most 255 (a string index is a byte).
+        let mut strings: Vec<Vec<u8>> = Vec::new();
+        let mut intern = |text: &str| -> u8 {
+            if text.is_empty() {
+                return 0;
+            }
+            if let Some(p) = strings.iter().position(|x| x == text.as_bytes()) {
+                return p as u8 + 1;
+            }
+            if strings.len() >= 255 {
+                return 0;
+            }
+            strings.push(text.as_bytes().to_vec());
+            strings.len() as u8
+        };
+        let (group, order, name) = (intern(&self.group), intern(&self.type_name), intern(&self.name));
         let coe = self.protocols & sii::protocol::COE != 0;
-        let pdo_records = |pdos: &[EsiPdo]| -> Vec<PdoRecord> {
+        let mut pdo_records = |pdos: &[EsiPdo]| -> Vec<PdoRecord> {
             pdos.iter()
                 .map(|p| PdoRecord {
                     index: p.index,
                     sm: p.sm.unwrap_or(0xFF),
+                    name: intern(&p.name),
                     flags: u16::from(p.fixed) << 4 | u16::from(p.mandatory),
                     entries: p
                         .entries
                         .iter()
-                        .map(|(e, _, t)| PdoEntryRecord {
+                        .map(|(e, n, t)| PdoEntryRecord {
                             index: e.index,
                             subindex: e.subindex,
+                            name: intern(n),
                             data_type: t.code() as u8,
                             bits: e.bits,
                             ..Default::default()
@@ -573,6 +638,18 @@ impl EsiDevice {
                 })
                 .collect()
         };
+        // PDOs described by CoE objects are not repeated in the SII.
+        let (rx_pdos, tx_pdos) =
+            if coe { (Vec::new(), Vec::new()) } else { (pdo_records(&self.rx_pdos), pdo_records(&self.tx_pdos)) };
+        // Physical ports (ETG.2010 General): 4 bits a port, 1 = MII, 3 = E-bus.
+        let physical_port = self.physics.chars().take(4).enumerate().fold(0u16, |w, (i, c)| {
+            let code = match c {
+                'Y' | 'H' => 1,
+                'K' => 3,
+                _ => 0,
+            };
+            w | code << (4 * i)
+        });
         let mut s = Sii {
             config,
             vendor_id,
@@ -585,17 +662,24 @@ impl EsiDevice {
             size_word: (self.eeprom_bytes * 8 / 1024).saturating_sub(1) as u16,
             version: 1,
             general: Some(General {
-                group: idx(&self.group),
-                order: idx(&self.type_name),
-                name: idx(&self.name),
+                group,
+                order,
+                name,
+                // CoE details (ETG.2010 General): bit0 SDO, bit1 SDO info,
+                // bit2 PDO assign, bit3 PDO config, bit5 complete access.
                 coe_details: if coe {
-                    0x01 | u8::from(self.pdo_assign) << 2 | u8::from(self.pdo_config) << 3
+                    0x01 | u8::from(self.sdo_info) << 1
+                        | u8::from(self.pdo_assign) << 2
+                        | u8::from(self.pdo_config) << 3
+                        | u8::from(self.complete_access) << 5
                 } else {
                     0
                 },
                 foe_details: u8::from(self.protocols & sii::protocol::FOE != 0),
                 eoe_details: u8::from(self.protocols & sii::protocol::EOE != 0),
-                physical_port: 0x0011,
+                // Flags bit2: mailbox data link layer.
+                flags: u8::from(self.data_link_layer) << 2,
+                physical_port: if self.physics.is_empty() { 0x0011 } else { physical_port },
                 ..General::default()
             }),
             strings,
@@ -621,9 +705,8 @@ impl EsiDevice {
                     kind: m.kind,
                 })
                 .collect(),
-            // PDOs described by CoE objects are not repeated in the SII.
-            rx_pdos: if coe { Vec::new() } else { pdo_records(&self.rx_pdos) },
-            tx_pdos: if coe { Vec::new() } else { pdo_records(&self.tx_pdos) },
+            rx_pdos,
+            tx_pdos,
             ..Sii::default()
         };
         for (cat, data) in &self.categories {
@@ -633,7 +716,16 @@ impl EsiDevice {
                 other => s.other.push((other, data.clone())),
             }
         }
-        s.to_bytes(self.eeprom_bytes.max(128))
+        // The size word (Kbit - 1) must cover the image: an ESI's ByteSize
+        // can be smaller than what its categories take.
+        let first = s.to_bytes(self.eeprom_bytes.max(128));
+        let bytes = first.len().max(self.eeprom_bytes).div_ceil(128) * 128;
+        let size_word = (bytes * 8 / 1024).saturating_sub(1) as u16;
+        if size_word == s.size_word && first.len() == bytes {
+            return first;
+        }
+        s.size_word = size_word;
+        s.to_bytes(bytes)
     }
 
     /// The default assignment: PDOs with a SyncManager, skipping those
@@ -662,6 +754,60 @@ mod tests {
         assert_eq!(parse_number("#X1a"), Some(0x1A));
         assert_eq!(parse_number("-1"), Some(u64::MAX));
         assert_eq!(parse_number("x12"), None);
+    }
+
+    #[test]
+    fn a_pdo_listed_twice_or_on_a_missing_sync_manager_is_said() {
+        let pdo = |index, sm| EsiPdo {
+            index,
+            name: String::new(),
+            sm,
+            fixed: true,
+            mandatory: false,
+            excludes: Vec::new(),
+            entries: Vec::new(),
+        };
+        let mut list = vec![pdo(0x1A00, Some(3)), pdo(0x1A00, Some(3)), pdo(0x1A01, Some(5))];
+        let mut warnings = Vec::new();
+        check_pdos("TxPdo", &mut list, 4, &mut warnings);
+        assert_eq!(list.iter().map(|p| (p.index, p.sm)).collect::<Vec<_>>(), [(0x1A00, Some(3)), (0x1A01, None)]);
+        assert!(warnings[0].contains("0x1a00 is listed twice"), "{warnings:?}");
+        assert!(warnings[1].contains("sync manager 5, and the device has 4"), "{warnings:?}");
+    }
+
+    const TERMINAL: &str = r##"<EtherCATInfo><Vendor><Id>2</Id></Vendor><Descriptions><Devices>
+        <Device Physics="YK"><Type ProductCode="#x1" RevisionNo="1">T1</Type><Name>Terminal</Name>
+          <Sm ControlByte="#x26" Enable="1" StartAddress="#x1000" DefaultSize="128">MBoxOut</Sm>
+          <Sm ControlByte="#x22" Enable="1" StartAddress="#x1080" DefaultSize="128">MBoxIn</Sm>
+          <Sm ControlByte="#x00" Enable="1" StartAddress="#x1100">Inputs</Sm>
+          <TxPdo Sm="2"><Index>#x1a00</Index><Name>Channel 1</Name>
+            <Entry><Index>#x6000</Index><SubIndex>1</SubIndex><BitLen>32</BitLen><Name>Counter</Name><DataType>DINT</DataType></Entry>
+          </TxPdo>
+          <Mailbox DataLinkLayer="true"><CoE SdoInfo="true" PdoAssign="false" PdoConfig="true" CompleteAccess="false"/></Mailbox>
+          <Eeprom><ByteSize>128</ByteSize><ConfigData>0C0D</ConfigData></Eeprom>
+        </Device></Devices></Descriptions></EtherCATInfo>"##;
+
+    #[test]
+    fn the_sii_an_esi_implies_keeps_names_details_physics_and_its_size() {
+        let f = EsiFile::parse(TERMINAL).unwrap();
+        let mut d = f.devices[0].clone();
+        let image = Sii::parse(&d.sii_image(2)).unwrap();
+        let g = image.general.clone().unwrap();
+        assert_eq!(g.coe_details, 0x01 | 0x02 | 0x08, "SDO, SDO info, PDO config; no assign, no complete access");
+        assert_eq!(g.flags & 0x04, 0x04, "data link layer");
+        assert_eq!(g.physical_port, 0x0031, "Y = MII on port 0, K = E-bus on port 1");
+        // Without CoE the PDOs are in the SII, with their names and types.
+        d.protocols = 0;
+        let bytes = d.sii_image(2);
+        let image = Sii::parse(&bytes).unwrap();
+        let pdo = &image.tx_pdos[0];
+        assert_eq!(image.string(pdo.name), Some(&b"Channel 1"[..]));
+        assert_eq!(image.string(pdo.entries[0].name), Some(&b"Counter"[..]));
+        assert_eq!(pdo.entries[0].data_type, 0x04, "DINT");
+        // ByteSize 128 is too small for the categories: the size word
+        // covers the image instead.
+        assert!(bytes.len() > 128);
+        assert_eq!((usize::from(image.size_word) + 1) * 128, bytes.len());
     }
 
     #[test]

@@ -16,6 +16,9 @@
 //! alias = 1
 //!
 //! [[slave]]
+//! sii = "dumps/el2889.bin"  # an SII EEPROM dump: PDOs from its categories
+//!
+//! [[slave]]
 //! esi = "devices/EK11xx.xml" # relative to this file
 //! product_code = 0x044C2C52
 //! revision = 0x00120000      # optional: highest revision when absent
@@ -66,6 +69,8 @@ pub struct SlaveSection {
     pub profile: Option<String>,
     /// An ESI file.
     pub esi: Option<PathBuf>,
+    /// An SII EEPROM dump (binary), the slave's only description.
+    pub sii: Option<PathBuf>,
     /// Product code of the ESI device.
     pub product_code: Option<u32>,
     /// Revision of the ESI device.
@@ -181,6 +186,19 @@ impl SlaveSection {
             message,
         };
         let serial = self.serial.unwrap_or(1000 + i as u32);
+        if let Some(sii) = &self.sii {
+            if self.profile.is_some() || self.esi.is_some() {
+                return Err(invalid("sii", "give one of profile, esi or sii".into()));
+            }
+            let path = base.join(sii);
+            let image = std::fs::read(&path).map_err(|e| invalid("sii", format!("{}: {e}", path.display())))?;
+            let mut s = crate::net::sii_slave::slave_from_sii(image)
+                .map_err(|e| invalid("sii", format!("{}: {e}", path.display())))?;
+            if self.alias != 0 {
+                s.eeprom_write(4, self.alias);
+            }
+            return Ok(s);
+        }
         match (&self.profile, &self.esi) {
             (Some(p), None) => match p.as_str() {
                 "neuromeka-core" => Ok(profiles::neuromeka_core(serial, self.alias)),
@@ -208,7 +226,7 @@ impl SlaveSection {
                 Ok(d.to_slave(f.vendor_id, self.alias))
             }
             (Some(_), Some(_)) => Err(invalid("profile", "give either profile or esi, not both".into())),
-            (None, None) => Err(invalid("profile", "each slave needs a profile or an esi".into())),
+            (None, None) => Err(invalid("profile", "each slave needs a profile, an esi or an sii".into())),
         }
     }
 }

@@ -48,6 +48,25 @@ fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
             d.ctl(&["master"]).ok();
             d.ctl(&["states"]).ok();
             d.ctl(&["sii", "read", "-p", "1", "--count", "16"]).ok();
+            // The EL1008 has no CoE: its PDOs come from its SII, named and
+            // typed as the device describes them; the coupler's CoE-less
+            // emptiness fails nothing.
+            let pdos = d.ctl(&["--json", "pdos"]).json();
+            let el1008 = &pdos["slaves"][1];
+            assert_eq!(el1008["source"], "sii", "{at}: {el1008}");
+            let tx = el1008["tx_pdos"].as_array().unwrap();
+            assert_eq!(tx.len(), 8, "{at}: eight one-bit TxPDOs: {el1008}");
+            assert_eq!(tx[0]["index"], 0x1A00, "{at}");
+            assert_eq!(tx[0]["name"], "Channel 1", "{at}: {el1008}");
+            assert_eq!(tx[0]["entries"][0]["index"], 0x6000, "{at}");
+            assert_eq!(tx[0]["entries"][0]["name"], "Input", "{at}");
+            assert_eq!(tx[0]["entries"][0]["data_type"], "bool", "{at}: {el1008}");
+            let inputs: Vec<&serde_json::Value> =
+                pdos["image"]["entries"].as_array().unwrap().iter().filter(|e| e["slave"] == 1).collect();
+            assert_eq!(inputs.len(), 8, "{at}: one image entry per input bit: {inputs:?}");
+            assert!(inputs.iter().all(|e| e["data_type"] == "bool" && e["label"] == "Input"), "{at}: {inputs:?}");
+            let data = d.ctl(&["--json", "data", "1.0x6000:01"]);
+            assert_eq!(data.code, 0, "{at}: {}{}", data.stdout, data.stderr);
             let diag = d.ctl(&["diag"]);
             assert_eq!(diag.code, 0, "{at}: {}{}", diag.stdout, diag.stderr);
             let log = d.log();

@@ -21,6 +21,10 @@ pub struct PdosReport {
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct SlaveMappingReport {
     pub slave: u32,
+    /// Where the list came from: "coe", "sii", "esi" or "none".
+    pub source: String,
+    /// Why a lesser source was used ("" for CoE).
+    pub note: String,
     /// RxPDOs (outputs, 0x1C12).
     pub rx_pdos: Vec<PdoReport>,
     /// TxPDOs (inputs, 0x1C13).
@@ -30,14 +34,23 @@ pub struct SlaveMappingReport {
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct PdoReport {
     pub index: u32,
+    /// The device's name for it ("" when none).
+    pub name: String,
+    /// Its sync manager, where the source says.
+    pub sync_manager: Option<u32>,
     pub entries: Vec<PdoEntryReport>,
 }
 
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct PdoEntryReport {
+    /// 0: a gap.
     pub index: u32,
     pub subindex: u32,
     pub bit_length: u32,
+    /// The device's name for it ("" when none).
+    pub name: String,
+    /// The device's type (ecmxfctl type name), "" when it gives none.
+    pub data_type: String,
 }
 
 /// The process image.
@@ -65,6 +78,8 @@ pub struct EntryReport {
     pub bit_length: u32,
     /// ecmxfctl type name.
     pub data_type: String,
+    /// The device's name for it ("" when none).
+    pub label: String,
 }
 
 impl EntryReport {
@@ -92,6 +107,7 @@ impl From<pb::ProcessImage> for LayoutReport {
                     bit_offset: e.bit_offset,
                     bit_length: e.bit_length,
                     data_type: type_name(e.data_type).into(),
+                    label: e.label,
                 })
                 .collect(),
         }
@@ -127,16 +143,30 @@ impl LayoutReport {
 impl Report for PdosReport {
     fn text(&self) -> String {
         let mut out = String::new();
+        let quoted = |s: &str| if s.is_empty() { String::new() } else { format!(" \"{s}\"") };
         for s in &self.slaves {
-            out.push_str(&format!("Slave {}\n", s.slave));
-            for (dir, sm, list) in [("RxPDO", "SM2 outputs", &s.rx_pdos), ("TxPDO", "SM3 inputs", &s.tx_pdos)] {
+            let from = match s.source.as_str() {
+                "coe" => String::new(),
+                src if s.note.is_empty() => format!(" (from {})", src.to_uppercase()),
+                src => format!(" (from {}: {})", src.to_uppercase(), s.note),
+            };
+            out.push_str(&format!("Slave {}{from}\n", s.slave));
+            for (dir, what, list) in [("RxPDO", "outputs", &s.rx_pdos), ("TxPDO", "inputs", &s.tx_pdos)] {
                 if list.is_empty() {
-                    out.push_str(&format!("  {sm}: none\n"));
+                    out.push_str(&format!("  {what}: none\n"));
                 }
                 for p in list {
-                    out.push_str(&format!("  {sm}: {dir} {:#06x}\n", p.index));
+                    let sm = p.sync_manager.map_or(String::new(), |n| format!("SM{n} "));
+                    out.push_str(&format!("  {sm}{what}: {dir} {:#06x}{}\n", p.index, quoted(&p.name)));
                     for e in &p.entries {
-                        out.push_str(&format!("    {:#06x}:{:02x}, {} bit\n", e.index, e.subindex, e.bit_length));
+                        let t = if e.data_type.is_empty() { String::new() } else { format!(", {}", e.data_type) };
+                        out.push_str(&format!(
+                            "    {:#06x}:{:02x}, {} bit{t}{}\n",
+                            e.index,
+                            e.subindex,
+                            e.bit_length,
+                            quoted(&e.name)
+                        ));
                     }
                 }
             }
@@ -162,10 +192,18 @@ pub async fn fetch(api: &Api, position: Option<u32>) -> Result<PdosReport, CliEr
         v.into_iter()
             .map(|p| PdoReport {
                 index: p.index,
+                name: p.name,
+                sync_manager: p.sync_manager,
                 entries: p
                     .entries
                     .into_iter()
-                    .map(|e| PdoEntryReport { index: e.index, subindex: e.subindex, bit_length: e.bit_length })
+                    .map(|e| PdoEntryReport {
+                        index: e.index,
+                        subindex: e.subindex,
+                        bit_length: e.bit_length,
+                        name: e.name,
+                        data_type: type_name(e.data_type).into(),
+                    })
                     .collect(),
             })
             .collect()
@@ -173,7 +211,19 @@ pub async fn fetch(api: &Api, position: Option<u32>) -> Result<PdosReport, CliEr
     let slaves = r
         .slaves
         .into_iter()
-        .map(|s| SlaveMappingReport { slave: s.slave, rx_pdos: pdos(s.rx_pdos), tx_pdos: pdos(s.tx_pdos) })
+        .map(|s| SlaveMappingReport {
+            slave: s.slave,
+            source: match pb::PdoSource::try_from(s.source) {
+                Ok(pb::PdoSource::Coe) => "coe",
+                Ok(pb::PdoSource::Sii) => "sii",
+                Ok(pb::PdoSource::Esi) => "esi",
+                _ => "none",
+            }
+            .into(),
+            note: s.note,
+            rx_pdos: pdos(s.rx_pdos),
+            tx_pdos: pdos(s.tx_pdos),
+        })
         .collect();
     let mut image = layout(api).await?;
     if let Some(p) = position {

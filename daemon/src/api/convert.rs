@@ -144,6 +144,29 @@ fn real(f: f64) -> pb::Value {
 }
 
 /// The natural type of an entry of `bits` bits with no better knowledge.
+/// The API's type for a device's CoE type. BITn travels as UNSIGNED8 (its
+/// bit length says how many bits the image has).
+pub fn pb_type(t: ecmxf_devices::od::DataType) -> pb::DataType {
+    use ecmxf_devices::od::DataType as D;
+    use pb::DataType as T;
+    match t {
+        D::Bool => T::Boolean,
+        D::Int8 => T::Integer8,
+        D::Int16 => T::Integer16,
+        D::Int32 => T::Integer32,
+        D::Int64 => T::Integer64,
+        D::UInt8 | D::Bits(_) => T::Unsigned8,
+        D::UInt16 => T::Unsigned16,
+        D::UInt32 => T::Unsigned32,
+        D::UInt64 => T::Unsigned64,
+        D::Real32 => T::Real32,
+        D::Real64 => T::Real64,
+        D::VisibleString(_) => T::VisibleString,
+        D::OctetString(_) => T::OctetString,
+    }
+}
+
+/// A type of `bits` bits when nothing better is known.
 pub fn type_for_bits(bits: u32, signed: bool) -> pb::DataType {
     use pb::DataType as T;
     match (bits, signed) {

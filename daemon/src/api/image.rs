@@ -1,19 +1,20 @@
 //! The process image as clients see it: every mapped PDO entry with a
 //! name, its place in the output or input image in bits, and a type. Built
-//! from each slave's PDO assignment as the slave reports it (cmds 8/9) and
-//! the offsets bring-up found; rebuilt when a new configuration is applied.
-//! Also the bit-level get/put of entry values.
+//! from each slave's assigned PDOs from the best source it has
+//! ([`crate::master::pdos`]: CoE, else SII, else ESI) and the offsets
+//! bring-up found; rebuilt when a new configuration is applied. Also the
+//! bit-level get/put of entry values.
 
 use std::collections::HashMap;
 use std::sync::Arc;
 
 use ecmxf_proto::v1 as pb;
-use ecmxf_wire::payload::pdo::{PdoConfig, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 
-use super::convert::{decode_value, type_for_bits};
+use super::convert::{decode_value, pb_type, type_for_bits};
 use super::objects::{entry_name, lookup};
 use crate::engine::error::EngineError;
 use crate::master::Master;
+use crate::master::pdos::{PdoDescription, SlavePdos};
 
 /// One entry.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -34,6 +35,8 @@ pub struct Entry {
     pub bit_length: u32,
     /// Type.
     pub data_type: pb::DataType,
+    /// The device's name for it ("" when none).
+    pub label: String,
 }
 
 /// The whole image.
@@ -50,10 +53,12 @@ pub struct Image {
     pub generation: u64,
     /// Cycle, us.
     pub cycle_us: u32,
+    /// Each slave's PDOs as the image was built from them, by position.
+    pub mappings: Vec<Arc<SlavePdos>>,
 }
 
 impl Image {
-    /// Reads the mapping of every slave with process data.
+    /// Reads the PDOs of every slave with process data.
     pub async fn build(master: &Master) -> Result<Self, EngineError> {
         let generation = master.status().config_generation;
         let layout = master.layout();
@@ -64,33 +69,36 @@ impl Image {
             cycle_us: master.config().cycle.sync0_us,
             ..Image::default()
         };
+        for (i, s) in layout.slaves.iter().enumerate() {
+            let pdos = master.slave_pdos(i as u8, s.rx_bytes, s.tx_bytes).await?;
+            image.mappings.push(Arc::new(pdos));
+        }
         for output in [true, false] {
             for (i, s) in layout.slaves.iter().enumerate() {
-                let (bytes, offset, assign) = if output {
-                    (s.rx_bytes, s.rx_offset, RX_PDO_ASSIGN)
-                } else {
-                    (s.tx_bytes, s.tx_offset, TX_PDO_ASSIGN)
-                };
+                let (bytes, offset) = if output { (s.rx_bytes, s.rx_offset) } else { (s.tx_bytes, s.tx_offset) };
                 if bytes == 0 {
                     continue;
                 }
-                let slave = i as u8;
-                let config = master.pdo_config_read(slave, assign, None).await?;
-                image.add_slave(slave, output, (offset * 8) as u32, (bytes * 8) as u32, &config);
+                let pdos = Arc::clone(&image.mappings[i]);
+                let list = if output { &pdos.rx } else { &pdos.tx };
+                image.add_slave(i as u8, output, (offset * 8) as u32, (bytes * 8) as u32, list);
             }
         }
         Ok(image)
     }
 
-    fn add_slave(&mut self, slave: u8, output: bool, start: u32, bits: u32, config: &PdoConfig) {
+    fn add_slave(&mut self, slave: u8, output: bool, start: u32, bits: u32, pdos: &[PdoDescription]) {
         let mut at = start;
-        let count = usize::from(config.pdo_count).min(config.pdos.len());
-        for pdo in &config.pdos[..count] {
-            for e in pdo.used() {
+        for pdo in pdos {
+            for e in &pdo.entries {
                 let len = u32::from(e.bits);
                 if e.index != 0 && at + len <= start + bits {
-                    let data_type =
-                        lookup(e.index, e.subindex).map_or_else(|| type_for_bits(len, false), |(k, _)| k.data_type);
+                    let data_type = e.data_type.map(pb_type).unwrap_or_else(|| {
+                        lookup(e.index, e.subindex)
+                            .map(|(k, _)| k.data_type)
+                            .filter(|t| super::convert::type_size(*t).is_none_or(|n| n * 8 == len as usize))
+                            .unwrap_or_else(|| type_for_bits(len, false))
+                    });
                     self.push(Entry {
                         name: entry_name(slave, e.index, e.subindex),
                         slave,
@@ -100,13 +108,15 @@ impl Image {
                         bit_offset: at,
                         bit_length: len,
                         data_type,
+                        label: e.name.clone(),
                     });
                 }
                 at += len;
             }
         }
-        // What the chip reports may be cut (3 PDOs x 8 entries are carried):
-        // the rest of the slave's bytes stay reachable by offset, as one entry.
+        // A source that describes less than the slave's bytes (no source at
+        // all, or one that disagrees with the slave): the rest stays
+        // reachable by offset, as one entry.
         if at < start + bits {
             let dir = if output { "outputs" } else { "inputs" };
             self.push(Entry {
@@ -118,6 +128,7 @@ impl Image {
                 bit_offset: at,
                 bit_length: start + bits - at,
                 data_type: pb::DataType::OctetString,
+                label: String::new(),
             });
         }
     }
@@ -161,6 +172,7 @@ impl Image {
                     bit_offset: e.bit_offset,
                     bit_length: e.bit_length,
                     data_type: e.data_type as i32,
+                    label: e.label.clone(),
                 })
                 .collect(),
         }

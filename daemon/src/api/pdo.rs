@@ -6,35 +6,50 @@ use std::time::Duration;
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::process_data_server::ProcessData as ProcessDataApi;
-use ecmxf_wire::payload::pdo::{PdoConfig as WirePdoConfig, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{encode_value, existing_slave};
+use super::convert::{encode_value, existing_slave, pb_type};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
+use crate::master::pdos::{PdoDescription, PdoSource};
 
 /// The `ProcessData` service.
 #[derive(Debug, Clone)]
 pub struct ProcessDataService(pub Arc<Context>);
 
-fn mapping_pb(c: &WirePdoConfig) -> Vec<pb::Pdo> {
-    let count = usize::from(c.pdo_count).min(c.pdos.len());
-    c.pdos[..count]
-        .iter()
+fn mapping_pb(list: &[PdoDescription]) -> Vec<pb::Pdo> {
+    list.iter()
         .map(|p| pb::Pdo {
             index: p.index.into(),
+            name: p.name.clone(),
+            sync_manager: p.sync_manager.map(u32::from),
             entries: p
-                .used()
+                .entries
                 .iter()
-                .map(|e| pb::PdoEntry { index: e.index.into(), subindex: e.subindex.into(), bit_length: e.bits.into() })
+                .map(|e| pb::PdoEntry {
+                    index: e.index.into(),
+                    subindex: e.subindex.into(),
+                    bit_length: e.bits.into(),
+                    name: e.name.clone(),
+                    data_type: e.data_type.map_or(pb::DataType::Unspecified, pb_type) as i32,
+                })
                 .collect(),
         })
         .collect()
+}
+
+fn source_pb(s: PdoSource) -> pb::PdoSource {
+    match s {
+        PdoSource::Coe => pb::PdoSource::Coe,
+        PdoSource::Sii => pb::PdoSource::Sii,
+        PdoSource::Esi => pb::PdoSource::Esi,
+        PdoSource::None => pb::PdoSource::None,
+    }
 }
 
 fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>, Status> {
@@ -164,17 +179,18 @@ impl ProcessDataApi for ProcessDataService {
             Some(s) => vec![existing_slave(s, count, "slave")?],
             None => (0..count as u8).collect(),
         };
-        let t = caller.deadline;
-        let slaves = bounded(&caller, async {
-            let mut out = Vec::new();
-            for s in which {
-                let rx = m.pdo_config_read(s, RX_PDO_ASSIGN, t).await.map_err(to_status)?;
-                let tx = m.pdo_config_read(s, TX_PDO_ASSIGN, t).await.map_err(to_status)?;
-                out.push(pb::SlaveMapping { slave: s.into(), rx_pdos: mapping_pb(&rx), tx_pdos: mapping_pb(&tx) });
-            }
-            Ok::<_, Status>(out)
-        })
-        .await?;
+        let image = bounded(&caller, self.0.image.get(m)).await?;
+        let slaves = which
+            .into_iter()
+            .filter_map(|s| image.mappings.get(usize::from(s)).map(|p| (s, p)))
+            .map(|(s, p)| pb::SlaveMapping {
+                slave: s.into(),
+                rx_pdos: mapping_pb(&p.rx),
+                tx_pdos: mapping_pb(&p.tx),
+                source: source_pb(p.source) as i32,
+                note: p.note.clone(),
+            })
+            .collect();
         Ok(Response::new(pb::GetMappingResponse { slaves }))
     }
 

@@ -86,10 +86,9 @@ impl SdoApi for SdoService {
         if usize::from(s) >= self.0.master.layout().slaves.len() {
             return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
         }
-        let esi = self.0.master.config().slaves.get(usize::from(s)).and_then(|c| c.esi.clone());
-        if let Some(path) = esi {
-            let found = &self.0.master.layout().slaves[usize::from(s)];
-            let entries = esi_objects(&path, found.vendor_id, found.product_code, found.revision)?;
+        if let Some(esi) = self.0.master.esi_device(s).await {
+            let esi = esi.map_err(Status::failed_precondition)?;
+            let entries = esi_objects(esi.device());
             return Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Esi as i32, entries }));
         }
         let entries = bounded(&caller, probe(&self.0.master, s)).await?;
@@ -181,25 +180,9 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
     Ok(out)
 }
 
-/// The object dictionary of the device in an ESI file that matches the
-/// slave found (vendor, product code, revision when the file has it).
-fn esi_objects(
-    path: &std::path::Path,
-    vendor: u32,
-    product: u32,
-    revision: u32,
-) -> Result<Vec<pb::ObjectEntry>, Status> {
-    use ecmxf_devices::esi::EsiFile;
-    let fail = |why: String| Status::failed_precondition(format!("ESI {}: {why}", path.display()));
-    let xml = std::fs::read_to_string(path).map_err(|e| fail(e.to_string()))?;
-    let file = EsiFile::parse(&xml).map_err(|e| fail(e.to_string()))?;
-    if file.vendor_id != vendor {
-        return Err(fail(format!("vendor {:#010x}, the slave's is {vendor:#010x}", file.vendor_id)));
-    }
-    let device = file
-        .device(product, Some(revision))
-        .or_else(|_| file.device(product, None))
-        .map_err(|e| fail(e.to_string()))?;
+/// The object dictionary of the ESI device matched to the slave found
+/// (vendor, product code, revision when the file has it).
+fn esi_objects(device: &ecmxf_devices::esi::EsiDevice) -> Vec<pb::ObjectEntry> {
     let mut out = Vec::new();
     for (index, object) in device.dictionary.objects() {
         for (sub, e) in &object.entries {
@@ -217,8 +200,7 @@ fn esi_objects(
                 index: index.into(),
                 subindex: (*sub).into(),
                 name,
-                data_type: pb::DataType::try_from(i32::from(e.dtype.code())).unwrap_or(pb::DataType::OctetString)
-                    as i32,
+                data_type: super::convert::pb_type(e.dtype) as i32,
                 // Strings have no fixed size: their default value's.
                 bit_length: if e.dtype.bits() == 0 { e.value.len() as u32 * 8 } else { e.dtype.bits() },
                 access: access.into(),
@@ -227,5 +209,5 @@ fn esi_objects(
             });
         }
     }
-    Ok(out)
+    out
 }

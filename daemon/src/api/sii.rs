@@ -12,12 +12,10 @@ use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::status::{bad_argument, to_status};
-use crate::master::Master;
+use crate::master::sii::Categories;
 
 /// Most words one Read or Write moves.
 pub const MAX_WORDS: u32 = 4096;
-/// Where the category area starts (word 0x40).
-const CATEGORIES: u16 = 0x40;
 
 /// The `Sii` service.
 #[derive(Debug, Clone)]
@@ -29,38 +27,6 @@ fn word(v: u32) -> Result<u16, Status> {
 
 fn bytes_of(words: &[u16]) -> Vec<u8> {
     words.iter().flat_map(|w| w.to_le_bytes()).collect()
-}
-
-/// Reads the image: the fixed area, then category headers up to the end
-/// marker (0xFFFF) or the end of the 64 Kword address space.
-async fn read_image(m: &Master, s: u8) -> Result<Vec<u16>, Status> {
-    let mut words = m.eeprom_read_words(s, 0, CATEGORIES, None).await.map_err(to_status)?;
-    // The EEPROM's own size (word 0x3E: (n + 1) x 128 bytes, ETG.1000.6
-    // table 2): a category that runs past it is a corrupt image, said with
-    // its offset, not read on into whatever the EEPROM answers there.
-    let size = words.get(0x3E).map_or(0x1_0000, |&n| (u32::from(n) + 1) * 64).min(0x1_0000);
-    let mut at = u32::from(CATEGORIES);
-    while at + 2 <= size {
-        let head = m.eeprom_read_words(s, at as u16, 2, None).await.map_err(to_status)?;
-        words.extend_from_slice(&head);
-        if head[0] == 0xFFFF || head[0] == 0 {
-            break;
-        }
-        if at + 2 + u32::from(head[1]) > size {
-            return Err(Status::failed_precondition(format!(
-                "slave {s}'s SII is corrupt: category {:#06x} at byte offset {:#06x} is {} bytes long and runs past the EEPROM's size of {} bytes (word 0x3E)",
-                head[0],
-                at * 2,
-                u32::from(head[1]) * 2,
-                size * 2
-            )));
-        }
-        let len = u32::from(head[1]);
-        let body = m.eeprom_read_words(s, (at + 2) as u16, len as u16, None).await.map_err(to_status)?;
-        words.extend_from_slice(&body);
-        at += 2 + len;
-    }
-    Ok(words)
 }
 
 fn mailbox(m: &MailboxArea) -> pb::SiiMailbox {
@@ -133,7 +99,8 @@ impl SiiApi for SiiService {
     async fn decode(&self, request: Request<pb::SiiDecodeRequest>) -> Result<Response<pb::SiiDecodeResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let s = self.0.slave(request.get_ref().slave)?;
-        let words = bounded(&caller, read_image(&self.0.master, s)).await?;
+        let words =
+            bounded(&caller, async { self.0.master.sii_words(s, Categories::All).await.map_err(to_status) }).await?;
         let image = bytes_of(&words);
         let sii = Sii::parse(&image).map_err(|e| Status::internal(format!("slave {s}'s SII does not parse: {e}")))?;
         let text = |i: u8| sii.string(i).map(decode_text).unwrap_or_default();

@@ -30,6 +30,7 @@ pub fn to_status(e: EngineError) -> Status {
         EngineError::Timeout => Status::deadline_exceeded(message),
         EngineError::QueueFull => Status::resource_exhausted(message),
         EngineError::Unavailable(_) => Status::unavailable(message),
+        EngineError::BadDeviceData(_) => Status::failed_precondition(message),
     }
 }
 
@@ -104,6 +105,7 @@ mod tests {
             (EngineError::Timeout, Code::DeadlineExceeded),
             (EngineError::QueueFull, Code::ResourceExhausted),
             (EngineError::Unavailable("x".into()), Code::Unavailable),
+            (EngineError::BadDeviceData("x".into()), Code::FailedPrecondition),
         ];
         for (e, code) in cases {
             assert_eq!(to_status(e.clone()).code(), code, "{e}");

@@ -38,6 +38,8 @@ pub enum EngineError {
     QueueFull,
     /// The engine is not running (stopped, or recovering from a fault).
     Unavailable(String),
+    /// What a slave describes itself with (its SII) is corrupt; says where.
+    BadDeviceData(String),
 }
 
 impl fmt::Display for EngineError {
@@ -53,6 +55,7 @@ impl fmt::Display for EngineError {
             Self::Timeout => f.write_str("deadline exceeded"),
             Self::QueueFull => f.write_str("request queue full"),
             Self::Unavailable(s) => write!(f, "engine unavailable: {s}"),
+            Self::BadDeviceData(s) => f.write_str(s),
         }
     }
 }

@@ -34,7 +34,10 @@ pub use crate::outputs::OutputWriter;
 use ecmxf_wire::EcatState;
 pub use transactions::RawAnswer;
 
+pub mod esi;
 mod network;
+pub mod pdos;
+pub mod sii;
 pub mod transactions;
 
 /// Requests that may wait at once.
@@ -178,6 +181,8 @@ pub struct Master {
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
     pub default_timeout: Duration,
+    /// The configured ESI files, parsed.
+    esi: esi::EsiLibrary,
 }
 
 /// Opens the link the configuration names. For the in-process simulator,
@@ -301,6 +306,7 @@ impl Master {
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
+            esi: esi::EsiLibrary::default(),
         }
     }
 

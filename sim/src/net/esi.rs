@@ -4,7 +4,7 @@ use ecmxf_devices::esi;
 pub use ecmxf_devices::esi::*;
 use ecmxf_wire::payload::pdo::PdoEntry;
 
-use super::od::{Access, Entry, Mappable, Object, ObjectKind};
+use super::od::{Access, DataType, Entry, Mappable, Object, ObjectDictionary, ObjectKind};
 use super::pdo_map::{self, RX_ASSIGN, TX_ASSIGN};
 use super::slave::{Device, Slave};
 
@@ -21,40 +21,17 @@ impl SimulatedDevice for EsiDevice {
         let mut od = self.dictionary.clone();
         od.no_complete_access = !self.complete_access;
         for (pdos, rx) in [(&self.rx_pdos, true), (&self.tx_pdos, false)] {
-            for p in pdos {
-                for (e, name, dtype) in &p.entries {
-                    if e.index == 0 || od.entry(e.index, e.subindex).is_some() {
-                        if let Some(en) = od.entry_mut(e.index, e.subindex) {
-                            if en.mappable == Mappable::No {
-                                en.mappable = pdo_map::mappable_for(rx);
-                            }
-                        }
-                        continue;
-                    }
-                    let dtype =
-                        if dtype.bits() == u32::from(e.bits) { *dtype } else { esi::data_type("", e.bits.into()) };
-                    let access = if rx { Access::RW } else { Access::RO };
-                    let entry = Entry::new(name, dtype, access).mappable(pdo_map::mappable_for(rx));
-                    if e.subindex == 0 {
-                        od.insert(e.index, Object::var(name, entry));
-                    } else {
-                        let obj = match od.object(e.index) {
-                            Some(o) => o.clone(),
-                            None => Object::record(name, ObjectKind::Record, Access::RO, Vec::new()),
-                        };
-                        let mut obj = obj;
-                        obj.entries.insert(e.subindex, entry);
-                        let highest = obj.entries.keys().copied().max().unwrap_or(0);
-                        if let Some(e0) = obj.entries.get_mut(&0) {
-                            e0.set_int(highest.into());
-                        }
-                        od.insert(e.index, obj);
-                    }
-                }
+            let assign = EsiDevice::default_assignment(pdos);
+            // The assigned PDOs make their entry objects first: an ESI may
+            // list one object at two sizes in alternative PDOs (Beckhoff
+            // EL1252: 0x1D09:B0 as UDINT in one, ULINT in the assigned one),
+            // and the size the device runs with is the assigned PDO's.
+            let (first, rest): (Vec<&EsiPdo>, Vec<&EsiPdo>) = pdos.iter().partition(|p| assign.contains(&p.index));
+            for p in first.iter().chain(&rest) {
+                add_entry_objects(&mut od, rx, &p.entries);
                 let entries: Vec<PdoEntry> = p.entries.iter().map(|(e, _, _)| *e).collect();
                 pdo_map::add_mapping(&mut od, p.index, &p.name, &entries, p.fixed || !self.pdo_config);
             }
-            let assign = EsiDevice::default_assignment(pdos);
             let index = if rx { RX_ASSIGN } else { TX_ASSIGN };
             pdo_map::add_assignment(&mut od, index, &assign, pdos.len().max(assign.len()), !self.pdo_assign);
         }
@@ -67,5 +44,39 @@ impl SimulatedDevice for EsiDevice {
             slave.eeprom_write(4, alias);
         }
         slave
+    }
+}
+
+/// Objects for the PDO entries a dictionary lacks (a device without CoE, or
+/// an ESI that lists PDO entries outside its `<Dictionary>`), and the
+/// mapping flag on those it has.
+pub(crate) fn add_entry_objects(od: &mut ObjectDictionary, rx: bool, entries: &[(PdoEntry, String, DataType)]) {
+    for (e, name, dtype) in entries {
+        if e.index == 0 || od.entry(e.index, e.subindex).is_some() {
+            if let Some(en) = od.entry_mut(e.index, e.subindex) {
+                if en.mappable == Mappable::No {
+                    en.mappable = pdo_map::mappable_for(rx);
+                }
+            }
+            continue;
+        }
+        let dtype = if dtype.bits() == u32::from(e.bits) { *dtype } else { esi::data_type("", e.bits.into()) };
+        let access = if rx { Access::RW } else { Access::RO };
+        let entry = Entry::new(name, dtype, access).mappable(pdo_map::mappable_for(rx));
+        if e.subindex == 0 {
+            od.insert(e.index, Object::var(name, entry));
+        } else {
+            let obj = match od.object(e.index) {
+                Some(o) => o.clone(),
+                None => Object::record(name, ObjectKind::Record, Access::RO, Vec::new()),
+            };
+            let mut obj = obj;
+            obj.entries.insert(e.subindex, entry);
+            let highest = obj.entries.keys().copied().max().unwrap_or(0);
+            if let Some(e0) = obj.entries.get_mut(&0) {
+                e0.set_int(highest.into());
+            }
+            od.insert(e.index, obj);
+        }
     }
 }

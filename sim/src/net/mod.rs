@@ -7,6 +7,7 @@ pub mod esm;
 pub mod od;
 pub mod pdo_map;
 pub mod profiles;
+pub mod sii_slave;
 pub mod slave;
 
 pub use ecmxf_devices::sii;

@@ -1,0 +1,80 @@
+//! The ESI files the configuration names (`[[slave]] esi`), parsed once and
+//! kept: a Beckhoff terminal family is megabytes of XML, and the process
+//! image, `pdos` and `ListObjects` all ask for the same device.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::sync::{Arc, Mutex};
+
+use ecmxf_devices::esi::{EsiDevice, EsiFile};
+
+use super::Master;
+
+/// Parsed ESI files by path.
+#[derive(Debug, Default)]
+pub struct EsiLibrary {
+    files: Mutex<HashMap<PathBuf, Arc<EsiFile>>>,
+}
+
+/// One device of a parsed ESI file.
+#[derive(Clone, Debug)]
+pub struct EsiRef {
+    file: Arc<EsiFile>,
+    at: usize,
+}
+
+impl EsiRef {
+    /// The device.
+    pub fn device(&self) -> &EsiDevice {
+        &self.file.devices[self.at]
+    }
+}
+
+impl EsiLibrary {
+    /// The file at `path`, parsed (on a blocking thread the first time).
+    pub async fn file(&self, path: &Path) -> Result<Arc<EsiFile>, String> {
+        if let Some(f) = self.files.lock().unwrap_or_else(|e| e.into_inner()).get(path) {
+            return Ok(Arc::clone(f));
+        }
+        let owned = path.to_path_buf();
+        let parsed = tokio::task::spawn_blocking(move || {
+            let xml = std::fs::read_to_string(&owned).map_err(|e| e.to_string())?;
+            EsiFile::parse(&xml).map_err(|e| e.to_string())
+        })
+        .await
+        .map_err(|e| format!("parsing stopped: {e}"))?
+        .map_err(|e| format!("ESI {}: {e}", path.display()))?;
+        let file = Arc::new(parsed);
+        self.files.lock().unwrap_or_else(|e| e.into_inner()).insert(path.to_path_buf(), Arc::clone(&file));
+        Ok(file)
+    }
+
+    /// The device of the file at `path` with this identity: the same
+    /// revision when the file has it, else the highest of that product.
+    pub async fn device(&self, path: &Path, vendor: u32, product: u32, revision: u32) -> Result<EsiRef, String> {
+        let file = self.file(path).await?;
+        let fail = |why: String| format!("ESI {}: {why}", path.display());
+        if file.vendor_id != vendor {
+            return Err(fail(format!("vendor {:#010x}, the slave's is {vendor:#010x}", file.vendor_id)));
+        }
+        let device = file
+            .device(product, Some(revision))
+            .or_else(|_| file.device(product, None))
+            .map_err(|e| fail(e.to_string()))?;
+        let at = file.devices.iter().position(|d| std::ptr::eq(d, device)).unwrap_or(0);
+        for w in &device.warnings {
+            tracing::warn!(esi = %path.display(), device = %device.type_name, "{w}");
+        }
+        Ok(EsiRef { file, at })
+    }
+}
+
+impl Master {
+    /// The ESI device configured for `slave`, matched to the identity the
+    /// slave reported: `None` when no ESI is configured for it.
+    pub async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, String>> {
+        let path = self.config().slaves.get(usize::from(slave)).and_then(|c| c.esi.clone())?;
+        let found = self.layout().slaves.get(usize::from(slave)).cloned()?;
+        Some(self.esi.device(&path, found.vendor_id, found.product_code, found.revision).await)
+    }
+}

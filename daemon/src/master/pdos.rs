@@ -1,0 +1,344 @@
+//! Each slave's PDOs from the best source it has, so one slave without CoE
+//! never fails the others' listing:
+//! 1. CoE: the chip's PDO_CONFIG_REQ/GET (cmds 8/9) carries 3 PDOs of 8
+//!    entries (v049, note under command 7); the rest of a longer assignment
+//!    or mapping is read with SDO uploads of 0x1C12/0x1C13 and 0x16xx/0x1Axx.
+//! 2. The SII's RxPDO/TxPDO categories (ETG.2010 categories 50/51): what a
+//!    slave without a mailbox has, PDOs with their sync manager, names and
+//!    entry types.
+//! 3. The ESI the configuration names for the slave: its default
+//!    assignment (PDOs with an `Sm`, minus those excluded).
+//!
+//! Entry types come from the device: the ESI dictionary, then the PDO
+//! entry's own type (ESI `DataType`, SII data type code); what is left is
+//! typed by the caller's table.
+
+use ecmxf_devices::esi::{EsiDevice, EsiPdo};
+use ecmxf_devices::od::DataType;
+use ecmxf_devices::sii::{self, PdoRecord, Sii, decode_text};
+use ecmxf_wire::payload::pdo::{PdoEntry, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
+
+use super::Master;
+use super::esi::EsiRef;
+use super::sii::Categories;
+use crate::engine::error::EngineError;
+
+/// Where a slave's PDO list came from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum PdoSource {
+    /// Read from the slave over CoE.
+    Coe,
+    /// The slave's SII PDO categories.
+    Sii,
+    /// The configured ESI file.
+    Esi,
+    /// Nothing says (no process data, or no source answered).
+    None,
+}
+
+/// One mapped entry.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EntryDescription {
+    /// Object index (0: a gap).
+    pub index: u16,
+    /// Subindex.
+    pub subindex: u8,
+    /// Size in bits.
+    pub bits: u8,
+    /// The device's name for it ("" when no source names it).
+    pub name: String,
+    /// The device's type for it, when a source gives one of this size.
+    pub data_type: Option<DataType>,
+}
+
+/// One PDO.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PdoDescription {
+    /// Mapping object (0x16xx / 0x1Axx).
+    pub index: u16,
+    /// The device's name for it.
+    pub name: String,
+    /// Its sync manager, where the source says.
+    pub sync_manager: Option<u8>,
+    /// Entries in image order.
+    pub entries: Vec<EntryDescription>,
+}
+
+/// A slave's assigned PDOs.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SlavePdos {
+    /// Where they came from.
+    pub source: PdoSource,
+    /// Why a lesser source was used ("" for CoE).
+    pub note: String,
+    /// RxPDOs (outputs).
+    pub rx: Vec<PdoDescription>,
+    /// TxPDOs (inputs).
+    pub tx: Vec<PdoDescription>,
+}
+
+impl SlavePdos {
+    /// A slave with nothing to list, and why.
+    pub fn none(note: impl Into<String>) -> Self {
+        Self { source: PdoSource::None, note: note.into(), rx: Vec::new(), tx: Vec::new() }
+    }
+}
+
+/// Whether an error means "this source has nothing" (try the next) rather
+/// than "the daemon cannot ask now" (pass it on).
+fn source_lacks(e: &EngineError) -> bool {
+    matches!(
+        e,
+        EngineError::Failed(_) | EngineError::SdoAbort { .. } | EngineError::Refused(_) | EngineError::BadDeviceData(_)
+    )
+}
+
+fn le_u32(v: &[u8]) -> u32 {
+    let mut b = [0u8; 4];
+    for (o, i) in b.iter_mut().zip(v) {
+        *o = *i;
+    }
+    u32::from_le_bytes(b)
+}
+
+impl Master {
+    /// `slave`'s assigned PDOs from the best source it has (module docs).
+    /// `rx_bytes`/`tx_bytes` are its process data as bring-up found it: a
+    /// direction without bytes is not asked for.
+    pub async fn slave_pdos(&self, slave: u8, rx_bytes: usize, tx_bytes: usize) -> Result<SlavePdos, EngineError> {
+        if rx_bytes == 0 && tx_bytes == 0 {
+            return Ok(SlavePdos::none("no process data"));
+        }
+        let esi = match self.esi_device(slave).await {
+            Some(Ok(d)) => Some(d),
+            Some(Err(e)) => {
+                tracing::warn!(slave, "{e}");
+                None
+            }
+            None => None,
+        };
+        let esi_device = esi.as_ref().map(EsiRef::device);
+        let mut notes = Vec::new();
+        match self.coe_pdos(slave, rx_bytes, tx_bytes).await {
+            Ok((rx, tx)) => {
+                return Ok(typed(SlavePdos { source: PdoSource::Coe, note: String::new(), rx, tx }, esi_device));
+            }
+            Err(e) if source_lacks(&e) => notes.push(format!("CoE: {e}")),
+            Err(e) => return Err(e),
+        }
+        match self
+            .sii(
+                slave,
+                Categories::Only(&[
+                    sii::category::RXPDO,
+                    sii::category::TXPDO,
+                    sii::category::STRINGS,
+                    sii::category::SYNC_MANAGER,
+                ]),
+            )
+            .await
+        {
+            Ok(image) if !image.rx_pdos.is_empty() || !image.tx_pdos.is_empty() => {
+                let (rx, tx) = (from_sii(&image, &image.rx_pdos), from_sii(&image, &image.tx_pdos));
+                let note = notes.join("; ");
+                return Ok(typed(SlavePdos { source: PdoSource::Sii, note, rx, tx }, esi_device));
+            }
+            Ok(_) => notes.push("SII: no PDO categories".into()),
+            Err(e) if source_lacks(&e) => notes.push(format!("SII: {e}")),
+            Err(e) => return Err(e),
+        }
+        if let Some(d) = esi_device {
+            let (rx, tx) = (from_esi(&d.rx_pdos), from_esi(&d.tx_pdos));
+            let note = notes.join("; ");
+            return Ok(typed(SlavePdos { source: PdoSource::Esi, note, rx, tx }, esi_device));
+        }
+        notes.push("no ESI configured".into());
+        Ok(SlavePdos::none(notes.join("; ")))
+    }
+
+    /// Both directions over CoE; a direction without bytes is left empty.
+    async fn coe_pdos(
+        &self,
+        slave: u8,
+        rx_bytes: usize,
+        tx_bytes: usize,
+    ) -> Result<(Vec<PdoDescription>, Vec<PdoDescription>), EngineError> {
+        let rx = if rx_bytes > 0 { self.coe_assignment(slave, RX_PDO_ASSIGN).await? } else { Vec::new() };
+        let tx = if tx_bytes > 0 { self.coe_assignment(slave, TX_PDO_ASSIGN).await? } else { Vec::new() };
+        Ok((rx, tx))
+    }
+
+    /// One assignment: what PDO_CONFIG_GET carries, completed with SDO
+    /// uploads where it is cut (more than 3 PDOs, more than 8 entries).
+    async fn coe_assignment(&self, slave: u8, assign: u16) -> Result<Vec<PdoDescription>, EngineError> {
+        let config = self.pdo_config_read(slave, assign, None).await?;
+        let mut out = Vec::with_capacity(usize::from(config.pdo_count));
+        for n in 0..config.pdo_count {
+            let (index, count, mut entries) = match config.pdos.get(usize::from(n)) {
+                Some(p) => (p.index, p.entry_count, p.used().to_vec()),
+                None => {
+                    let v = self.sdo_read(slave, assign, n + 1, false, None).await?;
+                    let index = le_u32(&v) as u16;
+                    let count = self.sdo_read(slave, index, 0, false, None).await?;
+                    (index, u16::from(count.first().copied().unwrap_or(0)), Vec::new())
+                }
+            };
+            for sub in entries.len() + 1..=usize::from(count).min(255) {
+                let v = self.sdo_read(slave, index, sub as u8, false, None).await?;
+                entries.push(PdoEntry::from_u32(le_u32(&v)));
+            }
+            out.push(PdoDescription {
+                index,
+                name: String::new(),
+                // 0x1C10 + n assigns sync manager n (ETG.1000.6 5.6.7.4).
+                sync_manager: Some((assign - 0x1C10) as u8),
+                entries: entries
+                    .into_iter()
+                    .map(|e| EntryDescription {
+                        index: e.index,
+                        subindex: e.subindex,
+                        bits: e.bits,
+                        name: String::new(),
+                        data_type: None,
+                    })
+                    .collect(),
+            });
+        }
+        Ok(out)
+    }
+}
+
+/// The PDOs of an SII list that are assigned: their sync manager is one
+/// the device has (ETG.2010 table 14: SM 0xFF, or one beyond the SM
+/// category, means "not assigned by default").
+fn from_sii(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
+    let text = |i: u8| image.string(i).map(decode_text).unwrap_or_default();
+    let sms = image.sync_managers.len();
+    list.iter()
+        .filter(|p| p.sm != 0xFF && (sms == 0 || usize::from(p.sm) < sms))
+        .map(|p| PdoDescription {
+            index: p.index,
+            name: text(p.name),
+            sync_manager: Some(p.sm),
+            entries: p
+                .entries
+                .iter()
+                .map(|e| EntryDescription {
+                    index: e.index,
+                    subindex: e.subindex,
+                    bits: e.bits,
+                    name: text(e.name),
+                    data_type: sii_type(e.data_type, e.bits),
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// An SII entry's data type code (ETG.1000.6 table 64) where it is a
+/// standard one of the entry's size.
+fn sii_type(code: u8, bits: u8) -> Option<DataType> {
+    let t = match code {
+        0x01 => DataType::Bool,
+        0x02 => DataType::Int8,
+        0x03 => DataType::Int16,
+        0x04 => DataType::Int32,
+        0x05 => DataType::UInt8,
+        0x06 => DataType::UInt16,
+        0x07 => DataType::UInt32,
+        0x08 => DataType::Real32,
+        0x11 => DataType::Real64,
+        0x15 => DataType::Int64,
+        0x1B => DataType::UInt64,
+        0x30..=0x37 => DataType::Bits(code - 0x2F),
+        _ => return None,
+    };
+    (t.bits() == u32::from(bits)).then_some(t)
+}
+
+/// The default assignment an ESI describes.
+fn from_esi(pdos: &[EsiPdo]) -> Vec<PdoDescription> {
+    let chosen = EsiDevice::default_assignment(pdos);
+    chosen
+        .iter()
+        .filter_map(|i| pdos.iter().find(|p| p.index == *i))
+        .map(|p| PdoDescription {
+            index: p.index,
+            name: p.name.clone(),
+            sync_manager: p.sm,
+            entries: p
+                .entries
+                .iter()
+                .map(|(e, name, t)| EntryDescription {
+                    index: e.index,
+                    subindex: e.subindex,
+                    bits: e.bits,
+                    name: name.clone(),
+                    data_type: (t.bits() == u32::from(e.bits)).then_some(*t),
+                })
+                .collect(),
+        })
+        .collect()
+}
+
+/// Names and types from the ESI where the list lacks them: the PDO's name,
+/// the entry's name, and the dictionary's type for the object (when its
+/// size is the entry's), which wins over a type guessed from a PDO list.
+fn typed(mut pdos: SlavePdos, esi: Option<&EsiDevice>) -> SlavePdos {
+    let Some(d) = esi else { return pdos };
+    for (list, described) in [(&mut pdos.rx, &d.rx_pdos), (&mut pdos.tx, &d.tx_pdos)] {
+        for p in list.iter_mut() {
+            let known = described.iter().find(|q| q.index == p.index);
+            if p.name.is_empty() {
+                p.name = known.map(|q| q.name.clone()).unwrap_or_default();
+            }
+            if p.sync_manager.is_none() {
+                p.sync_manager = known.and_then(|q| q.sm);
+            }
+            for e in &mut p.entries {
+                if e.index == 0 {
+                    continue;
+                }
+                if let Some(t) = d.dictionary.entry(e.index, e.subindex).map(|x| x.dtype) {
+                    if t.bits() == u32::from(e.bits) {
+                        e.data_type = Some(t);
+                    }
+                }
+                let listed = known
+                    .and_then(|q| q.entries.iter().find(|(x, _, _)| x.index == e.index && x.subindex == e.subindex));
+                if let Some((x, name, t)) = listed {
+                    if e.name.is_empty() {
+                        e.name = name.clone();
+                    }
+                    if e.data_type.is_none() && t.bits() == u32::from(x.bits) && x.bits == e.bits {
+                        e.data_type = Some(*t);
+                    }
+                }
+            }
+        }
+    }
+    pdos
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn sii_types_only_when_the_size_agrees() {
+        assert_eq!(sii_type(0x04, 32), Some(DataType::Int32));
+        assert_eq!(sii_type(0x04, 16), None, "a DINT code on 16 bits is not believed");
+        assert_eq!(sii_type(0x01, 1), Some(DataType::Bool));
+        assert_eq!(sii_type(0x32, 3), Some(DataType::Bits(3)));
+        assert_eq!(sii_type(0x00, 8), None);
+    }
+
+    #[test]
+    fn unassigned_and_missing_sync_managers_are_left_out() {
+        let image = Sii { sync_managers: vec![Default::default(); 3], ..Sii::default() };
+        let pdo = |index, sm| PdoRecord { index, sm, ..Default::default() };
+        let list = [pdo(0x1A00, 2), pdo(0x1A01, 0xFF), pdo(0x1A02, 5)];
+        let got: Vec<u16> = from_sii(&image, &list).iter().map(|p| p.index).collect();
+        assert_eq!(got, [0x1A00]);
+    }
+}

@@ -1,0 +1,52 @@
+//! Simulated slaves built from an SII EEPROM dump alone (a real terminal's
+//! image, e.g. read with `ecmxfctl sii dump`): identity, mailbox, sync
+//! managers and the PDOs of its RxPDO/TxPDO categories (ETG.2010 categories
+//! 50/51) are what the chip's bring-up uses. A dump has no dictionary:
+//! only the PDO entries and mapping objects are made, fixed as the SII
+//! describes them.
+
+use ecmxf_devices::esi;
+use ecmxf_devices::sii::{PdoRecord, Sii, SiiError, decode_text};
+use ecmxf_wire::payload::pdo::PdoEntry;
+
+use super::esi::add_entry_objects;
+use super::od::{DataType, ObjectDictionary};
+use super::pdo_map::{self, RX_ASSIGN, TX_ASSIGN};
+use super::slave::{Device, Slave};
+
+/// A PDO of the list is assigned by default when its sync manager is one
+/// the device has (ETG.2010: 0xFF, or one beyond the SM category, is none).
+fn assigned(image: &Sii, p: &PdoRecord) -> bool {
+    p.sm != 0xFF && (image.sync_managers.is_empty() || usize::from(p.sm) < image.sync_managers.len())
+}
+
+/// A slave from an SII image; the image must parse.
+pub fn slave_from_sii(eeprom: Vec<u8>) -> Result<Slave, SiiError> {
+    let image = Sii::parse(&eeprom)?;
+    let mut od = ObjectDictionary::new();
+    for (list, rx) in [(&image.rx_pdos, true), (&image.tx_pdos, false)] {
+        let chosen: Vec<&PdoRecord> = list.iter().filter(|p| assigned(&image, p)).collect();
+        for p in &chosen {
+            let entries: Vec<(PdoEntry, String, DataType)> = p
+                .entries
+                .iter()
+                .map(|e| {
+                    let name = image.string(e.name).map(decode_text).unwrap_or_default();
+                    let entry = PdoEntry { index: e.index, subindex: e.subindex, bits: e.bits };
+                    (entry, name, esi::data_type("", e.bits.into()))
+                })
+                .collect();
+            add_entry_objects(&mut od, rx, &entries);
+            let name = image.string(p.name).map(decode_text).unwrap_or_default();
+            let mapped: Vec<PdoEntry> = entries.iter().map(|(e, _, _)| *e).collect();
+            pdo_map::add_mapping(&mut od, p.index, &name, &mapped, true);
+        }
+        let indices: Vec<u16> = chosen.iter().map(|p| p.index).collect();
+        let assign = if rx { RX_ASSIGN } else { TX_ASSIGN };
+        if !indices.is_empty() {
+            pdo_map::add_assignment(&mut od, assign, &indices, indices.len(), true);
+        }
+    }
+    let has_dc = image.dc.is_some();
+    Ok(Slave::new(eeprom, od, Device::Passive, has_dc))
+}
