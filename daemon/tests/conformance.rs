@@ -101,10 +101,9 @@ impl Expected {
     }
 
     fn from_sii(file: &Path, image: &Sii) -> Self {
-        let sms = image.sync_managers.len();
         let pick = |list: &[sii::PdoRecord]| -> Vec<(u16, u8, u8)> {
-            list.iter()
-                .filter(|p| p.sm != 0xFF && (sms == 0 || usize::from(p.sm) < sms))
+            image
+                .default_assignment(list)
                 .flat_map(|p| p.entries.iter().map(|e| (e.index, e.subindex, e.bits)))
                 .collect()
         };

@@ -80,6 +80,29 @@ impl DataType {
         }
     }
 
+    /// The type of an ETG type code (what [`DataType::code`] gives), for an
+    /// entry of `bits` bits: `None` for codes outside the fixed-size types
+    /// and when the type's size is not `bits` (a code that contradicts its
+    /// entry is not believed).
+    pub fn from_code(code: u16, bits: u32) -> Option<Self> {
+        let t = match code {
+            0x01 => Self::Bool,
+            0x02 => Self::Int8,
+            0x03 => Self::Int16,
+            0x04 => Self::Int32,
+            0x05 => Self::UInt8,
+            0x06 => Self::UInt16,
+            0x07 => Self::UInt32,
+            0x08 => Self::Real32,
+            0x11 => Self::Real64,
+            0x15 => Self::Int64,
+            0x1B => Self::UInt64,
+            0x30..=0x37 => Self::Bits((code - 0x2F) as u8),
+            _ => return None,
+        };
+        (t.bits() == bits).then_some(t)
+    }
+
     /// Whether values are signed integers.
     pub fn is_signed(self) -> bool {
         matches!(self, Self::Int8 | Self::Int16 | Self::Int32 | Self::Int64)
@@ -340,6 +363,15 @@ mod tests {
         assert_eq!(e.int(), -5);
         let e = Entry::new("x", DataType::UInt16, Access::RW).default_int(0xFFFF);
         assert_eq!(e.int(), 0xFFFF);
+    }
+
+    #[test]
+    fn type_codes_round_trip_when_the_size_agrees() {
+        for t in [DataType::Bool, DataType::Int32, DataType::UInt64, DataType::Real64, DataType::Bits(3)] {
+            assert_eq!(DataType::from_code(t.code(), t.bits()), Some(t));
+        }
+        assert_eq!(DataType::from_code(0x04, 16), None, "a DINT code on 16 bits is not believed");
+        assert_eq!(DataType::from_code(0x00, 8), None);
     }
 
     #[test]

@@ -405,6 +405,14 @@ impl Sii {
         self.string(g.name).map(decode_text)
     }
 
+    /// The PDOs of `list` (this image's `rx_pdos` or `tx_pdos`) assigned by
+    /// default: their sync manager is one the device has (ETG.2010: 0xFF,
+    /// or one beyond the SM category, means none).
+    pub fn default_assignment<'a>(&self, list: &'a [PdoRecord]) -> impl Iterator<Item = &'a PdoRecord> {
+        let sms = self.sync_managers.len();
+        list.iter().filter(move |p| p.sm != 0xFF && (sms == 0 || usize::from(p.sm) < sms))
+    }
+
     /// Whether the config-area checksum (word 7 low byte) is right.
     pub fn checksum_ok(&self) -> bool {
         let mut bytes = [0u8; 14];

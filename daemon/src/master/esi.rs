@@ -73,7 +73,10 @@ impl Master {
     /// The ESI device configured for `slave`, matched to the identity the
     /// slave reported: `None` when no ESI is configured for it.
     pub async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, String>> {
-        let path = self.config().slaves.get(usize::from(slave)).and_then(|c| c.esi.clone())?;
+        let path = {
+            let config = self.config.lock().unwrap_or_else(|e| e.into_inner());
+            config.slaves.get(usize::from(slave)).and_then(|c| c.esi.clone())?
+        };
         let found = self.layout().slaves.get(usize::from(slave)).cloned()?;
         Some(self.esi.device(&path, found.vendor_id, found.product_code, found.revision).await)
     }

@@ -208,14 +208,11 @@ impl Master {
     }
 }
 
-/// The PDOs of an SII list that are assigned: their sync manager is one
-/// the device has (ETG.2010 table 14: SM 0xFF, or one beyond the SM
-/// category, means "not assigned by default").
+/// The PDOs of an SII list that are assigned by default.
 fn from_sii(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
     let text = |i: u8| image.string(i).map(decode_text).unwrap_or_default();
-    let sms = image.sync_managers.len();
-    list.iter()
-        .filter(|p| p.sm != 0xFF && (sms == 0 || usize::from(p.sm) < sms))
+    image
+        .default_assignment(list)
         .map(|p| PdoDescription {
             index: p.index,
             name: text(p.name),
@@ -228,32 +225,11 @@ fn from_sii(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
                     subindex: e.subindex,
                     bits: e.bits,
                     name: text(e.name),
-                    data_type: sii_type(e.data_type, e.bits),
+                    data_type: DataType::from_code(e.data_type.into(), e.bits.into()),
                 })
                 .collect(),
         })
         .collect()
-}
-
-/// An SII entry's data type code (ETG.1000.6 table 64) where it is a
-/// standard one of the entry's size.
-fn sii_type(code: u8, bits: u8) -> Option<DataType> {
-    let t = match code {
-        0x01 => DataType::Bool,
-        0x02 => DataType::Int8,
-        0x03 => DataType::Int16,
-        0x04 => DataType::Int32,
-        0x05 => DataType::UInt8,
-        0x06 => DataType::UInt16,
-        0x07 => DataType::UInt32,
-        0x08 => DataType::Real32,
-        0x11 => DataType::Real64,
-        0x15 => DataType::Int64,
-        0x1B => DataType::UInt64,
-        0x30..=0x37 => DataType::Bits(code - 0x2F),
-        _ => return None,
-    };
-    (t.bits() == u32::from(bits)).then_some(t)
 }
 
 /// The default assignment an ESI describes.
@@ -323,15 +299,6 @@ fn typed(mut pdos: SlavePdos, esi: Option<&EsiDevice>) -> SlavePdos {
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn sii_types_only_when_the_size_agrees() {
-        assert_eq!(sii_type(0x04, 32), Some(DataType::Int32));
-        assert_eq!(sii_type(0x04, 16), None, "a DINT code on 16 bits is not believed");
-        assert_eq!(sii_type(0x01, 1), Some(DataType::Bool));
-        assert_eq!(sii_type(0x32, 3), Some(DataType::Bits(3)));
-        assert_eq!(sii_type(0x00, 8), None);
-    }
 
     #[test]
     fn unassigned_and_missing_sync_managers_are_left_out() {

@@ -4,15 +4,13 @@
 //! seconds over the chip's two-words-per-request EEPROM_REQ (cmd 38); the
 //! PDO categories of a terminal take a few dozen requests.
 
-use ecmxf_devices::sii::Sii;
+use ecmxf_devices::sii::{Sii, category};
 
 use super::Master;
 use crate::engine::error::EngineError;
 
 /// Where the category area starts (word 0x40).
-pub const CATEGORIES: u16 = 0x40;
-/// The end marker of the category list.
-const END: u16 = 0xFFFF;
+const CATEGORIES: u16 = 0x40;
 
 /// Which category bodies to read.
 #[derive(Clone, Copy, Debug)]
@@ -45,7 +43,7 @@ impl Master {
         while at + 2 <= size {
             let head = self.eeprom_read_words(slave, at as u16, 2, None).await?;
             words.extend_from_slice(&head);
-            if head[0] == END || head[0] == 0 {
+            if head[0] == category::END || head[0] == 0 {
                 break;
             }
             let len = u32::from(head[1]);

@@ -14,18 +14,12 @@ use super::od::{DataType, ObjectDictionary};
 use super::pdo_map::{self, RX_ASSIGN, TX_ASSIGN};
 use super::slave::{Device, Slave};
 
-/// A PDO of the list is assigned by default when its sync manager is one
-/// the device has (ETG.2010: 0xFF, or one beyond the SM category, is none).
-fn assigned(image: &Sii, p: &PdoRecord) -> bool {
-    p.sm != 0xFF && (image.sync_managers.is_empty() || usize::from(p.sm) < image.sync_managers.len())
-}
-
 /// A slave from an SII image; the image must parse.
 pub fn slave_from_sii(eeprom: Vec<u8>) -> Result<Slave, SiiError> {
     let image = Sii::parse(&eeprom)?;
     let mut od = ObjectDictionary::new();
     for (list, rx) in [(&image.rx_pdos, true), (&image.tx_pdos, false)] {
-        let chosen: Vec<&PdoRecord> = list.iter().filter(|p| assigned(&image, p)).collect();
+        let chosen: Vec<&PdoRecord> = image.default_assignment(list).collect();
         for p in &chosen {
             let entries: Vec<(PdoEntry, String, DataType)> = p
                 .entries
