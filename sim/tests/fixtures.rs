@@ -50,6 +50,11 @@ fn every_esi_loads_and_every_device_reaches_safeop() {
             let sii = s.sii();
             assert_eq!((sii.vendor_id, sii.product_code, sii.revision), (f.vendor_id, d.product_code, d.revision));
             assert!(sii.checksum_ok(), "{name} {}", d.type_name);
+            if s.od.object(0x1018).is_some() {
+                let identity: Vec<i64> = (1..=3).map(|sub| s.od.int(0x1018, sub)).collect();
+                let want = [f.vendor_id, d.product_code, d.revision].map(i64::from);
+                assert_eq!(identity, want, "{name} {}: 0x1018 contradicts the identity", d.type_name);
+            }
             for rx in [true, false] {
                 pdo_map::layout(&s.od, rx)
                     .unwrap_or_else(|pdo| panic!("{name} {}: PDO {pdo:#06x} inconsistent", d.type_name));

@@ -35,6 +35,12 @@ impl SimulatedDevice for EsiDevice {
             let index = if rx { RX_ASSIGN } else { TX_ASSIGN };
             pdo_map::add_assignment(&mut od, index, &assign, pdos.len().max(assign.len()), !self.pdo_assign);
         }
+        // The identity object says what the slave is (CiA301 0x1018): an
+        // ESI default that disagrees (Elmo's 0x1018:01 = 0) would make the
+        // slave contradict its own SII and the identity the chip reports.
+        for (sub, v) in [(1, vendor_id), (2, self.product_code), (3, self.revision)] {
+            od.set_int(0x1018, sub, v.into());
+        }
         let has_dc = self.dc_modes.iter().any(|(_, a)| *a != 0);
         let mut slave = Slave::new(self.sii_image(vendor_id), od, Device::Passive, has_dc);
         if slave.name.is_empty() {
