@@ -7,7 +7,7 @@
 //! - its process data is as many bytes as the file's default assignment;
 //! - `Master::slave_pdos` lists exactly the file's PDO entries (index,
 //!   subindex, bits), from CoE when the device has it, else from its SII,
-//!   with the types the file declares.
+//!   with the names and types the file declares.
 //!
 //! A device that cannot be simulated (no process data at all: a coupler,
 //! a bootloader entry) is named in the output with the reason. The same
@@ -19,8 +19,8 @@ use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-use ecmxf_devices::esi::{EsiDevice, EsiFile};
-use ecmxf_devices::sii::{self, Sii};
+use ecmxf_devices::catalog::{self, Catalog, CatalogDevice, CatalogEntry};
+use ecmxf_sim::config::SlaveSection;
 use ecmxfd::config::{Config, LinkConfig, SlaveConfig};
 use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::master::Master;
@@ -36,138 +36,30 @@ fn fixtures() -> Option<PathBuf> {
     None
 }
 
-/// Every file of the folder with this extension, sorted.
-fn files(dir: &Path, ext: &str) -> Vec<PathBuf> {
-    let mut out: Vec<PathBuf> = std::fs::read_dir(dir)
-        .unwrap()
-        .filter_map(|e| e.ok().map(|e| e.path()))
-        .filter(|p| p.extension().is_some_and(|e| e.eq_ignore_ascii_case(ext)))
-        .collect();
-    out.sort();
-    out
-}
-
-/// What a device description says the slave must show.
-struct Expected {
-    what: String,
-    vendor: u32,
-    product: u32,
-    revision: u32,
-    coe: bool,
-    /// (index, subindex, bits) of the default assignment, outputs then inputs.
-    rx: Vec<(u16, u8, u8)>,
-    tx: Vec<(u16, u8, u8)>,
-    /// Declared types by (index, subindex), where the file gives one.
-    types: Vec<((u16, u8), ecmxf_devices::od::DataType)>,
-}
-
-impl Expected {
-    fn bytes(list: &[(u16, u8, u8)]) -> usize {
-        list.iter().map(|e| usize::from(e.2)).sum::<usize>().div_ceil(8)
-    }
-
-    fn from_esi(file: &Path, vendor: u32, d: &EsiDevice) -> Self {
-        let pick = |pdos: &[ecmxf_devices::esi::EsiPdo]| -> Vec<(u16, u8, u8)> {
-            let chosen = EsiDevice::default_assignment(pdos);
-            chosen
-                .iter()
-                .filter_map(|i| pdos.iter().find(|p| p.index == *i))
-                .flat_map(|p| p.entries.iter().map(|(e, _, _)| (e.index, e.subindex, e.bits)))
-                .collect()
-        };
-        let mut types = Vec::new();
-        let assigned: Vec<u16> = EsiDevice::default_assignment(&d.rx_pdos)
-            .into_iter()
-            .chain(EsiDevice::default_assignment(&d.tx_pdos))
-            .collect();
-        for p in d.rx_pdos.iter().chain(&d.tx_pdos).filter(|p| assigned.contains(&p.index)) {
-            for (e, _, t) in &p.entries {
-                let declared = d.dictionary.entry(e.index, e.subindex).map_or(*t, |x| x.dtype);
-                if e.index != 0 && declared.bits() == u32::from(e.bits) {
-                    types.push(((e.index, e.subindex), declared));
-                }
-            }
-        }
-        Self {
-            what: format!("{} {} ({:#010x} rev {:#010x})", name_of(file), d.type_name, d.product_code, d.revision),
-            vendor,
-            product: d.product_code,
-            revision: d.revision,
-            coe: d.protocols & sii::protocol::COE != 0,
-            rx: pick(&d.rx_pdos),
-            tx: pick(&d.tx_pdos),
-            types,
-        }
-    }
-
-    fn from_sii(file: &Path, image: &Sii) -> Self {
-        let pick = |list: &[sii::PdoRecord]| -> Vec<(u16, u8, u8)> {
-            image
-                .default_assignment(list)
-                .flat_map(|p| p.entries.iter().map(|e| (e.index, e.subindex, e.bits)))
-                .collect()
-        };
-        Self {
-            what: format!("{} ({:#010x} rev {:#010x})", name_of(file), image.product_code, image.revision),
-            vendor: image.vendor_id,
-            product: image.product_code,
-            revision: image.revision,
-            coe: image.protocols & sii::protocol::COE != 0,
-            rx: pick(&image.rx_pdos),
-            tx: pick(&image.tx_pdos),
-            types: Vec::new(),
-        }
-    }
-}
-
-fn name_of(p: &Path) -> String {
-    p.file_name().unwrap().to_string_lossy().into_owned()
-}
-
-/// One device to put on the simulated ring.
-struct Device {
-    /// Its `[[slave]]` lines in the simulator's network file.
-    line: String,
-    /// The ESI the daemon is configured with for it.
-    esi: Option<PathBuf>,
-    want: Expected,
-}
-
 /// Networks of devices in file order: up to 24 slaves and 128 bytes of
-/// process data each way (a larger image leaves the SPI link little room at
-/// 1 ms: one FIFO frame per packet), a device with more alone.
+/// process data each way, a device with more alone.
 /// ECMXF_CONFORMANCE_ALONE=1: every device alone (about 2 s a device).
-fn networks(devices: &[Device]) -> Vec<&[Device]> {
-    let alone = std::env::var_os("ECMXF_CONFORMANCE_ALONE").is_some();
-    let (max_slaves, max_bytes) = if alone { (1, 0) } else { (24, 128) };
-    let mut out = Vec::new();
-    let (mut start, mut rx, mut tx) = (0, 0, 0);
-    for (i, d) in devices.iter().enumerate() {
-        let (r, t) = (Expected::bytes(&d.want.rx), Expected::bytes(&d.want.tx));
-        if i > start && (i - start >= max_slaves || rx + r > max_bytes || tx + t > max_bytes) {
-            out.push(&devices[start..i]);
-            (start, rx, tx) = (i, 0, 0);
-        }
-        rx += r;
-        tx += t;
+fn networks(devices: &[CatalogDevice]) -> Vec<&[CatalogDevice]> {
+    if std::env::var_os("ECMXF_CONFORMANCE_ALONE").is_some() {
+        return catalog::networks(devices, 1, 0);
     }
-    if start < devices.len() {
-        out.push(&devices[start..]);
-    }
-    out
+    catalog::networks(devices, 24, 128)
 }
 
 /// Runs these devices as one network; returns an error per device that
 /// disagrees with its file, naming what.
-fn check(dir: &Path, devices: &[Device]) -> Vec<String> {
+fn check(dir: &Path, devices: &[CatalogDevice]) -> Vec<String> {
     let network = dir.join("net.toml");
-    let lines: String = devices.iter().map(|d| format!("[[slave]]\n{}\n", d.line)).collect();
+    let lines: String = devices.iter().map(SlaveSection::table_for).collect();
     std::fs::write(&network, format!("version = 1\n{lines}")).unwrap();
     let mut config = Config::simulator();
     config.link = LinkConfig::Sim { network: Some(network) };
     config.cycle.sync0_us = 1000;
-    config.slaves = devices.iter().map(|d| SlaveConfig { esi: d.esi.clone(), ..SlaveConfig::default() }).collect();
-    let all = |e: String| devices.iter().map(|d| format!("{}: {e}", d.want.what)).collect();
+    config.slaves = devices
+        .iter()
+        .map(|d| SlaveConfig { esi: d.origin.esi().map(Path::to_path_buf), ..SlaveConfig::default() })
+        .collect();
+    let all = |e: String| devices.iter().map(|d| format!("{}: {e}", d.what)).collect();
     let (master, sim) = match Master::from_config(config) {
         Ok((m, Some(sim))) => (Arc::new(m), sim),
         Ok((_, None)) => return all("no simulator".into()),
@@ -195,8 +87,8 @@ fn check(dir: &Path, devices: &[Device]) -> Vec<String> {
     }
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     for (i, d) in devices.iter().enumerate() {
-        if let Err(e) = verify(&master, &rt, i as u8, &d.want) {
-            failures.push(format!("{} (slave {i}): {e}", d.want.what));
+        if let Err(e) = verify(&master, &rt, i as u8, d) {
+            failures.push(format!("{} (slave {i}): {e}", d.what));
         }
     }
     master.stop();
@@ -241,14 +133,14 @@ fn flows(m: &Master, sim: &ecmxfd::link::sim::SimHandle) -> Result<(), String> {
     Ok(())
 }
 
-fn verify(m: &Master, rt: &tokio::runtime::Runtime, at: u8, want: &Expected) -> Result<(), String> {
+fn verify(m: &Master, rt: &tokio::runtime::Runtime, at: u8, want: &CatalogDevice) -> Result<(), String> {
     let layout = m.layout();
     let s = layout.slaves.get(usize::from(at)).ok_or("slave not found")?;
     let found = (s.vendor_id, s.product_code, s.revision);
     if found != (want.vendor, want.product, want.revision) {
         return Err(format!("identity {found:#x?}, the file says {:#x?}", (want.vendor, want.product, want.revision)));
     }
-    let bytes = (Expected::bytes(&want.rx), Expected::bytes(&want.tx));
+    let bytes = (want.rx_bytes(), want.tx_bytes());
     if (s.rx_bytes, s.tx_bytes) != bytes {
         return Err(format!(
             "process data {:?} bytes (out, in), the file's PDOs make {bytes:?}",
@@ -264,14 +156,23 @@ fn verify(m: &Master, rt: &tokio::runtime::Runtime, at: u8, want: &Expected) -> 
     let listed = |list: &[ecmxfd::master::pdos::PdoDescription]| -> Vec<(u16, u8, u8)> {
         list.iter().flat_map(|p| p.entries.iter().map(|e| (e.index, e.subindex, e.bits))).collect()
     };
-    if listed(&pdos.rx) != want.rx || listed(&pdos.tx) != want.tx {
+    let file =
+        |list: &[CatalogEntry]| -> Vec<(u16, u8, u8)> { list.iter().map(|e| (e.index, e.subindex, e.bits)).collect() };
+    if listed(&pdos.rx) != file(&want.rx) || listed(&pdos.tx) != file(&want.tx) {
         return Err(format!(
             "PDO entries differ:\n  listed rx {:x?}\n  file   rx {:x?}\n  listed tx {:x?}\n  file   tx {:x?}",
             listed(&pdos.rx),
-            want.rx,
+            file(&want.rx),
             listed(&pdos.tx),
-            want.tx
+            file(&want.tx)
         ));
+    }
+    let named = pdos.rx.iter().chain(&pdos.tx).flat_map(|p| &p.entries);
+    for (e, f) in named.zip(want.rx.iter().chain(&want.tx)) {
+        // A gap (object 0) names no object; several share 0:00.
+        if f.index != 0 && !f.name.is_empty() && e.name != f.name {
+            return Err(format!("{:#06x}:{:02x} named {:?}, the file says {:?}", e.index, e.subindex, e.name, f.name));
+        }
     }
     for e in pdos.rx.iter().chain(&pdos.tx).flat_map(|p| &p.entries) {
         if let Some((_, t)) = want.types.iter().find(|(k, _)| *k == (e.index, e.subindex)) {
@@ -291,49 +192,21 @@ fn every_fixture_device_alone_reaches_op_with_the_pdos_its_file_describes() {
     let Some(dir) = fixtures() else { return };
     let tmp = std::env::temp_dir().join(format!("ecmxf-conformance-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();
-    let (mut devices, mut not_simulated, mut failed) = (Vec::new(), Vec::new(), Vec::new());
-    for file in files(&dir, "xml") {
-        let text = std::fs::read_to_string(&file).unwrap();
-        let Ok(esi) = EsiFile::parse(&text) else {
-            // An ENI (EtherCATConfig) or other XML: not a device description.
-            eprintln!("{}: not an ESI file, skipped", name_of(&file));
-            continue;
-        };
-        for d in &esi.devices {
-            let want = Expected::from_esi(&file, esi.vendor_id, d);
-            if want.rx.is_empty() && want.tx.is_empty() {
-                not_simulated.push(format!("{}: no process data", want.what));
-                continue;
-            }
-            let line = format!(
-                "esi = \"{}\"\nproduct_code = {:#x}\nrevision = {:#x}",
-                file.display(),
-                d.product_code,
-                d.revision
-            );
-            devices.push(Device { line, esi: Some(file.clone()), want });
-        }
+    let catalog = Catalog::scan(&dir).unwrap();
+    for skipped in &catalog.skipped {
+        eprintln!("{skipped}, skipped");
     }
-    for file in files(&dir, "bin") {
-        let bytes = std::fs::read(&file).unwrap();
-        let image = match Sii::parse(&bytes) {
-            Ok(i) => i,
-            Err(e) => {
-                failed.push(format!("{}: SII does not parse: {e}", name_of(&file)));
-                continue;
-            }
-        };
-        let want = Expected::from_sii(&file, &image);
-        if want.rx.is_empty() && want.tx.is_empty() {
-            let why = if want.coe { "PDOs over CoE, not in the SII" } else { "no process data" };
-            not_simulated.push(format!("{}: {why}", want.what));
-            continue;
+    let mut failed = catalog.failed.clone();
+    let (mut devices, mut not_simulated) = (Vec::new(), Vec::new());
+    for d in catalog.devices {
+        match d.no_process_data() {
+            Some(why) => not_simulated.push(format!("{}: {why}", d.what)),
+            None => devices.push(d),
         }
-        devices.push(Device { line: format!("sii = \"{}\"", file.display()), esi: None, want });
     }
     // ECMXF_CONFORMANCE_ONLY=EL1252: only devices whose description says so.
     if let Ok(only) = std::env::var("ECMXF_CONFORMANCE_ONLY") {
-        devices.retain(|d| d.want.what.contains(&only));
+        devices.retain(|d| d.what.contains(&only));
     }
     let started = Instant::now();
     for group in networks(&devices) {

@@ -11,11 +11,14 @@
 //! - [`od`]: an object dictionary: types, access per state, PDO-mapping
 //!   flags, defaults.
 //! - [`pdo`]: PDO assignment and mapping objects.
+//! - [`catalog`]: a folder of descriptions (ESI files and SII dumps) read
+//!   as the devices they describe and what each must show on the bus.
 //! - [`config_file`]: errors of the TOML files that describe networks and
 //!   daemons, naming file, line and key.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
+pub mod catalog;
 pub mod config_file;
 pub mod esi;
 pub mod od;

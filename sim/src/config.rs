@@ -85,6 +85,24 @@ pub struct SlaveSection {
 pub use ecmxf_devices::config_file::{ConfigError, key_line};
 pub use ecmxf_wire::limits::{MAX_SLAVES, SPI_HZ};
 
+impl SlaveSection {
+    /// The `[[slave]]` table that puts a catalogued device on the ring: its
+    /// ESI device by product code and revision, or its SII dump.
+    pub fn table_for(device: &ecmxf_devices::catalog::CatalogDevice) -> String {
+        use ecmxf_devices::catalog::Origin;
+        let quoted = |p: &Path| toml::Value::String(p.display().to_string()).to_string();
+        match &device.origin {
+            Origin::Esi { file } => format!(
+                "[[slave]]\nesi = {}\nproduct_code = {:#x}\nrevision = {:#x}\n",
+                quoted(file),
+                device.product,
+                device.revision
+            ),
+            Origin::Sii { file } => format!("[[slave]]\nsii = {}\n", quoted(file)),
+        }
+    }
+}
+
 impl NetworkFile {
     /// Parses and checks the text of a file at `path`.
     pub fn parse(text: &str, path: &Path) -> Result<Self, ConfigError> {
@@ -237,6 +255,30 @@ mod tests {
 
     fn parse(t: &str) -> Result<NetworkFile, ConfigError> {
         NetworkFile::parse(t, Path::new("net.toml"))
+    }
+
+    #[test]
+    fn a_catalogued_device_becomes_a_slave_table_that_reads_back() {
+        use ecmxf_devices::catalog::{CatalogDevice, Origin};
+        let mut d = CatalogDevice {
+            origin: Origin::Esi { file: PathBuf::from("/odd \"dir\"\\x.xml") },
+            what: String::new(),
+            name: String::new(),
+            vendor: 2,
+            product: 0x3f03052,
+            revision: 0x120000,
+            coe: false,
+            rx: vec![],
+            tx: vec![],
+            types: vec![],
+            objects: vec![],
+        };
+        let f = parse(&format!("version = 1\n{}", SlaveSection::table_for(&d))).unwrap();
+        assert_eq!(f.slaves[0].esi.as_deref(), Some(Path::new("/odd \"dir\"\\x.xml")));
+        assert_eq!((f.slaves[0].product_code, f.slaves[0].revision), (Some(0x3f03052), Some(0x120000)));
+        d.origin = Origin::Sii { file: PathBuf::from("d.bin") };
+        let f = parse(&format!("version = 1\n{}", SlaveSection::table_for(&d))).unwrap();
+        assert_eq!(f.slaves[0].sii.as_deref(), Some(Path::new("d.bin")));
     }
 
     #[test]

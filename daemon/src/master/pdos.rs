@@ -120,24 +120,25 @@ impl Master {
         let esi_device = esi.as_ref().map(EsiRef::device);
         let mut notes = Vec::new();
         match self.coe_pdos(slave, rx_bytes, tx_bytes).await {
-            Ok((rx, tx)) => {
+            Ok((mut rx, mut tx)) => {
+                // Without an ESI, the SII's PDO categories (when it has
+                // them) are what names and types the entries.
+                if esi_device.is_none() {
+                    match self.sii(slave, PDO_CATEGORIES).await {
+                        Ok(image) => {
+                            complete(&mut rx, &from_sii_all(&image, &image.rx_pdos));
+                            complete(&mut tx, &from_sii_all(&image, &image.tx_pdos));
+                        }
+                        Err(e) if source_lacks(&e) => tracing::debug!(slave, "PDO names from the SII: {e}"),
+                        Err(e) => return Err(e),
+                    }
+                }
                 return Ok(typed(SlavePdos { source: PdoSource::Coe, note: String::new(), rx, tx }, esi_device));
             }
             Err(e) if source_lacks(&e) => notes.push(format!("CoE: {e}")),
             Err(e) => return Err(e),
         }
-        match self
-            .sii(
-                slave,
-                Categories::Only(&[
-                    sii::category::RXPDO,
-                    sii::category::TXPDO,
-                    sii::category::STRINGS,
-                    sii::category::SYNC_MANAGER,
-                ]),
-            )
-            .await
-        {
+        match self.sii(slave, PDO_CATEGORIES).await {
             Ok(image) if !image.rx_pdos.is_empty() || !image.tx_pdos.is_empty() => {
                 let (rx, tx) = (from_sii(&image, &image.rx_pdos), from_sii(&image, &image.tx_pdos));
                 let note = notes.join("; ");
@@ -208,28 +209,64 @@ impl Master {
     }
 }
 
+/// The SII categories that describe PDOs and name them.
+const PDO_CATEGORIES: Categories<'static> = Categories::Only(&[
+    sii::category::RXPDO,
+    sii::category::TXPDO,
+    sii::category::STRINGS,
+    sii::category::SYNC_MANAGER,
+]);
+
 /// The PDOs of an SII list that are assigned by default.
 fn from_sii(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
+    described(image, image.default_assignment(list))
+}
+
+/// Every PDO of an SII list, assigned or not (to name what CoE assigned).
+fn from_sii_all(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
+    described(image, list.iter())
+}
+
+/// Names of PDOs and entries, and entry types, from `described` where
+/// `list` lacks them and the description's entry is the same object at the
+/// same size.
+fn complete(list: &mut [PdoDescription], described: &[PdoDescription]) {
+    for p in list.iter_mut() {
+        let Some(known) = described.iter().find(|q| q.index == p.index) else { continue };
+        if p.name.is_empty() {
+            p.name.clone_from(&known.name);
+        }
+        for e in &mut p.entries {
+            let same = |x: &&EntryDescription| (x.index, x.subindex, x.bits) == (e.index, e.subindex, e.bits);
+            if let Some(x) = known.entries.iter().find(same) {
+                if e.name.is_empty() {
+                    e.name.clone_from(&x.name);
+                }
+                e.data_type = e.data_type.or(x.data_type);
+            }
+        }
+    }
+}
+
+fn described<'a>(image: &Sii, list: impl Iterator<Item = &'a PdoRecord>) -> Vec<PdoDescription> {
     let text = |i: u8| image.string(i).map(decode_text).unwrap_or_default();
-    image
-        .default_assignment(list)
-        .map(|p| PdoDescription {
-            index: p.index,
-            name: text(p.name),
-            sync_manager: Some(p.sm),
-            entries: p
-                .entries
-                .iter()
-                .map(|e| EntryDescription {
-                    index: e.index,
-                    subindex: e.subindex,
-                    bits: e.bits,
-                    name: text(e.name),
-                    data_type: DataType::from_code(e.data_type.into(), e.bits.into()),
-                })
-                .collect(),
-        })
-        .collect()
+    list.map(|p| PdoDescription {
+        index: p.index,
+        name: text(p.name),
+        sync_manager: Some(p.sm),
+        entries: p
+            .entries
+            .iter()
+            .map(|e| EntryDescription {
+                index: e.index,
+                subindex: e.subindex,
+                bits: e.bits,
+                name: text(e.name),
+                data_type: DataType::from_code(e.data_type.into(), e.bits.into()),
+            })
+            .collect(),
+    })
+    .collect()
 }
 
 /// The default assignment an ESI describes.
@@ -307,5 +344,31 @@ mod tests {
         let list = [pdo(0x1A00, 2), pdo(0x1A01, 0xFF), pdo(0x1A02, 5)];
         let got: Vec<u16> = from_sii(&image, &list).iter().map(|p| p.index).collect();
         assert_eq!(got, [0x1A00]);
+    }
+
+    #[test]
+    fn a_coe_listing_takes_names_and_types_from_the_sii_where_the_entry_is_the_same() {
+        let entry = |index, subindex, bits, name: &str, data_type| EntryDescription {
+            index,
+            subindex,
+            bits,
+            name: name.into(),
+            data_type,
+        };
+        let pdo = |index, name: &str, entries| PdoDescription { index, name: name.into(), sync_manager: None, entries };
+        let mut coe = vec![pdo(0x1A00, "", vec![entry(0x6000, 1, 16, "", None), entry(0x6000, 2, 8, "", None)])];
+        let sii = [pdo(
+            0x1A00,
+            "AI",
+            vec![
+                entry(0x6000, 1, 16, "Value", Some(DataType::Int16)),
+                entry(0x6000, 2, 16, "Wide", Some(DataType::UInt16)),
+            ],
+        )];
+        complete(&mut coe, &sii);
+        assert_eq!(coe[0].name, "AI");
+        assert_eq!(coe[0].entries[0], entry(0x6000, 1, 16, "Value", Some(DataType::Int16)));
+        // Mapped at another size than the SII says: left as CoE gave it.
+        assert_eq!(coe[0].entries[1], entry(0x6000, 2, 8, "", None));
     }
 }
