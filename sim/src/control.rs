@@ -21,6 +21,7 @@ gpio LINE high|low|float        drive a GPIO pin from outside
 qei EDGES                       encoder edges (X4 count)
 adc VOLTS                       analog input voltage
 io-input SLAVE BYTE             bits ORed into a digital-IO slave's inputs
+outputs SLAVE                   the output bytes the slave holds (hex) and its state
 help                            this list";
 
 fn num(s: Option<&str>, what: &str) -> Result<u64, String> {
@@ -186,6 +187,13 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 _ => Err(format!("slave {i} is not a digital-IO slave")),
             }
         }
+        "outputs" => {
+            // What reached the slave: what a master wrote, as the slave
+            // holds it (to check outputs flow end to end).
+            let s = &chip.net.slaves[slave_index(chip, w.next())?];
+            let hex: String = s.outputs.iter().map(|b| format!("{b:02x}")).collect();
+            Ok(format!("ok state={} outputs={hex}", s.esm.state))
+        }
         other => Err(format!("unknown command {other:?}; try help")),
     }
 }
@@ -212,6 +220,8 @@ mod tests {
         assert!(execute(&mut c, "al-error 0 0x1B").is_ok());
         assert_eq!(c.net.slaves[0].esm.al_status, 0x1B);
         assert!(execute(&mut c, "io-input 2 0x0F").is_ok());
+        c.net.slaves[2].outputs = vec![0xA5, 0x01];
+        assert_eq!(execute(&mut c, "outputs 2"), Ok("ok state=INIT outputs=a501".into()));
         assert!(execute(&mut c, "bogus").unwrap_err().contains("unknown command"));
         assert!(execute(&mut c, "status").unwrap().starts_with("ok time_ns=0"));
         assert!(execute(&mut c, "gpio 25 high").is_err());

@@ -40,6 +40,7 @@ fn every_esi_loads_and_every_device_reaches_safeop() {
         "esi_beckhoff_EK11xx.xml",
         "esi_elmo_gold_Elmo_ECAT_00010420_V11.xml",
         "esi_itegva_E7x_Series.xml",
+        "esi_ni_NI9144.xml",
         "esi_soes_lan9252_evb9252_dig.xml",
     ];
     for name in files {
@@ -50,7 +51,8 @@ fn every_esi_loads_and_every_device_reaches_safeop() {
             let sii = s.sii();
             assert_eq!((sii.vendor_id, sii.product_code, sii.revision), (f.vendor_id, d.product_code, d.revision));
             assert!(sii.checksum_ok(), "{name} {}", d.type_name);
-            if s.od.object(0x1018).is_some() {
+            // Every CoE device has 0x1018, whether its ESI lists it or not.
+            if d.protocols & protocol::COE != 0 {
                 let identity: Vec<i64> = (1..=3).map(|sub| s.od.int(0x1018, sub)).collect();
                 let want = [f.vendor_id, d.product_code, d.revision].map(i64::from);
                 assert_eq!(identity, want, "{name} {}: 0x1018 contradicts the identity", d.type_name);
@@ -195,4 +197,25 @@ fn a_network_of_esi_slaves_runs_in_the_chip() {
     for s in &mut net.slaves {
         assert!(s.request_state(2) && s.request_state(4) && s.request_state(8));
     }
+}
+
+#[test]
+fn a_coe_slave_from_an_sii_dump_says_what_it_is_and_types_its_entries_as_the_sii_does() {
+    let Some(bytes) = fixture("sii_ni_9144_rev2.bin") else { return };
+    let image = Sii::parse(&bytes).unwrap();
+    assert!(image.protocols & protocol::COE != 0, "the NI 9144 speaks CoE");
+    let s = ecmxf_sim::net::sii_slave::slave_from_sii(bytes).unwrap();
+    let identity: Vec<u32> = (1..=4)
+        .map(|sub| {
+            let v = s.od.upload(0x1018, sub, false, AlState::PreOp).unwrap();
+            u32::from_le_bytes(v[..4].try_into().unwrap())
+        })
+        .collect();
+    assert_eq!(identity, [image.vendor_id, image.product_code, image.revision, image.serial]);
+    let name = s.od.upload(0x1008, 0, false, AlState::PreOp).unwrap();
+    assert_eq!(String::from_utf8(name).unwrap(), image.name().unwrap());
+    // The SII declares the analog inputs UINT (code 6): not a guess from 16 bits.
+    let entry = &image.tx_pdos[0].entries[0];
+    assert_eq!((entry.index, entry.subindex, entry.data_type), (0x6000, 1, 6));
+    assert_eq!(s.od.entry(0x6000, 1).unwrap().dtype, ecmxf_sim::net::od::DataType::UInt16);
 }

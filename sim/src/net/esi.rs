@@ -6,6 +6,8 @@ use ecmxf_wire::payload::pdo::PdoEntry;
 
 use super::od::{Access, DataType, Entry, Mappable, Object, ObjectDictionary, ObjectKind};
 use super::pdo_map::{self, RX_ASSIGN, TX_ASSIGN};
+use super::profiles::{Identity, identity_objects};
+use super::sii;
 use super::slave::{Device, Slave};
 
 /// A device description the simulator can make a slave of.
@@ -37,7 +39,13 @@ impl SimulatedDevice for EsiDevice {
         }
         // The identity object says what the slave is (CiA301 0x1018): an
         // ESI default that disagrees (Elmo's 0x1018:01 = 0) would make the
-        // slave contradict its own SII and the identity the chip reports.
+        // slave contradict its own SII and the identity the chip reports;
+        // an ESI without it (Elmo rev 1, NI 9144: no `<Dictionary>`) still
+        // describes a CoE device, which has the CiA301 mandatory objects.
+        if self.protocols & sii::protocol::COE != 0 {
+            let id = Identity { vendor_id, product_code: self.product_code, revision: self.revision, serial: 0 };
+            identity_objects(&mut od, id, &self.name, 0);
+        }
         for (sub, v) in [(1, vendor_id), (2, self.product_code), (3, self.revision)] {
             od.set_int(0x1018, sub, v.into());
         }

@@ -127,27 +127,38 @@ pub fn build_sii(spec: &SiiSpec<'_>) -> Vec<u8> {
     s.to_bytes(256)
 }
 
-fn identity_objects(od: &mut ObjectDictionary, id: Identity, name: &str, device_type: u32) {
-    od.insert(
+/// The CiA 301 objects every CoE slave has (0x1000 device type, 0x1001
+/// error register, 0x1008 name, 0x1018 identity), saying what it is.
+pub(crate) fn identity_objects(od: &mut ObjectDictionary, id: Identity, name: &str, device_type: u32) {
+    let insert_absent = |od: &mut ObjectDictionary, index: u16, object: Object| {
+        if od.object(index).is_none() {
+            od.insert(index, object);
+        }
+    };
+    insert_absent(
+        od,
         0x1000,
         Object::var(
             "Device type",
             Entry::new("Device type", DataType::UInt32, Access::RO).default_int(device_type.into()),
         ),
     );
-    od.insert(
+    insert_absent(
+        od,
         0x1001,
         Object::var("Error register", Entry::new("Error register", DataType::UInt8, Access::RO).mappable(Mappable::Tx)),
     );
     let n = name.len() as u16;
-    od.insert(
+    insert_absent(
+        od,
         0x1008,
         Object::var(
             "Device name",
             Entry::new("Device name", DataType::VisibleString(n), Access::RO).default_bytes(name.as_bytes()),
         ),
     );
-    od.insert(
+    insert_absent(
+        od,
         0x1018,
         Object::record(
             "Identity",
