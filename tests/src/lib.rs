@@ -214,6 +214,18 @@ pub fn fixture(name: &str) -> Option<PathBuf> {
     None
 }
 
+/// ../shared/fixtures, if there (else as [`fixture`]: skipped, or failed
+/// under ECMXF_REQUIRE_FIXTURES).
+pub fn fixtures_dir() -> Option<PathBuf> {
+    let path = repo().join("../shared/fixtures");
+    if path.is_dir() {
+        return Some(path);
+    }
+    assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", path.display());
+    eprintln!("skipped: {} missing", path.display());
+    None
+}
+
 /// A running daemon.
 #[derive(Debug)]
 pub struct Daemon {

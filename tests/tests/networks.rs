@@ -76,3 +76,79 @@ fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
         });
     }
 }
+
+/// A coupler with an output terminal from a real SII dump (the Beckhoff
+/// EL2889: 16 outputs, no CoE, no inputs at all) at 125 us and 1 ms, on a
+/// simulator of its own so the test sees what reaches the slave: every read
+/// command answers (none waits for an input frame that never comes), and a
+/// value written through the API is what the simulated EL2889 holds.
+#[test]
+fn an_output_only_network_without_coe_runs_answers_and_its_outputs_reach_the_slave() {
+    let Some(dump) = ecmxf_e2e::fixture("sii_beckhoff_el2889.bin") else { return };
+    for sync0_us in [125, 1000] {
+        let dump = dump.clone();
+        run(async move {
+            let dir = ecmxf_e2e::temp_dir("outputs-only");
+            let network = dir.join("net.toml");
+            let net =
+                format!("version = 1\n[[slave]]\nprofile = \"coupler\"\n[[slave]]\nsii = \"{}\"\n", dump.display());
+            std::fs::write(&network, net).unwrap();
+            let sim = ecmxf_e2e::Simulator::serve(&dir, &["--network", &network.display().to_string()]);
+            let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+            let config =
+                ecmxf_e2e::config(&link, "").replace("[cycle]\n", &format!("[cycle]\nsync0_us = {sync0_us}\n"));
+            let mut d = Daemon::with_config(&config);
+            let ch = d.connect().await;
+            let at = format!("at {sync0_us} us");
+            let mut m = MasterClient::new(ch.clone());
+            let s = m.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+            assert!(s.process_data_flowing, "{at}: an output-only network is healthy: {s:?}");
+            let layout = pb::process_data_client::ProcessDataClient::new(ch.clone())
+                .get_layout(pb::GetLayoutRequest {})
+                .await
+                .unwrap()
+                .into_inner();
+            assert_eq!((layout.output_bytes, layout.input_bytes), (2, 0), "{at}: {layout:?}");
+            // Every read command answers; `data --raw` does not wait for an
+            // input frame, StreamInputs says why there is none.
+            for cmd in [&["master"][..], &["states"], &["slaves", "-v"], &["pdos"], &["data"], &["data", "--raw"]] {
+                let out = d.ctl(cmd);
+                assert_eq!(out.code, 0, "{at}: ecmxfctl {cmd:?}: {}{}", out.stdout, out.stderr);
+            }
+            d.ctl(&["sii", "decode", "-p", "1"]).ok();
+            let watch = d.ctl(&["watch", "-n", "1"]);
+            assert_eq!(watch.code, 7, "{at}: {}{}", watch.stdout, watch.stderr);
+            assert!(watch.stderr.contains("no inputs"), "{at}: {}", watch.stderr);
+            let pdos = d.ctl(&["--json", "pdos"]).json();
+            let el2889 = &pdos["slaves"][1];
+            assert_eq!(el2889["source"], "sii", "{at}: {el2889}");
+            assert_eq!(el2889["rx_pdos"].as_array().unwrap().len(), 16, "{at}: {el2889}");
+            // A value written through the API reaches the slave.
+            let mut pd = pb::process_data_client::ProcessDataClient::new(ch);
+            let lease =
+                pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![1], ttl_ms: 0 }).await.unwrap().into_inner();
+            let write = |name: &str| pb::OutputWrite {
+                target: Some(pb::output_write::Target::Entry(name.into())),
+                value: Some(pb::Value { kind: Some(pb::value::Kind::Boolean(true)) }),
+            };
+            let writes = vec![write("1.0x7000:01"), write("1.0x70f0:01")];
+            pd.write_outputs(pb::WriteOutputsRequest { lease_id: lease.id, writes }).await.unwrap();
+            let start = std::time::Instant::now();
+            loop {
+                let held = sim.ctl("outputs 1");
+                if held.trim() == "ok state=OP outputs=0180" {
+                    break;
+                }
+                assert!(start.elapsed() < Duration::from_secs(2), "{at}: the EL2889 holds {held}");
+                tokio::time::sleep(Duration::from_millis(20)).await;
+            }
+            let diag = d.ctl(&["diag"]);
+            assert_eq!(diag.code, 0, "{at}: {}{}", diag.stdout, diag.stderr);
+            let log = d.log();
+            assert!(!log.contains("ran dry"), "{at}: the log warns of a dry RxFIFO:\n{log}");
+            drop(d);
+            drop(sim);
+            let _ = std::fs::remove_dir_all(&dir);
+        });
+    }
+}

@@ -125,12 +125,13 @@ fn pick<'a>(values: &'a [pb::EntryValue], name: &str) -> Option<&'a pb::Value> {
 pub async fn data(api: &Api, names: &[String], raw: bool) -> Result<DataReport, CliError> {
     let layout = layout(api).await?;
     if raw {
-        let i = inputs(api, Vec::new(), true).await?;
+        // An output-only network has no input frame to wait for.
+        let i = if layout.input_bytes > 0 { inputs(api, Vec::new(), true).await? } else { None };
         let o = outputs(api, Vec::new()).await?;
         return Ok(DataReport {
             seq: i.as_ref().map(|s| s.seq),
             entries: Vec::new(),
-            input_image: i.map(|s| Hex::of(&s.image)),
+            input_image: Some(i.map_or_else(|| Hex::of(&[]), |s| Hex::of(&s.image))),
             output_image: Some(Hex::of(&o.image)),
         });
     }

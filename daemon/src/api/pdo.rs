@@ -16,6 +16,7 @@ use super::convert::{encode_value, existing_slave, pb_type};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
+use crate::engine::error::EngineError;
 use crate::master::pdos::{PdoDescription, PdoSource};
 
 /// The `ProcessData` service.
@@ -270,6 +271,13 @@ impl ProcessDataApi for ProcessDataService {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.into_inner();
         let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        if image.input_bytes == 0 {
+            // No input frame will ever come: say so instead of a stream
+            // that never yields (an output-only network).
+            return Err(
+                EngineError::WrongState("the process image has no inputs (no slave maps a TxPDO)".into()).into()
+            );
+        }
         let mut selected: Vec<Entry> = Vec::with_capacity(r.entries.len());
         for name in &r.entries {
             let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;

@@ -86,10 +86,15 @@ impl SdoApi for SdoService {
         if usize::from(s) >= self.0.master.layout().slaves.len() {
             return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
         }
+        // An ESI without a `<Dictionary>` (older files, e.g. NI 9144) says
+        // nothing of the objects: the slave is probed as without one.
         if let Some(esi) = self.0.master.esi_device(s).await {
             let esi = esi.map_err(Status::failed_precondition)?;
-            let entries = esi_objects(esi.device());
-            return Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Esi as i32, entries }));
+            if esi.device().dictionary.objects().next().is_some() {
+                let entries = esi_objects(esi.device());
+                let source = pb::DictionarySource::Esi as i32;
+                return Ok(Response::new(pb::ListObjectsResponse { source, entries }));
+            }
         }
         let entries = bounded(&caller, probe(&self.0.master, s)).await?;
         Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Probe as i32, entries }))
