@@ -257,3 +257,32 @@ fn sdo_and_eeprom_requests_fail_when_their_timeout_is_shorter_than_the_work() {
     let after = h.blocking(&eeprom);
     assert!(after.errors.contains(ErrorFlags::BLOCKING_FAILED), "EEPROM word in 10 us: {after:?}");
 }
+
+/// v049 gives each command's data length ("資料長度"); a packet declaring
+/// another one is laid out differently from what the chip reads. The
+/// vendor's host driver sent PDO_CONFIG_REQ (4 bytes) with 156: the chip
+/// must refuse it (error bit7) and execute nothing, not read the slave and
+/// assign index from the wrong offsets.
+#[test]
+fn a_declared_length_that_does_not_fit_the_command_is_refused_and_not_executed() {
+    use ecmxf_wire::payload::pdo::{PdoConfigReq, TX_PDO_ASSIGN};
+    use ecmxf_wire::{CheckType, CommandHeader, encode_request};
+    let mut h = Host::new(Network::demo());
+    h.call(&InfoUpdate);
+    let req = PdoConfigReq { slave: 0, assign_index: TX_PDO_ASSIGN };
+    for (index, len, refused) in [(101u8, 156u16, true), (102, 3, true), (103, 4, false)] {
+        let executed = h.chip.stats.executed;
+        let mut buf = vec![0u8; h.packet_len()];
+        encode_request(&req, CommandHeader::new(CommandCode::PdoConfigReq, index), CheckType::Fixed, &mut buf).unwrap();
+        buf[14..16].copy_from_slice(&len.to_le_bytes());
+        h.exchange_raw(&buf);
+        let (bytes, _) = h.send(&InfoUpdate);
+        let a = h.decode(&bytes).unwrap();
+        assert_eq!(a.header.index, index, "the answer is to the request");
+        assert_eq!(a.header.errors.contains(ErrorFlags::COMMAND_ERROR), refused, "{len} bytes: {:?}", a.header);
+        assert_eq!(h.chip.pending.is_some(), !refused, "{len} bytes: the read runs only with its own length");
+        assert_eq!(h.chip.stats.executed, executed + 2, "the packet was taken (and answered)");
+        h.control = ControlFlags::CLEAR_COMMAND_ERROR;
+        h.wait_idle();
+    }
+}

@@ -145,6 +145,16 @@ pub enum PayloadError {
         /// The raw code.
         code: u8,
     },
+    /// The header's data length is not the one the manual gives the
+    /// command's data layout.
+    DataLength {
+        /// The command.
+        command: CommandCode,
+        /// The length its layout has.
+        expected: u16,
+        /// The length the header declares.
+        found: u16,
+    },
 }
 
 impl fmt::Display for PayloadError {
@@ -159,6 +169,9 @@ impl fmt::Display for PayloadError {
             }
             Self::InvalidValue { field, value } => write!(f, "invalid {field}: {value} ({value:#x})"),
             Self::UnknownCommand { code } => write!(f, "unknown command code {code}"),
+            Self::DataLength { command, expected, found } => {
+                write!(f, "{command} declares {found} data bytes; its layout has {expected}")
+            }
         }
     }
 }

@@ -271,6 +271,56 @@ mod tests {
         }
     }
 
+    /// Commands with a data layout of a fixed length (v049 "資料長度"): a
+    /// packet declaring any other length is refused whole, so the chip never
+    /// reads its fields from the wrong offsets (issue 13: the vendor
+    /// driver's PDO_CONFIG_REQ with 156 bytes).
+    #[test]
+    fn a_declared_length_that_does_not_fit_the_layout_is_refused() {
+        use CommandCode as C;
+        let fixed = [
+            (C::EcatInit, 16),
+            (C::PdoConfigSet, 112),
+            (C::PdoConfigReq, 4),
+            (C::EepromReq, 12),
+            (C::DcSync, 16),
+            (C::ConfigSm, 8),
+            (C::ConfigFmmu, 5),
+            (C::IntSetEnable, 6),
+        ];
+        for req in every_code() {
+            let mut data = [0u8; 1408];
+            let fields = req.encode(&mut data).unwrap();
+            let Some(&(code, len)) = fixed.iter().find(|(c, _)| *c == req.code()) else { continue };
+            assert_eq!(fields.data_len, len, "{code:?} encodes its layout's length");
+            for wrong in [0, len - 1, len + 1, 156] {
+                let f = RequestFields { data_len: wrong, ..fields };
+                assert_eq!(
+                    AnyRequest::decode(code, &f, &data),
+                    Err(PayloadError::DataLength { command: code, expected: len, found: wrong }),
+                    "{code:?} with {wrong} bytes"
+                );
+            }
+        }
+        // SDO_REQ: 12 bytes to read, 12 + the bytes to write.
+        let read = sdo::SdoRequest {
+            slave: 1,
+            index: 0x6040,
+            subindex: 0,
+            complete_access: false,
+            timeout_us: 0,
+            access: sdo::SdoAccess::Read { max_len: 4 },
+        };
+        let mut data = [0u8; 64];
+        let f = read.encode(&mut data).unwrap();
+        assert_eq!(f.data_len, 12);
+        let err = AnyRequest::decode(C::SdoReq, &RequestFields { data_len: 16, ..f }, &data);
+        assert_eq!(err, Err(PayloadError::DataLength { command: C::SdoReq, expected: 12, found: 16 }));
+        // A peripheral operation's data word.
+        let f = RequestFields { parameter: 4, data_len: 8, ..RequestFields::default() };
+        assert!(matches!(AnyRequest::decode(C::QeiFuncOp, &f, &data), Err(PayloadError::DataLength { .. })));
+    }
+
     #[test]
     fn unknown_codes_are_named() {
         for c in [14u8, 17, 100, 255] {

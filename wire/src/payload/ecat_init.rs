@@ -85,6 +85,7 @@ impl<'a> Request<'a> for EcatInit {
     }
 
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        crate::payload::fixed_len(fields, Self::CODE, 16)?;
         let mut r = Reader::new(data);
         let _fixed: [u8; 2] = r.array("ECAT_INIT fixed bytes")?;
         Ok(Self {
@@ -119,7 +120,8 @@ impl<'a> Request<'a> for DcSync {
         Ok(RequestFields { data_len: w.len_u16(), ..RequestFields::default() })
     }
 
-    fn decode(_fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+    fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        crate::payload::fixed_len(fields, Self::CODE, 16)?;
         let mut r = Reader::new(data);
         let slave = r.u8("slave")?;
         crate::bytes::expect_range("slave", slave.into(), 0, 127)?;
@@ -192,14 +194,15 @@ mod tests {
         ));
         d[0] = 200;
         assert_eq!(
-            DcSync::decode(&RequestFields::default(), &d),
+            DcSync::decode(&RequestFields { data_len: 16, ..RequestFields::default() }, &d),
             Err(PayloadError::InvalidValue { field: "slave", value: 200 })
         );
     }
 
     #[test]
     fn truncated_init_names_the_field() {
-        let err = EcatInit::decode(&RequestFields::default(), &[0xFF, 0x81, 0, 3, 1]).unwrap_err();
+        let f = RequestFields { data_len: 16, ..RequestFields::default() };
+        let err = EcatInit::decode(&f, &[0xFF, 0x81, 0, 3, 1]).unwrap_err();
         assert!(matches!(err, PayloadError::TooShort { field: "SYNC0 Cycle Time", .. }), "{err:?}");
     }
 }

@@ -56,7 +56,8 @@ impl<'a> Request<'a> for EepromRequest {
         Ok(RequestFields { data_len: w.len_u16(), ..RequestFields::default() })
     }
 
-    fn decode(_fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+    fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        crate::payload::fixed_len(fields, Self::CODE, 12)?;
         let mut r = Reader::new(data);
         let op = r.u16("EEPROM operation")?;
         let slave = r.u16("slave")?;
@@ -148,7 +149,7 @@ mod tests {
         let mut d = [0u8; 12];
         d[0] = 2;
         assert_eq!(
-            EepromRequest::decode(&RequestFields::default(), &d),
+            EepromRequest::decode(&RequestFields { data_len: 12, ..RequestFields::default() }, &d),
             Err(PayloadError::InvalidValue { field: "EEPROM operation", value: 2 })
         );
         assert!(

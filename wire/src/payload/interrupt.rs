@@ -104,6 +104,7 @@ impl<'a> Request<'a> for IntSetEnable {
     }
 
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        crate::payload::fixed_len(fields, Self::CODE, INT_CONFIG_LEN)?;
         IntConfig::read(fields.parameter, data).map(Self)
     }
 }

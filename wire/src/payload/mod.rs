@@ -180,6 +180,21 @@ macro_rules! int_data_reply {
 }
 pub(crate) use int_data_reply;
 
+/// Checks that the header declares the data length the manual gives the
+/// command (v049, "資料長度" under each command): a packet laid out for
+/// another length would have its fields read from the wrong offsets (the
+/// vendor driver's PDO_CONFIG_REQ with 156 bytes where the layout has 4),
+/// so the chip refuses it whole (error bit7) instead of executing it.
+/// Only commands with a data layout are checked; for the others the length
+/// field is unused or "a per-command value" (v049 表一 0x0E).
+pub(crate) fn fixed_len(fields: &RequestFields, command: CommandCode, expected: u16) -> Result<(), PayloadError> {
+    if fields.data_len == expected {
+        Ok(())
+    } else {
+        Err(PayloadError::DataLength { command, expected, found: fields.data_len })
+    }
+}
+
 /// Takes the valid part of a data section, by a length field.
 pub(crate) fn valid<'a>(field: &'static str, data: &'a [u8], len: usize) -> Result<&'a [u8], PayloadError> {
     data.get(..len).ok_or(PayloadError::TooShort { field, needed: len, available: data.len() })

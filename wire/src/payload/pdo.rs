@@ -5,7 +5,7 @@
 use crate::CommandCode;
 use crate::bytes::{Reader, Writer, check_range, expect_range};
 use crate::error::{EncodeError, PayloadError};
-use crate::payload::{Reply, ReplyFields, Request, RequestFields, bare_request, int_data_reply, valid};
+use crate::payload::{Reply, ReplyFields, Request, RequestFields, bare_request, fixed_len, int_data_reply, valid};
 
 /// Outputs' SyncManager PDO assignment object.
 pub const RX_PDO_ASSIGN: u16 = 0x1C12;
@@ -154,7 +154,8 @@ impl<'a> Request<'a> for PdoConfig {
         Ok(RequestFields { data_len: self.write(data)?, ..RequestFields::default() })
     }
 
-    fn decode(_fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+    fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        fixed_len(fields, Self::CODE, PDO_CONFIG_LEN as u16)?;
         Self::read(data)
     }
 }
@@ -197,7 +198,8 @@ impl<'a> Request<'a> for PdoConfigReq {
         Ok(RequestFields { data_len: w.len_u16(), ..RequestFields::default() })
     }
 
-    fn decode(_fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+    fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        fixed_len(fields, Self::CODE, 4)?;
         let mut r = Reader::new(data);
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;
@@ -426,7 +428,8 @@ impl<'a> Request<'a> for ConfigSm {
         Ok(RequestFields { data_len: w.len_u16(), ..RequestFields::default() })
     }
 
-    fn decode(_fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+    fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        fixed_len(fields, Self::CODE, 8)?;
         let mut r = Reader::new(data);
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;
@@ -462,7 +465,8 @@ impl<'a> Request<'a> for ConfigFmmu {
         Ok(RequestFields { data_len: w.len_u16(), ..RequestFields::default() })
     }
 
-    fn decode(_fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+    fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        fixed_len(fields, Self::CODE, 5)?;
         let mut r = Reader::new(data);
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;

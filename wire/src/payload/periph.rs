@@ -39,10 +39,9 @@ fn word(w: u32, data: &mut [u8]) -> Result<u16, EncodeError> {
     Ok(wr.len_u16())
 }
 
-fn data_word(fields: &RequestFields, data: &[u8], field: &'static str) -> Result<u32, PayloadError> {
-    if fields.data_len < 4 {
-        return Err(PayloadError::TooShort { field, needed: 4, available: fields.data_len.into() });
-    }
+/// The one data word some peripheral operations carry (4 bytes).
+fn data_word(fields: &RequestFields, data: &[u8], field: &'static str, code: CommandCode) -> Result<u32, PayloadError> {
+    crate::payload::fixed_len(fields, code, 4)?;
     Reader::new(data).u32(field)
 }
 
@@ -69,7 +68,7 @@ impl<'a> Request<'a> for QeiOp {
 
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
         Ok(match fields.parameter {
-            4 => Self::Open(match data_word(fields, data, "QEI mode")? {
+            4 => Self::Open(match data_word(fields, data, "QEI mode", Self::CODE)? {
                 0x000 => QeiMode::X4Free,
                 0x100 => QeiMode::X2Free,
                 0x200 => QeiMode::X4Compare,
@@ -162,18 +161,18 @@ impl<'a> Request<'a> for DacOp {
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
         Ok(match fields.parameter {
             20 => {
-                let v = data_word(fields, data, "DAC mode")?;
+                let v = data_word(fields, data, "DAC mode", Self::CODE)?;
                 let t = DacTrigger::TABLE.iter().find(|(_, x)| *x == v);
                 Self::Open(t.ok_or(PayloadError::InvalidValue { field: "DAC mode", value: v })?.0)
             }
             21 => Self::Close,
             22 => {
-                let v = data_word(fields, data, "DAC delay")?;
+                let v = data_word(fields, data, "DAC delay", Self::CODE)?;
                 expect_range("DAC delay", v, 0, 1023)?;
                 Self::SetDelay(v as u16)
             }
             11 => {
-                let v = data_word(fields, data, "DAC value")?;
+                let v = data_word(fields, data, "DAC value", Self::CODE)?;
                 expect_range("DAC value", v, 0, 4095)?;
                 Self::SetData(v as u16)
             }
@@ -239,11 +238,11 @@ impl<'a> Request<'a> for AdcOp {
 
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
         let fixed = |want: u32, field: &'static str| -> Result<(), PayloadError> {
-            let v = data_word(fields, data, field)?;
+            let v = data_word(fields, data, field, Self::CODE)?;
             if v == want { Ok(()) } else { Err(PayloadError::InvalidValue { field, value: v }) }
         };
         Ok(match fields.parameter {
-            40 => match data_word(fields, data, "ADC input mode")? {
+            40 => match data_word(fields, data, "ADC input mode", Self::CODE)? {
                 0x000 => Self::Open(AdcInput::SingleEnded),
                 0x100 => Self::Open(AdcInput::Differential),
                 v => return Err(PayloadError::InvalidValue { field: "ADC input mode", value: v }),
@@ -330,7 +329,7 @@ mod tests {
         let f = RequestFields { parameter: 17, data_len: 4, ..RequestFields::default() };
         assert!(AdcOp::decode(&f, &[0, 0, 0, 0]).is_err());
         let f = RequestFields { parameter: 4, data_len: 0, ..RequestFields::default() };
-        assert!(matches!(QeiOp::decode(&f, &[0; 4]), Err(PayloadError::TooShort { .. })));
+        assert!(matches!(QeiOp::decode(&f, &[0; 4]), Err(PayloadError::DataLength { expected: 4, found: 0, .. })));
         let f = RequestFields { parameter: 99, ..RequestFields::default() };
         assert!(QeiOp::decode(&f, &[]).is_err() && DacOp::decode(&f, &[]).is_err() && AdcOp::decode(&f, &[]).is_err());
     }

@@ -93,15 +93,15 @@ impl<'a> Request<'a> for SdoRequest<'a> {
         let access = match op {
             0 => {
                 let declared = SDO_REQ_HEADER_LEN + usize::from(len);
-                if usize::from(fields.data_len) != declared {
-                    return Err(PayloadError::InvalidValue {
-                        field: "SDO_REQ data length",
-                        value: fields.data_len.into(),
-                    });
-                }
+                let declared = u16::try_from(declared)
+                    .map_err(|_| PayloadError::InvalidValue { field: "SDO data length", value: len.into() })?;
+                crate::payload::fixed_len(fields, Self::CODE, declared)?;
                 SdoAccess::Write(r.bytes("SDO write data", len.into())?)
             }
-            1 => SdoAccess::Read { max_len: len },
+            1 => {
+                crate::payload::fixed_len(fields, Self::CODE, SDO_REQ_HEADER_LEN as u16)?;
+                SdoAccess::Read { max_len: len }
+            }
             v => return Err(PayloadError::InvalidValue { field: "SDO operation", value: v.into() }),
         };
         Ok(Self { slave, index, subindex, complete_access: ca == 1, timeout_us, access })
@@ -324,10 +324,10 @@ mod tests {
         };
         let mut f = req.encode(&mut data).unwrap();
         f.data_len = 13;
-        assert!(matches!(
+        assert_eq!(
             SdoRequest::decode(&f, &data),
-            Err(PayloadError::InvalidValue { field: "SDO_REQ data length", .. })
-        ));
+            Err(PayloadError::DataLength { command: CommandCode::SdoReq, expected: 14, found: 13 })
+        );
         f.data_len = 14;
         data[0] = 2;
         assert_eq!(SdoRequest::decode(&f, &data), Err(PayloadError::InvalidValue { field: "SDO operation", value: 2 }));
