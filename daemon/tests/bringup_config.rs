@@ -141,6 +141,29 @@ fn a_different_network_is_named() {
     m.stop();
 }
 
+/// A process image the SPI link cannot carry is refused at bring-up with
+/// the sizes and what to change, instead of reaching OP and running dry.
+#[test]
+fn a_frame_bigger_than_the_spi_packet_is_refused_naming_the_sizes() {
+    // No remap (PDO_CONFIG_SET alone needs 112 bytes): 40-byte packets.
+    let remap =
+        "  [[slave.rx_pdos]]\n  index = 0x1600\n  entries = [[0x6040, 0, 16], [0x6060, 0, 8], [0x607A, 0, 32]]\n";
+    assert!(CONFIG.contains(remap));
+    let small = CONFIG.replace(remap, "").replace("[realtime]", "[chip]\ndata_size = 40\n[realtime]");
+    let m = start(&small);
+    let t = Instant::now();
+    let e = loop {
+        if let Some(e) = m.last_error() {
+            break e;
+        }
+        assert!(t.elapsed() < Duration::from_secs(20), "no error reported: {:?}", m.status());
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    assert!(e.contains("link budget") && e.contains("carries 40") && e.contains("chip.data_size"), "{e}");
+    assert_ne!(m.status().phase, Phase::Running);
+    m.stop();
+}
+
 fn running(text: &str) -> Master {
     let m = start(text);
     let t = Instant::now();

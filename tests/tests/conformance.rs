@@ -365,8 +365,10 @@ fn check(label: &str, devices: &[&CatalogDevice], per_slave: bool) -> Vec<String
         let ch = d.connect().await;
         failures.extend(rpcs(ch, devices).await);
         failures.extend(ctl_reads(&d, devices, per_slave));
-        if d.log().matches("ran dry").count() > 1 {
-            failures.push(format!("{label}: the log repeats \"ran dry\""));
+        let log = d.log();
+        let dry: Vec<&str> = log.lines().filter(|l| l.contains("ran dry")).collect();
+        if dry.len() > 1 {
+            failures.push(format!("{label}: the log repeats \"ran dry\":\n{}", dry.join("\n")));
         }
     });
     let _ = std::fs::remove_dir_all(&dir);

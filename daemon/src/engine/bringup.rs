@@ -362,6 +362,22 @@ pub fn bring_up<L: Link>(
     let rx_size = reply::<FifoPackSize>(&rx.header, rx.data).map_or(0, |r| usize::from(r.0));
     let tx = port.call(&FifoPackSizeGet(PdoDirection::Inputs))?;
     let tx_size = reply::<FifoPackSize>(&tx.header, tx.data).map_or(0, |r| usize::from(r.0));
+    let budget = super::link_budget::check(
+        port.data_size(),
+        rx_size,
+        tx_size,
+        packet_time(port)?.as_nanos() as u64,
+        u64::from(c.sync0_us) * 1000,
+    )
+    .map_err(|e| step("link budget", e.to_string()))?;
+    if budget.load() > super::link_budget::WARN_LOAD {
+        warn!(
+            load_percent = (budget.load() * 100.0) as u32,
+            packet_us = budget.packet_ns / 1000,
+            frames_per_packet = budget.frames_per_packet,
+            "the cyclic exchange takes most of the SPI link; SDO and other requests will be slow"
+        );
+    }
     let (rx_depth, tx_depth, low, high) =
         fit_fifo(c.fifo_rx_depth, c.fifo_low, c.fifo_high, c.fifo_tx_depth, rx_size, tx_size);
     if (rx_depth, tx_depth) != (c.fifo_rx_depth, c.fifo_tx_depth) {
@@ -411,6 +427,19 @@ pub fn bring_up<L: Link>(
         fifo_low: low,
         fifo_high: high,
     })
+}
+
+/// The time one packet takes on this link, as measured: the median of five
+/// status packets (clocking, the chip's processing, the host's wake-up).
+fn packet_time<L: Link>(port: &mut Port<L>) -> Result<Duration, PortError> {
+    let mut times = [Duration::ZERO; 5];
+    for t in &mut times {
+        let start = Instant::now();
+        port.send_once(&InfoUpdate)?;
+        *t = start.elapsed();
+    }
+    times.sort();
+    Ok(times[2])
 }
 
 /// Depths that fit the FIFO memory (v049 under 52/54: RxCnt x RxSize +

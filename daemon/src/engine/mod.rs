@@ -17,6 +17,7 @@ mod fair;
 pub mod held;
 pub mod inputs;
 pub mod job;
+pub mod link_budget;
 mod running;
 pub mod supervisor;
 pub mod telemetry;
