@@ -1,6 +1,7 @@
 //! Compiles the .proto files with protox (pure Rust: no system `protoc`),
 //! generates the tonic services and prost messages, and writes the encoded
 //! file descriptor set that the daemon's reflection service serves.
+#![forbid(unsafe_code)]
 
 use std::path::PathBuf;
 

@@ -9,6 +9,7 @@
 //! - [`schema`]: the JSON schemas of every report.
 //! - [`values`]: names and number formats shared by all commands.
 //! - [`error`]: errors, messages and exit codes.
+#![forbid(unsafe_code)]
 
 pub mod cli;
 pub mod commands;

@@ -1,4 +1,5 @@
 //! `ecmxfctl`: see the library for the map of modules.
+#![forbid(unsafe_code)]
 
 use std::process::ExitCode;
 

@@ -13,6 +13,7 @@
 //! - [`config`]: the configuration file.
 //! - [`metrics`]: the Prometheus endpoint.
 //! - [`service`]: life under systemd: sd_notify, watchdog, logging, reload.
+#![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod api;

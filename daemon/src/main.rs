@@ -1,5 +1,6 @@
 //! `ecmxfd`: runs the engine on the configured chip (or the simulator) until
 //! SIGINT/SIGTERM, then stops it safely.
+#![forbid(unsafe_code)]
 
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -24,12 +24,12 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::ControlFlags;
-use ecmxf_wire::framing::{DATA_DEFAULT, DATA_MAX, PacketLayout};
+use ecmxf_wire::framing::{DATA_DEFAULT, DATA_MAX, OVERHEAD, PacketLayout, find_packet_start};
 use ecmxf_wire::payload::control::InfoUpdate;
 use ecmxf_wire::payload::spi::{CrcTypeSet, SpiReconfig};
 use ecmxf_wire::{
-    CheckType, CommandCode, CommandHeader, DecodeError, EncodeError, Request, ResponseHeader, decode_response,
-    encode_request,
+    CheckType, CommandCode, CommandHeader, DecodeError, EncodeError, HEADER_LEN, Request, ResponseHeader,
+    decode_response, encode_request,
 };
 
 use crate::link::{Link, LinkError};
@@ -304,12 +304,12 @@ impl<L: Link> Port<L> {
     pub fn previous(&self) -> Option<Answer<'_>> {
         let h = self.prev_header?;
         let n = usize::from(h.data_len);
-        Some(Answer { header: h, data: self.prev_rx.get(24..24 + n).unwrap_or(&[]) })
+        Some(Answer { header: h, data: self.prev_rx.get(HEADER_LEN..HEADER_LEN + n).unwrap_or(&[]) })
     }
 
     fn current(&self, header: ResponseHeader) -> Answer<'_> {
         let n = usize::from(header.data_len);
-        Answer { header, data: self.rx.get(24..24 + n).unwrap_or(&[]) }
+        Answer { header, data: self.rx.get(HEADER_LEN..HEADER_LEN + n).unwrap_or(&[]) }
     }
 
     /// Sends `req` guarded (see the module doc) and returns its answer. The
@@ -428,12 +428,11 @@ impl<L: Link> Port<L> {
     /// progress with zeros (the chip refuses it as a bad packet), then reads
     /// the check type from the status byte of the next answer.
     pub fn synchronize(&mut self) -> Result<(), PortError> {
-        const END_START: [u8; 8] = [0x59, 0x58, 0x57, 0x56, 0xA4, 0xA3, 0xA2, 0xA1];
-        let mut stream: Vec<u8> = Vec::with_capacity(3 * (DATA_MAX + 32));
+        let mut stream: Vec<u8> = Vec::with_capacity(3 * (DATA_MAX + OVERHEAD));
         let mut starts: Vec<usize> = Vec::new();
         let mut byte = [0u8; 1];
         while starts.len() < 2 {
-            if stream.len() > 3 * (DATA_MAX + 32) {
+            if stream.len() > 3 * (DATA_MAX + OVERHEAD) {
                 return Err(PortError::Unsynchronized);
             }
             if !self.wait_ready()? {
@@ -441,8 +440,10 @@ impl<L: Link> Port<L> {
             }
             self.transfer(&[0], &mut byte)?;
             stream.push(byte[0]);
-            if stream.ends_with(&END_START) {
-                starts.push(stream.len() - 4);
+            // The wire crate's boundary rule, on the newest 8 bytes.
+            let tail = stream.len().saturating_sub(8);
+            if let Some(start) = find_packet_start(&stream[tail..]) {
+                starts.push(tail + start);
             }
         }
         let layout = PacketLayout::from_packet_len(starts[1] - starts[0]).ok_or(PortError::Unsynchronized)?;

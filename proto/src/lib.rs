@@ -2,7 +2,7 @@
 //! `proto/ecmxf/v1/` (the contract, usable from any language) and the Rust
 //! client and server code generated from them at build time with protox
 //! (no system `protoc` needed).
-
+#![forbid(unsafe_code)]
 #![allow(missing_docs, missing_debug_implementations, clippy::all)]
 
 /// The `ecmxf.v1` package: messages, `*_client` and `*_server` modules.

@@ -19,6 +19,7 @@
 //! Time is simulated: everything takes the current time in nanoseconds as an
 //! argument, so tests advance it deterministically; [`server::Server`] runs
 //! it against the wall clock.
+#![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod chip;

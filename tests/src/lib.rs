@@ -2,6 +2,7 @@
 //! and talk to it over its Unix socket (and TCP/TLS), as any client would.
 //! This library is the harness: find or build the binary, start it with a
 //! private socket, wait until the bus runs, stop it with SIGTERM.
+#![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};

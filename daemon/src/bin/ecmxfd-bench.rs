@@ -10,6 +10,7 @@
 //! 4. the daemon process's CPU time per second of wall time.
 //!
 //! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS]`
+#![forbid(unsafe_code)]
 
 use std::path::PathBuf;
 use std::process::{Child, Command};

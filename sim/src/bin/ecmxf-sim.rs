@@ -1,5 +1,6 @@
 //! `ecmxf-sim`: serve the simulated ECM-XF chip on a Unix socket, control a
 //! running one, or check a network file.
+#![forbid(unsafe_code)]
 
 use std::path::PathBuf;
 use std::process::ExitCode;

@@ -10,6 +10,7 @@
 //!
 //! Prints medians, p99 and max from this one run. `--secs N` sets each
 //! phase's length (default 5).
+#![forbid(unsafe_code)]
 
 use std::time::{Duration, Instant};
 
