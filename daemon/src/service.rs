@@ -242,7 +242,7 @@ mod tests {
         let mut new = old.clone();
         assert_eq!(ReloadPlan::between(&old, &new), ReloadPlan::default());
         new.log.level = "debug".into();
-        new.api.default_role = crate::api::config::RoleName::None;
+        new.api.default_role = crate::config::api::RoleName::None;
         new.cycle.sync0_us = 500;
         new.api.lease_ttl_ms = 10;
         let p = ReloadPlan::between(&old, &new);

@@ -12,28 +12,8 @@ use sha2::{Digest, Sha256};
 use tonic::transport::server::{TcpConnectInfo, TlsConnectInfo, UdsConnectInfo};
 use tonic::{Request, Status};
 
-use super::config::ApiConfig;
-
-/// What a caller may do.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum Role {
-    /// Read-only.
-    Observer,
-    /// Process data, SDO writes, states, CiA402, peripherals.
-    Operator,
-    /// Everything.
-    Admin,
-}
-
-impl std::fmt::Display for Role {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.write_str(match self {
-            Self::Observer => "observer",
-            Self::Operator => "operator",
-            Self::Admin => "admin",
-        })
-    }
-}
+use crate::config::api::ApiConfig;
+pub use crate::config::api::Role;
 
 /// A caller, as authenticated.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -67,7 +47,7 @@ fn fingerprint(bytes: &[u8]) -> String {
 impl Authenticator {
     /// The rules of `config`; `own_uid` (the daemon's) is always admin.
     pub fn new(config: &ApiConfig, own_uid: u32) -> Self {
-        let fp = |list: &[super::config::TokenRole]| {
+        let fp = |list: &[crate::config::api::TokenRole]| {
             list.iter().map(|t| (t.sha256.to_ascii_lowercase(), (t.role.role(), t.name.clone()))).collect()
         };
         Self {
@@ -169,7 +149,7 @@ fn client_id<T>(request: &Request<T>) -> u64 {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::api::config::{GroupRole, RoleName, UserRole};
+    use crate::config::api::{GroupRole, RoleName, UserRole};
 
     #[test]
     fn unix_peers_get_roles_by_uid_then_gid_then_default() {

@@ -19,7 +19,6 @@ use crate::master::{InputFrame, Master};
 pub mod admin;
 pub mod auth;
 pub mod cia402;
-pub mod config;
 pub mod convert;
 pub mod diagnostics;
 pub mod image;
@@ -65,7 +64,7 @@ pub struct Context {
 
 impl Context {
     /// A context over `master`.
-    pub fn new(master: Arc<Master>, config: &config::ApiConfig, own_uid: u32) -> Arc<Self> {
+    pub fn new(master: Arc<Master>, config: &crate::config::ApiConfig, own_uid: u32) -> Arc<Self> {
         Arc::new(Self {
             master,
             auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
@@ -88,7 +87,7 @@ impl Context {
 
     /// Takes the `[api]` roles, tokens and client certificates of a reloaded
     /// configuration; calls already authorized keep their role.
-    pub fn reload_roles(&self, config: &config::ApiConfig) {
+    pub fn reload_roles(&self, config: &crate::config::ApiConfig) {
         let own_uid = nix::unistd::getuid().as_raw();
         *self.auth.write().unwrap_or_else(|e| e.into_inner()) = Authenticator::new(config, own_uid);
     }

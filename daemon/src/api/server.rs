@@ -21,13 +21,13 @@ use tonic_health::server::HealthReporter;
 use super::Context;
 use super::admin::{FoeService, RegistersService};
 use super::cia402::Cia402Service;
-use super::config::ApiConfig;
 use super::diagnostics::DiagnosticsService;
 use super::master::{MasterService, SlavesService, StateService};
 use super::pdo::ProcessDataService;
 use super::peripherals::PeripheralsService;
 use super::sdo::SdoService;
 use super::sii::SiiService;
+use crate::config::api::ApiConfig;
 use crate::master::Master;
 
 /// Why the API could not be served.

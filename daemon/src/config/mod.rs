@@ -8,7 +8,9 @@ use std::time::Duration;
 
 use serde::Deserialize;
 
-pub use crate::api::config::ApiConfig;
+pub mod api;
+
+pub use api::{ApiConfig, Role};
 
 /// A configuration mistake: unreadable file, TOML syntax or schema (naming
 /// key and line), or a value not allowed (naming the dotted key). The same

@@ -12,8 +12,28 @@ use std::path::{Path, PathBuf};
 
 use serde::Deserialize;
 
-use super::auth::Role;
-use crate::config::ConfigError;
+use super::ConfigError;
+
+/// What a caller may do.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
+pub enum Role {
+    /// Read-only.
+    Observer,
+    /// Process data, SDO writes, states, CiA402, peripherals.
+    Operator,
+    /// Everything.
+    Admin,
+}
+
+impl std::fmt::Display for Role {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Observer => "observer",
+            Self::Operator => "operator",
+            Self::Admin => "admin",
+        })
+    }
+}
 
 /// `[api]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
