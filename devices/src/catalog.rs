@@ -125,29 +125,23 @@ impl CatalogDevice {
     }
 
     fn from_esi(file: &Path, vendor: u32, d: &EsiDevice) -> Self {
-        let assigned = |pdos: &[EsiPdo]| -> Vec<u16> { EsiDevice::default_assignment(pdos) };
-        let pick = |pdos: &[EsiPdo]| -> Vec<CatalogEntry> {
-            assigned(pdos)
-                .iter()
-                .filter_map(|i| pdos.iter().find(|p| p.index == *i))
-                .flat_map(|p| {
-                    p.entries.iter().map(|(e, name, _)| CatalogEntry {
-                        index: e.index,
-                        subindex: e.subindex,
-                        bits: e.bits,
-                        name: name.clone(),
-                    })
+        let (rx, tx) = (EsiDevice::assigned_pdos(&d.rx_pdos), EsiDevice::assigned_pdos(&d.tx_pdos));
+        let entries = |pdos: &[&EsiPdo]| -> Vec<CatalogEntry> {
+            pdos.iter()
+                .flat_map(|p| &p.entries)
+                .map(|(e, name, _)| CatalogEntry {
+                    index: e.index,
+                    subindex: e.subindex,
+                    bits: e.bits,
+                    name: name.clone(),
                 })
                 .collect()
         };
-        let chosen: Vec<u16> = assigned(&d.rx_pdos).into_iter().chain(assigned(&d.tx_pdos)).collect();
         let mut types = Vec::new();
-        for p in d.rx_pdos.iter().chain(&d.tx_pdos).filter(|p| chosen.contains(&p.index)) {
-            for (e, _, t) in &p.entries {
-                let declared = d.dictionary.entry(e.index, e.subindex).map_or(*t, |x| x.dtype);
-                if e.index != 0 && declared.bits() == u32::from(e.bits) {
-                    types.push(((e.index, e.subindex), declared));
-                }
+        for (e, _, t) in rx.iter().chain(&tx).flat_map(|p| &p.entries).filter(|(e, _, _)| e.index != 0) {
+            let declared = d.dictionary.entry(e.index, e.subindex).map_or(*t, |x| x.dtype);
+            if declared.bits() == u32::from(e.bits) {
+                types.push(((e.index, e.subindex), declared));
             }
         }
         Self {
@@ -158,8 +152,8 @@ impl CatalogDevice {
             product: d.product_code,
             revision: d.revision,
             coe: d.protocols & sii::protocol::COE != 0,
-            rx: pick(&d.rx_pdos),
-            tx: pick(&d.tx_pdos),
+            rx: entries(&rx),
+            tx: entries(&tx),
             types,
             objects: d.dictionary.objects().map(|(i, _)| i).collect(),
         }

@@ -90,6 +90,12 @@ impl ConfigError {
     }
 }
 
+/// A path as a TOML string value, quoted and escaped (for files that
+/// point at other files: network files, generated configurations).
+pub fn toml_path(path: &Path) -> String {
+    toml::Value::String(path.display().to_string()).to_string()
+}
+
 /// The 1-based line where a dotted key (`cycle.sync0_us`, `slave[2].alias`)
 /// is written in `text`; the nearest table on its path when the key itself
 /// is not written (a default that conflicts with a written value).

@@ -740,6 +740,12 @@ impl EsiDevice {
         }
         chosen
     }
+
+    /// The PDOs of the default assignment, in assignment order.
+    pub fn assigned_pdos(pdos: &[EsiPdo]) -> Vec<&EsiPdo> {
+        let chosen = Self::default_assignment(pdos);
+        chosen.iter().filter_map(|i| pdos.iter().find(|p| p.index == *i)).collect()
+    }
 }
 
 #[cfg(test)]

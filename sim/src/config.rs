@@ -90,7 +90,7 @@ impl SlaveSection {
     /// ESI device by product code and revision, or its SII dump.
     pub fn table_for(device: &ecmxf_devices::catalog::CatalogDevice) -> String {
         use ecmxf_devices::catalog::Origin;
-        let quoted = |p: &Path| toml::Value::String(p.display().to_string()).to_string();
+        use ecmxf_devices::config_file::toml_path as quoted;
         match &device.origin {
             Origin::Esi { file } => format!(
                 "[[slave]]\nesi = {}\nproduct_code = {:#x}\nrevision = {:#x}\n",

@@ -206,20 +206,16 @@ impl Drop for Simulator {
 /// (and says so), unless ECMXF_REQUIRE_FIXTURES is set (CI), where a
 /// missing fixture fails the test.
 pub fn fixture(name: &str) -> Option<PathBuf> {
-    let path = repo().join("../shared/fixtures").join(name);
-    if path.exists() {
-        return Some(path);
-    }
-    assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", path.display());
-    eprintln!("skipped: {} missing", path.display());
-    None
+    present(fixtures_dir()?.join(name))
 }
 
-/// ../shared/fixtures, if there (else as [`fixture`]: skipped, or failed
-/// under ECMXF_REQUIRE_FIXTURES).
+/// ../shared/fixtures itself, if there (else as [`fixture`]).
 pub fn fixtures_dir() -> Option<PathBuf> {
-    let path = repo().join("../shared/fixtures");
-    if path.is_dir() {
+    present(repo().join("../shared/fixtures"))
+}
+
+fn present(path: PathBuf) -> Option<PathBuf> {
+    if path.exists() {
         return Some(path);
     }
     assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", path.display());

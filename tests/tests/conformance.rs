@@ -19,6 +19,7 @@ use std::path::Path;
 use std::time::Duration;
 
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice};
+use ecmxf_devices::config_file::toml_path;
 use ecmxf_devices::od::DataType;
 use ecmxf_e2e::{Daemon, run};
 use ecmxf_proto::v1 as pb;
@@ -60,17 +61,13 @@ fn start(dir: &Path, devices: &[&CatalogDevice]) -> Daemon {
     let slaves: String = devices
         .iter()
         .map(|d| match d.origin.esi() {
-            Some(f) => format!("[[slave]]\nesi = {}\n", toml_string(f)),
+            Some(f) => format!("[[slave]]\nesi = {}\n", toml_path(f)),
             None => "[[slave]]\n".to_string(),
         })
         .collect();
-    let link = format!("backend = \"sim\"\nnetwork = {}", toml_string(&network));
+    let link = format!("backend = \"sim\"\nnetwork = {}", toml_path(&network));
     let config = ecmxf_e2e::config(&link, &slaves);
     Daemon::with_config(&config.replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n"))
-}
-
-fn toml_string(p: &Path) -> String {
-    format!("\"{}\"", p.display().to_string().replace('\\', "\\\\").replace('"', "\\\""))
 }
 
 /// Every read RPC, for the network and for each slave; an error per

@@ -22,7 +22,8 @@ pub const WARN_LOAD: f64 = 0.5;
 /// What the cyclic exchange costs the link.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct LinkBudget {
-    /// Cycles of frames one packet carries (both directions).
+    /// Cycles of frames one packet carries (both directions); `usize::MAX`
+    /// when there is no process data (nothing to carry).
     pub frames_per_packet: usize,
     /// Measured time of one packet, ns.
     pub packet_ns: u64,

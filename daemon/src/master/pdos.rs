@@ -227,16 +227,18 @@ fn from_sii_all(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
     described(image, list.iter())
 }
 
-/// Names of PDOs and entries, and entry types, from `described` where
-/// `list` lacks them and the description's entry is the same object at the
-/// same size.
+/// Names of PDOs and entries, entry types and sync managers, from
+/// `described` where `list` lacks them and the description's entry is the
+/// same object at the same size. Gaps (object 0) are left alone: several
+/// share 0:00, so which description is whose cannot be told.
 fn complete(list: &mut [PdoDescription], described: &[PdoDescription]) {
     for p in list.iter_mut() {
         let Some(known) = described.iter().find(|q| q.index == p.index) else { continue };
         if p.name.is_empty() {
             p.name.clone_from(&known.name);
         }
-        for e in &mut p.entries {
+        p.sync_manager = p.sync_manager.or(known.sync_manager);
+        for e in p.entries.iter_mut().filter(|e| e.index != 0) {
             let same = |x: &&EntryDescription| (x.index, x.subindex, x.bits) == (e.index, e.subindex, e.bits);
             if let Some(x) = known.entries.iter().find(same) {
                 if e.name.is_empty() {
@@ -271,64 +273,44 @@ fn described<'a>(image: &Sii, list: impl Iterator<Item = &'a PdoRecord>) -> Vec<
 
 /// The default assignment an ESI describes.
 fn from_esi(pdos: &[EsiPdo]) -> Vec<PdoDescription> {
-    let chosen = EsiDevice::default_assignment(pdos);
-    chosen
-        .iter()
-        .filter_map(|i| pdos.iter().find(|p| p.index == *i))
-        .map(|p| PdoDescription {
-            index: p.index,
-            name: p.name.clone(),
-            sync_manager: p.sm,
-            entries: p
-                .entries
-                .iter()
-                .map(|(e, name, t)| EntryDescription {
-                    index: e.index,
-                    subindex: e.subindex,
-                    bits: e.bits,
-                    name: name.clone(),
-                    data_type: (t.bits() == u32::from(e.bits)).then_some(*t),
-                })
-                .collect(),
-        })
-        .collect()
+    esi_described(EsiDevice::assigned_pdos(pdos).into_iter())
 }
 
-/// Names and types from the ESI where the list lacks them: the PDO's name,
-/// the entry's name, and the dictionary's type for the object (when its
-/// size is the entry's), which wins over a type guessed from a PDO list.
+fn esi_described<'a>(pdos: impl Iterator<Item = &'a EsiPdo>) -> Vec<PdoDescription> {
+    pdos.map(|p| PdoDescription {
+        index: p.index,
+        name: p.name.clone(),
+        sync_manager: p.sm,
+        entries: p
+            .entries
+            .iter()
+            .map(|(e, name, t)| EntryDescription {
+                index: e.index,
+                subindex: e.subindex,
+                bits: e.bits,
+                name: name.clone(),
+                data_type: (t.bits() == u32::from(e.bits)).then_some(*t),
+            })
+            .collect(),
+    })
+    .collect()
+}
+
+/// Names and types from the ESI where the list lacks them: the dictionary's
+/// type for an object (when its size is the entry's) wins over a type
+/// guessed from a PDO list; then the ESI's PDOs complete the list as any
+/// description does ([`complete`]), sync managers included.
 fn typed(mut pdos: SlavePdos, esi: Option<&EsiDevice>) -> SlavePdos {
     let Some(d) = esi else { return pdos };
     for (list, described) in [(&mut pdos.rx, &d.rx_pdos), (&mut pdos.tx, &d.tx_pdos)] {
-        for p in list.iter_mut() {
-            let known = described.iter().find(|q| q.index == p.index);
-            if p.name.is_empty() {
-                p.name = known.map(|q| q.name.clone()).unwrap_or_default();
-            }
-            if p.sync_manager.is_none() {
-                p.sync_manager = known.and_then(|q| q.sm);
-            }
-            for e in &mut p.entries {
-                if e.index == 0 {
-                    continue;
-                }
-                if let Some(t) = d.dictionary.entry(e.index, e.subindex).map(|x| x.dtype) {
-                    if t.bits() == u32::from(e.bits) {
-                        e.data_type = Some(t);
-                    }
-                }
-                let listed = known
-                    .and_then(|q| q.entries.iter().find(|(x, _, _)| x.index == e.index && x.subindex == e.subindex));
-                if let Some((x, name, t)) = listed {
-                    if e.name.is_empty() {
-                        e.name = name.clone();
-                    }
-                    if e.data_type.is_none() && t.bits() == u32::from(x.bits) && x.bits == e.bits {
-                        e.data_type = Some(*t);
-                    }
+        for e in list.iter_mut().flat_map(|p| p.entries.iter_mut()).filter(|e| e.index != 0) {
+            if let Some(t) = d.dictionary.entry(e.index, e.subindex).map(|x| x.dtype) {
+                if t.bits() == u32::from(e.bits) {
+                    e.data_type = Some(t);
                 }
             }
         }
+        complete(list, &esi_described(described.iter()));
     }
     pdos
 }

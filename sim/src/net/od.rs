@@ -25,6 +25,18 @@ fn allows_complete_access(object: &Object, sub: u8) -> SdoResult<()> {
     Ok(())
 }
 
+/// Whether `e` may be read in `state`: never-readable entries abort as
+/// write-only, others outside their states as the wrong state.
+fn readable(e: &Entry, state: AlState) -> SdoResult<()> {
+    if e.access.read.contains(state.to_ecat()) {
+        Ok(())
+    } else if e.access.read == StateSet::NONE {
+        Err(SdoAbortCode::WRITE_ONLY)
+    } else {
+        Err(SdoAbortCode::WRONG_STATE)
+    }
+}
+
 /// A slave answering SDO requests from its dictionary.
 pub trait SdoServer {
     /// SDO upload as a slave answers it.
@@ -58,13 +70,7 @@ impl SdoServer for ObjectDictionary {
                 if *s > count && *s != 0 {
                     break;
                 }
-                if !e.access.read.contains(state.to_ecat()) {
-                    return Err(if e.access.read == StateSet::NONE {
-                        SdoAbortCode::WRITE_ONLY
-                    } else {
-                        SdoAbortCode::WRONG_STATE
-                    });
-                }
+                readable(e, state)?;
                 out.extend_from_slice(&e.value);
                 // Subindex 0 travels as 16 bits in complete access
                 // (ETG.1000.6 5.6.2.1).
@@ -75,19 +81,10 @@ impl SdoServer for ObjectDictionary {
             return Ok(out);
         }
         let e = obj.entries.get(&sub).ok_or(SdoAbortCode::SUBINDEX_MISSING)?;
-        if !e.access.read.contains(state.to_ecat()) {
-            return Err(if e.access.read == StateSet::NONE {
-                SdoAbortCode::WRITE_ONLY
-            } else {
-                SdoAbortCode::WRONG_STATE
-            });
-        }
+        readable(e, state)?;
         Ok(e.value.clone())
     }
 
-    /// SDO download as a slave answers it. `validate` sees the whole new
-    /// value of an entry before it is stored, for object-specific rules (PDO
-    /// mapping checks); it may refuse with an abort code.
     fn download(
         &mut self,
         index: u16,
