@@ -341,14 +341,14 @@ fn draw(f: &mut Frame, v: &View) {
             c.exchanges, c.input_frames, c.output_frames, c.transactions, c.recoveries
         )),
         Line::from(format!(
-            "CRC {}  WKC {}  corrupt {}  not-ready {}  FIFO alarms {}  max gap {} us  lost {}",
+            "CRC {}  WKC {}  corrupt {}  not-ready {}  FIFO alarms {}  max gap {} us  ring overflows {}",
             c.crc_errors,
             c.wkc_errors,
             c.corrupt_answers,
             c.not_ready_answers,
             c.fifo_alarms,
             c.max_fifo_gap_us,
-            c.input_batches_lost
+            c.ring_overflows
         )),
     ];
     f.render_widget(Paragraph::new(counters).block(Block::bordered().title(" Counters ")), rows[3]);

@@ -13,12 +13,15 @@
 //! - [`config`]: the configuration file.
 //! - [`metrics`]: the Prometheus endpoint.
 //! - [`service`]: life under systemd: sd_notify, watchdog, logging, reload.
+//! - [`lifecycle`]: the daemon as a whole: [`run`]`(config, shutdown)`
+//!   starts all of the above and stops it safely; the binary is thin.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
 
 pub mod api;
 pub mod config;
 pub mod engine;
+pub mod lifecycle;
 pub mod link;
 pub mod master;
 pub mod metrics;
@@ -26,3 +29,5 @@ pub mod outputs;
 pub mod port;
 pub mod realtime;
 pub mod service;
+
+pub use lifecycle::{DaemonError, Options, run, run_with};

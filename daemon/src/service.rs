@@ -42,6 +42,11 @@ impl Notifier {
         Self { socket }
     }
 
+    /// A notifier that sends nothing (not under systemd, or embedded).
+    pub fn disabled() -> Self {
+        Self { socket: None }
+    }
+
     /// Whether a service manager listens.
     pub fn enabled(&self) -> bool {
         self.socket.is_some()

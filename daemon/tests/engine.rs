@@ -399,7 +399,7 @@ fn clients_can_reinit_and_warm_reset_the_network() {
         let mut reasons = Vec::new();
         while let Ok(e) = events.try_recv() {
             if let EventKind::Recovering(r) = e.kind {
-                reasons.push(r);
+                reasons.push(r.to_string());
             }
         }
         assert_eq!(reasons.len(), 2, "{reasons:?}");

@@ -236,7 +236,7 @@ impl Cia402Api for Cia402Service {
                             "axis {axis} is {now:?}, not {target:?}, at the deadline"
                         )));
                     }
-                    tokio::time::sleep(Duration::from_millis(5)).await;
+                    self.0.next_inputs(end.saturating_duration_since(Instant::now())).await;
                 }
             }
             self.status(axis, &a, Some(budget)).await
@@ -267,7 +267,7 @@ impl Cia402Api for Cia402Service {
                         s.mode_display
                     )));
                 }
-                tokio::time::sleep(Duration::from_millis(5)).await;
+                self.0.next_inputs(end.saturating_duration_since(Instant::now())).await;
             }
         })
         .await?;

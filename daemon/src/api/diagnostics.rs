@@ -43,19 +43,19 @@ pub async fn emergencies(m: &Master, n: u8, t: Option<Duration>) -> Result<Vec<E
     Ok(out)
 }
 
-/// An engine event as a message.
+/// An engine event as a message: its sentence as `text`, its numbers in
+/// the typed fields.
 pub fn event_pb(e: &Event) -> pb::Event {
     use pb::EventKind as K;
-    let mut out = pb::Event { time_ns: e.time_ns, text: format!("{:?}", e.kind), ..pb::Event::default() };
+    let mut out = pb::Event { time_ns: e.time_ns, text: e.kind.to_string(), ..pb::Event::default() };
     let kind = match &e.kind {
         EventKind::Phase(p) => {
-            out.detail = format!("{:?}", phase_to_pb(*p));
+            out.detail = phase_to_pb(*p).as_str_name().into();
             K::Phase
         }
         EventKind::EcatState { from, to } => {
             out.from_state = state_to_pb(*from) as i32;
             out.to_state = state_to_pb(*to) as i32;
-            out.text = format!("network state {from} -> {to}");
             K::StateChange
         }
         EventKind::LinkPin(v) => {
@@ -80,23 +80,17 @@ pub fn event_pb(e: &Event) -> pb::Event {
             K::BringUpFailed
         }
         EventKind::Recovering(why) => {
-            out.detail = why.clone();
+            out.detail = why.to_string();
+            out.cause = why.name().into();
             K::Recovering
         }
         EventKind::Recovered { axes_disabled, outputs } => {
             out.counter = *axes_disabled as u64;
-            out.detail = format!("{outputs:?}");
-            out.text = format!(
-                "network back after a fault: {axes_disabled} axes disabled until enabled again, outputs {}",
-                match outputs {
-                    crate::config::WriterGoneAction::Zero => "zeroed",
-                    _ => "as last written",
-                }
-            );
+            out.detail = outputs.as_str().into();
             K::Recovered
         }
         EventKind::LastWriterGone(action) => {
-            out.detail = format!("{action:?}");
+            out.detail = action.as_str().into();
             K::LastWriterGone
         }
         EventKind::Lost(n) => {
@@ -105,10 +99,6 @@ pub fn event_pb(e: &Event) -> pb::Event {
         }
         EventKind::Emergency(r) => {
             out.emergency = Some(emergency_pb(r));
-            out.text = format!(
-                "emergency {:#06x} from slave {} (error register {:#04x})",
-                r.error_code, r.slave, r.error_register
-            );
             K::Emergency
         }
         EventKind::AlStatus { slave, state, code } => {
@@ -116,17 +106,11 @@ pub fn event_pb(e: &Event) -> pb::Event {
             out.to_state = state_to_pb(*state) as i32;
             out.al_status_code = (*code).into();
             out.detail = ecmxf_wire::al_status_text(*code).into();
-            out.text = format!("slave {slave} in {state}: AL status {code:#06x} ({})", out.detail);
             K::AlStatus
         }
         EventKind::ProcessData { flowing, age_us } => {
             out.flag = *flowing;
             out.counter = *age_us;
-            out.text = if *flowing {
-                "process data flowing again".into()
-            } else {
-                format!("process data stalled: no input frame for {} ms", age_us / 1000)
-            };
             K::ProcessData
         }
     };

@@ -27,30 +27,28 @@ pub struct MasterService(pub Arc<Context>);
 
 /// The status message from the engine's snapshot.
 pub fn status_pb(m: &Master) -> pb::MasterStatus {
+    use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
     let s = m.status();
-    let now = m.now_ns();
-    let health = m.health_of(&s, now);
-    let age = s.input_age(now);
-    let errors = ecmxf_wire::flags::ErrorFlags::from_bits_retain(s.error_byte);
-    let status = ecmxf_wire::flags::StatusFlags::from_bits_retain(s.status_byte);
+    let v = m.verdict(&s);
+    let age = v.input_age;
     pb::MasterStatus {
         phase: phase_to_pb(s.phase) as i32,
         ecat_state: state_to_pb(s.ecat_state) as i32,
         error_flags: s.error_byte.into(),
         status_flags: s.status_byte.into(),
-        link_pin: errors.contains(ecmxf_wire::flags::ErrorFlags::LINK_PIN),
-        dc_stable: status.contains(ecmxf_wire::flags::StatusFlags::DC_STABLE),
-        blocking_busy: status.contains(ecmxf_wire::flags::StatusFlags::BLOCKING_BUSY),
+        link_pin: s.error_flags().contains(ErrorFlags::LINK_PIN),
+        dc_stable: s.status_flags().contains(StatusFlags::DC_STABLE),
+        blocking_busy: s.status_flags().contains(StatusFlags::BLOCKING_BUSY),
         rx_fifo_level: s.rx_fifo.into(),
         tx_fifo_level: s.tx_fifo.into(),
         counters: Some(counters_pb(&s)),
         last_error: m.last_error().unwrap_or_default(),
         output_writers: m.output_writers() as u32,
         config_generation: s.config_generation,
-        process_data_flowing: health.is_healthy() && age.is_some(),
+        process_data_flowing: v.flowing(),
         input_age_us: age.map_or(0, |(a, _)| a.as_micros() as u64),
         flow_limit_us: age.map_or(0, |(_, l)| l.as_micros() as u64),
-        health: health.to_string(),
+        health: v.health.to_string(),
     }
 }
 
@@ -309,6 +307,7 @@ impl StateApi for StateService {
         tracing::info!(who = %caller.who, ?target, %state, "state requested");
         let reached = bounded(&caller, async {
             let end = Instant::now() + budget;
+            let mut changes = m.watch_status();
             m.set_state(target, state, Some(budget)).await.map_err(to_status)?;
             loop {
                 let left = end.saturating_duration_since(Instant::now());
@@ -321,7 +320,8 @@ impl StateApi for StateService {
                         "{target:?} is {now}, not {state}, at the deadline"
                     )));
                 }
-                tokio::time::sleep(Duration::from_millis(10)).await;
+                // Look again when the engine has news (its snapshot).
+                let _ = tokio::time::timeout(left, changes.changed()).await;
             }
         })
         .await?;

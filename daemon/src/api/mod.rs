@@ -46,7 +46,7 @@ pub struct Context {
     /// Roles (replaced whole on SIGHUP, see [`Context::reload_roles`]).
     pub auth: std::sync::RwLock<Authenticator>,
     /// SDO transfer durations, for the metrics endpoint.
-    pub sdo_latency: crate::metrics::Histogram,
+    pub sdo_latency: Arc<crate::metrics::Histogram>,
     /// The process image, named.
     pub image: image::ImageCache,
     /// Output leases.
@@ -55,8 +55,9 @@ pub struct Context {
     pub lease_ttl: Duration,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
     pub stream_max_age: Duration,
-    /// The newest input frame (for CiA 402 actual values).
-    pub latest: Mutex<Option<Arc<InputFrame>>>,
+    /// The newest input frame (for CiA 402 actual values), and the event
+    /// that a new one arrived (drive states change only with one).
+    pub latest: tokio::sync::watch::Sender<Option<Arc<InputFrame>>>,
     /// The output image as the API last wrote it (bit-sized entries are
     /// merged into it, so writing one bit keeps its neighbours).
     pub shadow: Mutex<Vec<u8>>,
@@ -68,12 +69,12 @@ impl Context {
         Arc::new(Self {
             master,
             auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
-            sdo_latency: crate::metrics::Histogram::default(),
+            sdo_latency: Arc::default(),
             image: image::ImageCache::default(),
             leases: leases::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
-            latest: Mutex::new(None),
+            latest: tokio::sync::watch::Sender::new(None),
             shadow: Mutex::new(Vec::new()),
         })
     }
@@ -99,7 +100,15 @@ impl Context {
 
     /// The newest input frame, if any arrived.
     pub fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
-        self.latest.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.latest.borrow().clone()
+    }
+
+    /// Waits, at most `limit`, for an input frame newer than the newest
+    /// now; false when none came. What a drive reports (its state, its mode)
+    /// changes only with a frame, so a waiter looks again after each one.
+    pub async fn next_inputs(&self, limit: Duration) -> bool {
+        let mut rx = self.latest.subscribe();
+        matches!(tokio::time::timeout(limit, rx.changed()).await, Ok(Ok(())))
     }
 }
 

@@ -117,6 +117,9 @@ impl PeripheralsApi for PeripheralsService {
                 if word(&self.call(Immediate::Adc(AdcOp::GetDataValidFlag), t).await?) != 0 {
                     return Ok(word(&self.call(Immediate::Adc(AdcOp::GetConvData), t).await?) & 0x0FFF);
                 }
+                // The chip raises no event for a finished conversion (v049
+                // ADC commands): its flag is asked again after a ms, the
+                // conversion's own time.
                 tokio::time::sleep(Duration::from_millis(1)).await;
             }
             Err(Status::deadline_exceeded("the ADC conversion did not complete in 50 ms"))

@@ -168,15 +168,17 @@ fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
 /// Health follows the bus: SERVING while the engine runs, the network is in
 /// the configured target state and process data flows ([`Master::health`]),
 /// NOT_SERVING otherwise (bringing up, recovering, a slave dropped out of
-/// OP, no input frame for longer than the limit). Looked at every
-/// [`HEALTH_EVERY`], so a stop shows within the limit plus that.
+/// OP, no input frame for longer than the limit). Judged again on every
+/// snapshot the engine announces (a phase or state change at once) and at
+/// the moment the newest input frame passes its limit, so a stall shows on
+/// time even when a wedged engine announces nothing.
 async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
+    let mut changes = master.watch_status();
     let mut last = None;
-    let mut tick = tokio::time::interval(HEALTH_EVERY);
-    tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
     loop {
-        tick.tick().await;
-        let serving = master.health().is_healthy();
+        let s = *changes.borrow_and_update();
+        let now = master.now_ns();
+        let serving = master.health_of(&s, now).is_healthy();
         if last != Some(serving) {
             last = Some(serving);
             let status = if serving { ServingStatus::Serving } else { ServingStatus::NotServing };
@@ -184,18 +186,26 @@ async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
                 reporter.set_service_status(name, status).await;
             }
         }
+        // Only a new snapshot can end a stall; a fresh frame gets stale.
+        let stale_in = s.input_age(now).and_then(|(age, limit)| (age <= limit).then(|| limit - age));
+        let changed = match stale_in {
+            Some(d) => tokio::time::timeout(d + Duration::from_millis(1), changes.changed()).await.unwrap_or(Ok(())),
+            None => changes.changed().await,
+        };
+        if changed.is_err() {
+            return;
+        }
     }
 }
-
-/// How often health is judged again.
-pub const HEALTH_EVERY: Duration = Duration::from_millis(20);
 
 /// Keeps the newest input frame for the services.
 async fn track_inputs(ctx: Arc<Context>) {
     let mut rx = ctx.master.subscribe();
     loop {
         match rx.recv().await {
-            Ok(f) => *ctx.latest.lock().unwrap_or_else(|e| e.into_inner()) = Some(f),
+            Ok(f) => {
+                ctx.latest.send_replace(Some(f));
+            }
             Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
             Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
         }

@@ -118,6 +118,18 @@ pub enum WriterGoneAction {
     QuickStop,
 }
 
+impl WriterGoneAction {
+    /// As written in the configuration file (`hold-last`, `zero`,
+    /// `quick-stop`).
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::HoldLast => "hold-last",
+            Self::Zero => "zero",
+            Self::QuickStop => "quick-stop",
+        }
+    }
+}
+
 /// `[link]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(try_from = "RawLink")]

@@ -5,9 +5,15 @@
 //! subscribers.
 //!
 //! Counters that can rise every cycle during a fault (CRC errors, WKC
-//! errors) are reported at most every [`COUNTER_QUIET`], with the total, so
-//! a fault cannot flood the ring. Events that do not fit are counted and
-//! reported as [`EventKind::Lost`] once there is room.
+//! errors) are reported at most every [`COUNTER_QUIET`], with the total
+//! since the daemon started (it never goes down: see
+//! `telemetry::CounterTotal`), so a fault cannot flood the ring. Events
+//! that do not fit are counted and reported as [`EventKind::Lost`] once
+//! there is room.
+//!
+//! Every event reads as a sentence ([`EventKind`]'s `Display`, the API's
+//! `Event.text`) and has a stable one-word name ([`EventKind::name`]); the
+//! log gets both, plus the event's numbers as fields ([`Event::log`]).
 
 use std::thread::Thread;
 use std::time::{Duration, Instant};
@@ -16,6 +22,7 @@ use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::{EcatState, ResponseHeader};
 
+use super::supervisor::RecoverCause;
 use super::telemetry::Phase;
 use crate::config::WriterGoneAction;
 
@@ -83,8 +90,8 @@ pub enum EventKind {
     FifoUnderrun,
     /// Bring-up failed; the reason.
     BringUpFailed(String),
-    /// A fault was seen; recovery starts. The reason.
-    Recovering(String),
+    /// A fault was seen; recovery starts. Why.
+    Recovering(RecoverCause),
     /// The last output writer went away and this was done.
     LastWriterGone(WriterGoneAction),
     /// The network is back after a fault: every configured axis came up
@@ -102,6 +109,130 @@ pub enum EventKind {
     Emergency(EmergencyRecord),
     /// Events dropped because no one read them in time.
     Lost(u64),
+}
+
+impl EventKind {
+    /// The kind as one stable word (the log's `event` field).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Phase(_) => "phase",
+            Self::EcatState { .. } => "state_change",
+            Self::LinkPin(_) => "link",
+            Self::DcStable(_) => "dc_stable",
+            Self::CrcErrors { .. } => "crc_errors",
+            Self::WkcErrors { .. } => "wkc_errors",
+            Self::AlStatus { .. } => "al_status",
+            Self::ProcessData { .. } => "process_data",
+            Self::FifoUnderrun => "fifo_underrun",
+            Self::BringUpFailed(_) => "bring_up_failed",
+            Self::Recovering(_) => "recovering",
+            Self::LastWriterGone(_) => "last_writer_gone",
+            Self::Recovered { .. } => "recovered",
+            Self::Emergency(_) => "emergency",
+            Self::Lost(_) => "lost",
+        }
+    }
+
+    /// Whether the event says something went wrong (logged as a warning).
+    pub fn is_fault(&self) -> bool {
+        match self {
+            Self::AlStatus { .. }
+            | Self::FifoUnderrun
+            | Self::BringUpFailed(_)
+            | Self::Recovering(_)
+            | Self::Emergency(_)
+            | Self::Lost(_) => true,
+            Self::ProcessData { flowing, .. } => !flowing,
+            Self::EcatState { to, .. } => *to == EcatState::Error,
+            _ => false,
+        }
+    }
+}
+
+/// What the outputs are after the policy, in words.
+fn outputs_text(a: WriterGoneAction) -> &'static str {
+    match a {
+        WriterGoneAction::HoldLast => "held at the last written values",
+        WriterGoneAction::Zero => "zeroed",
+        WriterGoneAction::QuickStop => "held, axes quick-stopped",
+    }
+}
+
+fn phase_text(p: Phase) -> &'static str {
+    match p {
+        Phase::Starting => "starting",
+        Phase::BringUp => "bringing the network up",
+        Phase::Running => "running",
+        Phase::Recovering => "recovering",
+        Phase::Stopping => "stopping",
+        Phase::Stopped => "stopped",
+    }
+}
+
+impl std::fmt::Display for EventKind {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Phase(p) => write!(f, "engine {}", phase_text(*p)),
+            Self::EcatState { from, to } => write!(f, "network state {from} -> {to}"),
+            Self::LinkPin(v) => write!(f, "LINK pin {}", if *v { "high" } else { "low" }),
+            Self::DcStable(true) => f.write_str("DC cycle stable"),
+            Self::DcStable(false) => f.write_str("DC cycle lost stability"),
+            Self::CrcErrors { total } => write!(f, "SPI check-word errors: {total} since start"),
+            Self::WkcErrors { total } => write!(f, "working-counter errors: {total} since start"),
+            Self::AlStatus { slave, state, code } => {
+                write!(f, "slave {slave} in {state}: AL status {code:#06x} ({})", ecmxf_wire::al_status_text(*code))
+            }
+            Self::ProcessData { flowing: true, .. } => f.write_str("process data flowing again"),
+            Self::ProcessData { flowing: false, age_us } => {
+                write!(f, "process data stalled: no input frame for {} ms", age_us / 1000)
+            }
+            Self::FifoUnderrun => f.write_str("RxFIFO ran dry: slaves got repeated outputs"),
+            Self::BringUpFailed(why) => write!(f, "bring-up failed: {why}"),
+            Self::Recovering(why) => write!(f, "recovering: {why}"),
+            Self::LastWriterGone(a) => write!(f, "last output writer gone: outputs {}", outputs_text(*a)),
+            Self::Recovered { axes_disabled, outputs } => write!(
+                f,
+                "network back after a fault: {axes_disabled} axes disabled until enabled again, outputs {}",
+                match outputs {
+                    WriterGoneAction::Zero => "zeroed",
+                    _ => "as last written",
+                }
+            ),
+            Self::Emergency(r) => write!(
+                f,
+                "emergency {:#06x} from slave {} (error register {:#04x})",
+                r.error_code, r.slave, r.error_register
+            ),
+            Self::Lost(n) => write!(f, "{n} events lost (no one read them in time)"),
+        }
+    }
+}
+
+impl Event {
+    /// Logs the event: its sentence, its name as `event`, its time and its
+    /// numbers as fields (journald keeps them as fields of their own).
+    pub fn log(&self) {
+        let (event, t_ms) = (self.kind.name(), self.time_ns / 1_000_000);
+        macro_rules! log {
+            ($($field:tt)*) => {
+                if self.kind.is_fault() {
+                    tracing::warn!(event, t_ms, $($field)* "{}", self.kind)
+                } else {
+                    tracing::info!(event, t_ms, $($field)* "{}", self.kind)
+                }
+            };
+        }
+        match &self.kind {
+            EventKind::CrcErrors { total } | EventKind::WkcErrors { total } => log!(total = *total,),
+            EventKind::AlStatus { slave, code, .. } => log!(slave = *slave, al_status = *code,),
+            EventKind::Emergency(r) => log!(slave = r.slave, error_code = r.error_code,),
+            EventKind::ProcessData { flowing, age_us } => log!(flowing = *flowing, age_us = *age_us,),
+            EventKind::Recovering(why) => log!(cause = why.name(),),
+            EventKind::Recovered { axes_disabled, .. } => log!(axes_disabled = *axes_disabled,),
+            EventKind::Lost(n) => log!(lost = *n,),
+            _ => log!(),
+        }
+    }
 }
 
 /// The engine side: detects changes and pushes events.

@@ -96,6 +96,8 @@ pub struct Engine<L> {
     assembler: OutputAssembler,
     queue: FairQueue,
     active: Option<Active>,
+    /// What the last snapshot sent to waiters showed, and when it went.
+    announced: ((Phase, EcatState, u64, u64), Instant),
 }
 
 impl<L> std::fmt::Debug for Engine<L> {
@@ -166,6 +168,7 @@ impl<L: Link> Engine<L> {
             events,
             queue: FairQueue::default(),
             active: None,
+            announced: (Default::default(), epoch),
         }
     }
 
@@ -192,7 +195,7 @@ impl<L: Link> Engine<L> {
             if self.stop.load(Relaxed) {
                 return self.abandon_bring_up(result.is_ok());
             }
-            self.publish_status();
+            self.publish_status(Instant::now());
             if result.is_err() {
                 // The header of a failed bring-up says nothing about the network.
                 self.telemetry.forget_network();
@@ -212,7 +215,7 @@ impl<L: Link> Engine<L> {
                     backoff = (backoff * 2).min(Duration::from_millis(self.config.recovery.max_backoff_ms));
                     first = false;
                     self.set_phase(Phase::Recovering);
-                    self.telemetry.recoveries.fetch_add(1, Relaxed);
+                    self.count_recovery();
                     continue;
                 }
             };
@@ -262,8 +265,8 @@ impl<L: Link> Engine<L> {
                     // Phase first: no one may see "running" while recovering.
                     self.set_phase(Phase::Recovering);
                     self.telemetry.forget_network();
-                    self.events.emit(EventKind::Recovering(why.to_string()));
-                    self.telemetry.recoveries.fetch_add(1, Relaxed);
+                    self.events.emit(EventKind::Recovering(why.clone()));
+                    self.count_recovery();
                     self.fail_all(EngineError::Unavailable(format!("recovering: {why}")));
                     self.reopen_if_needed(&why);
                     if !self.config.recovery.enabled || !self.pause(backoff) {
@@ -302,12 +305,25 @@ impl<L: Link> Engine<L> {
         self.stopped();
     }
 
-    /// Publishes a phase change, to the status snapshot and as an event.
+    /// Publishes a phase change, to the status snapshot and its waiters,
+    /// and as an event.
     fn set_phase(&mut self, p: Phase) {
         if self.telemetry.phase() != p || p == Phase::BringUp {
             self.events.emit(EventKind::Phase(p));
         }
         self.telemetry.set_phase(p);
+        self.announce(Instant::now());
+    }
+
+    /// A recovery started: counted, and said to waiters at once.
+    fn count_recovery(&mut self) {
+        self.telemetry.recoveries.fetch_add(1, Relaxed);
+        self.announce(Instant::now());
+    }
+
+    /// Sends the snapshot to its waiters (see [`telemetry`]).
+    fn announce(&mut self, now: Instant) {
+        self.announced = (self.telemetry.announce().key(), now);
     }
 
     fn stopped(mut self) {
@@ -328,6 +344,7 @@ impl<L: Link> Engine<L> {
         self.set_phase(Phase::Recovering);
         self.config = config;
         self.telemetry.config_generation.store(generation, Relaxed);
+        self.announce(Instant::now());
         true
     }
 
@@ -367,7 +384,12 @@ impl<L: Link> Engine<L> {
         }
     }
 
-    fn publish_status(&mut self) {
+    /// Publishes the last header and the port's counters; waiters get a
+    /// snapshot when what they wait for changed, or [`ANNOUNCE_EVERY`]
+    /// after the last one.
+    ///
+    /// [`ANNOUNCE_EVERY`]: telemetry::ANNOUNCE_EVERY
+    fn publish_status(&mut self, now: Instant) {
         let s = self.port.stats();
         let h = *self.port.status();
         self.telemetry.header(&h);
@@ -379,12 +401,17 @@ impl<L: Link> Engine<L> {
             let totals = (self.crc_errors.update(h.crc_errors), self.wkc_errors.update(h.wkc_errors));
             self.telemetry.crc_errors.store(totals.0, Relaxed);
             self.telemetry.wkc_errors.store(totals.1, Relaxed);
-            self.events.header(&h, totals, Instant::now());
+            self.events.header(&h, totals, now);
         }
         self.telemetry.exchanges.store(s.exchanges, Relaxed);
         self.telemetry.corrupt.store(s.corrupt, Relaxed);
         self.telemetry.not_ready.store(s.not_ready, Relaxed);
         self.telemetry.ring_overflows.store(self.intake.inputs.ring_overflows, Relaxed);
+        let t = &self.telemetry;
+        let key = (t.phase(), h.ecat_state, t.config_generation.load(Relaxed), t.recoveries.load(Relaxed));
+        if key != self.announced.0 || now.saturating_duration_since(self.announced.1) >= telemetry::ANNOUNCE_EVERY {
+            self.announce(now);
+        }
     }
 
     /// Takes new requests; false when told to stop.
@@ -429,7 +456,7 @@ impl<L: Link> Engine<L> {
                 warn!(error = %e, %state, "safe stop");
             }
         }
-        self.publish_status();
+        self.publish_status(Instant::now());
         Exit::Stop
     }
 }

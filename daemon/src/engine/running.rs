@@ -270,7 +270,7 @@ impl<L: Link> Engine<L> {
                 self.set_phase(Phase::Running);
             }
             let h = *self.port.status();
-            self.publish_status();
+            self.publish_status(Instant::now());
             if let Err(why) = self.check_health(&h) {
                 return Exit::Recover(why);
             }

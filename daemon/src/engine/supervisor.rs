@@ -58,6 +58,23 @@ impl RecoverCause {
         }
     }
 
+    /// The cause as one stable word (the log's and the API's `cause`).
+    pub fn name(&self) -> &'static str {
+        match self {
+            Self::Link(_) => "link",
+            Self::Chip(_) => "chip",
+            Self::ChipReset => "chip_reset",
+            Self::SlaveError(_) => "slave_error",
+            Self::SlaveCount { .. } => "slave_count",
+            Self::WkcStreak(_) => "wkc_streak",
+            Self::ExchangeStopped => "exchange_stopped",
+            Self::InputStall { .. } => "input_stall",
+            Self::NewConfig => "new_config",
+            Self::ReinitRequested => "reinit_requested",
+            Self::WarmResetRequested => "warm_reset_requested",
+        }
+    }
+
     /// Whether the link itself must be opened again.
     pub fn needs_reopen(&self) -> bool {
         matches!(self, Self::Link(_))

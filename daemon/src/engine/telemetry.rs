@@ -1,18 +1,29 @@
-//! The engine's state for everyone else, published without locks: the RT
-//! thread stores atomics, readers load them. Individual values are exact;
+//! The engine's state for everyone else. The RT thread stores atomics,
+//! readers load them ([`Telemetry::snapshot`]): individual values are exact,
 //! a reader may see values from two neighbouring exchanges side by side.
+//! Whoever waits for a change (a phase, a state, a configuration taken)
+//! awaits the [`watch`] of snapshots instead ([`Telemetry::watch`]): the
+//! engine sends one at once when the phase, network state, configuration
+//! generation or recovery count changes, and at least every
+//! [`ANNOUNCE_EVERY`] while it runs, so counters reach waiters too.
 
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU8, AtomicU64, Ordering::Relaxed};
 use std::time::Duration;
 
 use ecmxf_wire::{EcatState, ResponseHeader};
+use tokio::sync::watch;
+
+/// The longest the [`watch`] of snapshots goes without a new one while the
+/// engine exchanges packets (counters move without a change of phase).
+pub const ANNOUNCE_EVERY: Duration = Duration::from_millis(10);
 
 /// What the engine is doing.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 #[repr(u8)]
 pub enum Phase {
     /// Starting, before the link is up.
+    #[default]
     Starting = 0,
     /// Running the bring-up sequence.
     BringUp = 1,
@@ -40,7 +51,7 @@ impl Phase {
 }
 
 /// The published values.
-#[derive(Debug, Default)]
+#[derive(Debug)]
 pub struct Telemetry {
     phase: AtomicU8,
     ecat_state: AtomicU8,
@@ -95,6 +106,40 @@ pub struct Telemetry {
     /// The last bring-up or recovery reason; written only when something
     /// fails, never on the cycle path.
     last_error: Mutex<Option<String>>,
+    /// Snapshots for waiters (see the module comment).
+    changes: watch::Sender<Snapshot>,
+}
+
+impl Default for Telemetry {
+    fn default() -> Self {
+        Self {
+            phase: AtomicU8::default(),
+            ecat_state: AtomicU8::default(),
+            error_byte: AtomicU8::default(),
+            status_byte: AtomicU8::default(),
+            rx_fifo: AtomicU8::default(),
+            tx_fifo: AtomicU8::default(),
+            crc_errors: AtomicU64::default(),
+            wkc_errors: AtomicU64::default(),
+            exchanges: AtomicU64::default(),
+            corrupt: AtomicU64::default(),
+            not_ready: AtomicU64::default(),
+            input_frames: AtomicU64::default(),
+            input_batches_lost: AtomicU64::default(),
+            ring_overflows: AtomicU64::default(),
+            newest_input_ns: AtomicU64::default(),
+            flow_limit_ns: AtomicU64::default(),
+            output_frames: AtomicU64::default(),
+            fifo_alarms: AtomicU64::default(),
+            transactions: AtomicU64::default(),
+            recoveries: AtomicU64::default(),
+            max_fifo_gap_us: AtomicU64::default(),
+            config_generation: AtomicU64::default(),
+            epoch_monotonic_ns: AtomicU64::default(),
+            last_error: Mutex::default(),
+            changes: watch::Sender::new(Snapshot::default()),
+        }
+    }
 }
 
 /// A total accumulated from one of the chip's 8-bit counters (CRC errors,
@@ -128,7 +173,7 @@ impl CounterTotal {
 }
 
 /// A consistent-enough copy for display.
-#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
 pub struct Snapshot {
     /// Phase.
     pub phase: Phase,
@@ -177,6 +222,22 @@ pub struct Snapshot {
 }
 
 impl Snapshot {
+    /// The chip's status flags from the last header.
+    pub fn status_flags(&self) -> ecmxf_wire::flags::StatusFlags {
+        ecmxf_wire::flags::StatusFlags::from_bits_retain(self.status_byte)
+    }
+
+    /// The chip's error flags from the last header.
+    pub fn error_flags(&self) -> ecmxf_wire::flags::ErrorFlags {
+        ecmxf_wire::flags::ErrorFlags::from_bits_retain(self.error_byte)
+    }
+
+    /// What a waiter may be waiting for: when it changes, the engine sends
+    /// a snapshot at once (see [`Telemetry::announce`]).
+    pub fn key(&self) -> (Phase, EcatState, u64, u64) {
+        (self.phase, self.ecat_state, self.config_generation, self.recoveries)
+    }
+
     /// How old the newest input frame is at `now_ns` (ns since the
     /// engine's epoch), and the limit; `None` while no cyclic exchange runs.
     pub fn input_age(&self, now_ns: u64) -> Option<(Duration, Duration)> {
@@ -224,6 +285,19 @@ impl Telemetry {
     /// The last failure, if any.
     pub fn last_error(&self) -> Option<String> {
         self.last_error.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// Sends the snapshot to every waiter; returns what was sent. Nothing
+    /// here allocates: the value is a copy, the waiters' list is intrusive.
+    pub fn announce(&self) -> Snapshot {
+        let s = self.snapshot();
+        self.changes.send_replace(s);
+        s
+    }
+
+    /// Snapshots as the engine announces them; the current one at once.
+    pub fn watch(&self) -> watch::Receiver<Snapshot> {
+        self.changes.subscribe()
     }
 
     /// A copy.

@@ -74,6 +74,23 @@ pub async fn as_client<F: std::future::Future>(id: u64, work: F) -> F::Output {
     CLIENT.scope(id, work).await
 }
 
+/// [`Master::verdict`]: the health, and the input age it was judged on.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Verdict {
+    /// The health.
+    pub health: Health,
+    /// The newest input frame's age and its limit (`None`: no cyclic
+    /// exchange runs).
+    pub input_age: Option<(Duration, Duration)>,
+}
+
+impl Verdict {
+    /// Healthy, with a cyclic exchange that delivers input frames.
+    pub fn flowing(&self) -> bool {
+        self.health.is_healthy() && self.input_age.is_some()
+    }
+}
+
 /// The verdict of [`Master::health`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Health {
@@ -384,6 +401,30 @@ impl Master {
         self.telemetry.snapshot()
     }
 
+    /// The engine's status as it changes: a new snapshot at once when the
+    /// phase, network state, configuration generation or recovery count
+    /// changes, and at least every few ms while the engine exchanges
+    /// packets. Await this instead of polling [`Master::status`].
+    pub fn watch_status(&self) -> tokio::sync::watch::Receiver<Snapshot> {
+        self.telemetry.watch()
+    }
+
+    /// Waits until a snapshot satisfies `done`, for at most `limit`;
+    /// returns that snapshot, or the newest one at the limit as the error.
+    pub async fn wait_status(
+        &self,
+        limit: Duration,
+        done: impl FnMut(&Snapshot) -> bool,
+    ) -> Result<Snapshot, Snapshot> {
+        let mut rx = self.watch_status();
+        let mut done = done;
+        match tokio::time::timeout(limit, rx.wait_for(|s| done(s))).await {
+            Ok(Ok(s)) => Ok(*s),
+            // The sender lives as long as `self`: closed cannot happen.
+            Ok(Err(_)) | Err(_) => Err(self.status()),
+        }
+    }
+
     /// The engine's epoch (time 0 of frame and event times) on the host's
     /// CLOCK_MONOTONIC, ns.
     pub fn epoch_monotonic_ns(&self) -> u64 {
@@ -408,6 +449,13 @@ impl Master {
     pub fn health_of(&self, s: &Snapshot, now_ns: u64) -> Health {
         let target = self.config.lock().unwrap_or_else(|e| e.into_inner()).cycle.target();
         Health::judge(s, target, now_ns)
+    }
+
+    /// Whether process data flows, judged on snapshot `s` now: the health
+    /// and the newest input frame's age against its limit.
+    pub fn verdict(&self, s: &Snapshot) -> Verdict {
+        let now = self.now_ns();
+        Verdict { health: self.health_of(s, now), input_age: s.input_age(now) }
     }
 
     /// Why bring-up last failed or recovery last started.

@@ -4,7 +4,7 @@
 
 use std::sync::atomic::Ordering;
 use std::sync::mpsc::TrySendError;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use super::Master;
 use crate::config::Config;
@@ -102,26 +102,19 @@ impl Master {
         self.until(timeout, |s| s.recoveries > before && s.phase == Phase::Running).await
     }
 
-    /// Waits until the status satisfies `done` (default limit 30 s).
+    /// Waits until the status satisfies `done` (default limit 30 s); a
+    /// stopped engine ends the wait at once.
     async fn until(&self, timeout: Option<Duration>, done: impl Fn(&Snapshot) -> bool) -> Result<(), EngineError> {
-        let deadline = Instant::now() + timeout.unwrap_or(Duration::from_secs(30));
-        loop {
-            let s = self.status();
-            if done(&s) {
-                return Ok(());
-            }
-            if s.phase == Phase::Stopped {
-                return Err(EngineError::Unavailable("engine stopped".into()));
-            }
-            if Instant::now() >= deadline {
-                return Err(match self.last_error() {
-                    Some(why) if s.phase != Phase::Running => {
-                        EngineError::Failed(format!("the network is not back up yet: {why}"))
-                    }
-                    _ => EngineError::Timeout,
-                });
-            }
-            tokio::time::sleep(Duration::from_millis(10)).await;
+        let limit = timeout.unwrap_or(Duration::from_secs(30));
+        match self.wait_status(limit, |s| done(s) || s.phase == Phase::Stopped).await {
+            Ok(s) if s.phase != Phase::Stopped || done(&s) => Ok(()),
+            Ok(_) => Err(EngineError::Unavailable("engine stopped".into())),
+            Err(s) => Err(match self.last_error() {
+                Some(why) if s.phase != Phase::Running => {
+                    EngineError::Failed(format!("the network is not back up yet: {why}"))
+                }
+                _ => EngineError::Timeout,
+            }),
         }
     }
 }

@@ -3,61 +3,71 @@
 //! and unauthenticated, like every exporter: bind it to localhost or a
 //! management network.
 //!
-//! Counters are the engine's (the same numbers `Master.GetStatus` and
-//! `ecmxfctl master` show); per-slave state and AL status are read from the
-//! chip at each scrape (one SLV_INFO_GET transaction per slave, queued with
-//! the other blocking commands). Exchanges per second is
-//! `rate(ecmxf_exchanges_total[1m])`.
+//! Counters are the engine's, read from the [`Master`] (the same numbers
+//! `Master.GetStatus` and `ecmxfctl master` show); per-slave state and AL
+//! status are read from the chip at each scrape (two SLV_INFO_GET
+//! transactions per slave, queued with the other blocking commands).
+//! Exchanges per second is `rate(ecmxf_exchanges_total[1m])`. Nothing
+//! here depends on the gRPC API: the API records into a [`Histogram`] it
+//! shares with the endpoint.
 
 use std::fmt::Write as _;
 use std::net::SocketAddr;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering};
 use std::time::Duration;
 
-use ecmxf_proto::v1 as pb;
+use ecmxf_wire::EcatState;
+use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::watch;
 
-use crate::api::Context;
+use crate::engine::telemetry::Phase;
+use crate::master::Master;
 
-/// Bucket upper bounds, seconds: SDO transfers take from a few cycles to
-/// the 3 s default deadline.
-const BUCKETS: [f64; 12] = [0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 0.2, 0.5, 1.0, 3.0];
+mod histogram;
+pub use histogram::Histogram;
 
-/// A latency histogram updated lock-free from any task.
-#[derive(Debug, Default)]
-pub struct Histogram {
-    counts: [AtomicU64; BUCKETS.len()],
-    over: AtomicU64,
-    sum_ns: AtomicU64,
+/// What the endpoint reads: the engine, and the API's SDO durations.
+#[derive(Debug, Clone)]
+pub struct Sources {
+    /// The engine.
+    pub master: Arc<Master>,
+    /// SDO transfer durations through the API.
+    pub sdo_latency: Arc<Histogram>,
 }
 
-impl Histogram {
-    /// Records one duration.
-    pub fn observe(&self, d: Duration) {
-        let s = d.as_secs_f64();
-        match BUCKETS.iter().position(|b| s <= *b) {
-            Some(i) => self.counts[i].fetch_add(1, Ordering::Relaxed),
-            None => self.over.fetch_add(1, Ordering::Relaxed),
-        };
-        self.sum_ns.fetch_add(d.as_nanos().min(u128::from(u64::MAX)) as u64, Ordering::Relaxed);
-    }
+/// The label of each phase (the API's `EnginePhase` names, so dashboards
+/// read the same words as clients).
+const PHASES: [(Phase, &str); 6] = [
+    (Phase::Starting, "ENGINE_PHASE_STARTING"),
+    (Phase::BringUp, "ENGINE_PHASE_BRINGING_UP"),
+    (Phase::Running, "ENGINE_PHASE_RUNNING"),
+    (Phase::Recovering, "ENGINE_PHASE_RECOVERING"),
+    (Phase::Stopping, "ENGINE_PHASE_STOPPING"),
+    (Phase::Stopped, "ENGINE_PHASE_STOPPED"),
+];
 
-    /// Appends the `_bucket`, `_sum` and `_count` lines of `name`.
-    fn render(&self, out: &mut String, name: &str, help: &str) {
-        let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} histogram");
-        let mut cumulative = 0u64;
-        for (b, c) in BUCKETS.iter().zip(&self.counts) {
-            cumulative += c.load(Ordering::Relaxed);
-            let _ = writeln!(out, "{name}_bucket{{le=\"{b}\"}} {cumulative}");
-        }
-        cumulative += self.over.load(Ordering::Relaxed);
-        let _ = writeln!(out, "{name}_bucket{{le=\"+Inf\"}} {cumulative}");
-        let _ = writeln!(out, "{name}_sum {}", self.sum_ns.load(Ordering::Relaxed) as f64 / 1e9);
-        let _ = writeln!(out, "{name}_count {cumulative}");
+/// A state as the gauges show it: the AL state code, 0 when unknown.
+fn state_value(s: EcatState) -> u8 {
+    match s {
+        EcatState::Other(_) => 0,
+        s => s.to_u8(),
     }
+}
+
+/// A slave's state and AL status code, read from the chip.
+async fn slave_state(master: &Master, slave: u8) -> Option<(EcatState, u16)> {
+    let read = |item| master.slave_info(slave, item);
+    let state = match SlaveInfo::decode(SlaveInfoCode::State, &read(SlaveInfoCode::State).await.ok()?) {
+        Ok(SlaveInfo::State(s)) => s,
+        _ => return None,
+    };
+    let code = match SlaveInfo::decode(SlaveInfoCode::AlStatus, &read(SlaveInfoCode::AlStatus).await.ok()?) {
+        Ok(SlaveInfo::AlStatus(c)) => c,
+        _ => return None,
+    };
+    Some((state, code))
 }
 
 /// One metric with a single sample.
@@ -71,22 +81,15 @@ fn label(v: &str) -> String {
 }
 
 /// The whole exposition.
-pub async fn render(ctx: &Context) -> String {
+pub async fn render(sources: &Sources) -> String {
+    let master = &sources.master;
     let mut out = String::with_capacity(8192);
-    let s = crate::api::master::status_pb(&ctx.master);
-    let c = s.counters.unwrap_or_default();
-    let phase = pb::EnginePhase::try_from(s.phase).unwrap_or_default();
+    let s = master.status();
+    let verdict = master.verdict(&s);
     let _ = writeln!(out, "# HELP ecmxf_engine_phase The engine's phase (1 for the current one).");
     let _ = writeln!(out, "# TYPE ecmxf_engine_phase gauge");
-    for p in [
-        pb::EnginePhase::Starting,
-        pb::EnginePhase::BringingUp,
-        pb::EnginePhase::Running,
-        pb::EnginePhase::Recovering,
-        pb::EnginePhase::Stopping,
-        pb::EnginePhase::Stopped,
-    ] {
-        let _ = writeln!(out, "ecmxf_engine_phase{{phase=\"{}\"}} {}", p.as_str_name(), u8::from(p == phase));
+    for (p, name) in PHASES {
+        let _ = writeln!(out, "ecmxf_engine_phase{{phase=\"{name}\"}} {}", u8::from(p == s.phase));
     }
     // (name, type, help, value): one sample each.
     let single: [(&str, &str, &str, String); 23] = [
@@ -94,84 +97,89 @@ pub async fn render(ctx: &Context) -> String {
             "ecmxf_network_state",
             "gauge",
             "Network AL state (1 INIT, 2 PREOP, 3 BOOT, 4 SAFEOP, 8 OP, 16 ERROR).",
-            s.ecat_state.to_string(),
+            state_value(s.ecat_state).to_string(),
         ),
-        ("ecmxf_exchanges_total", "counter", "SPI packets exchanged with the chip.", c.exchanges.to_string()),
+        ("ecmxf_exchanges_total", "counter", "SPI packets exchanged with the chip.", s.exchanges.to_string()),
         (
             "ecmxf_crc_errors_total",
             "counter",
             "SPI packets the chip received with bad check words (accumulated from its 8-bit counter).",
-            c.crc_errors.to_string(),
+            s.crc_errors.to_string(),
         ),
         (
             "ecmxf_wkc_errors_total",
             "counter",
             "Cycles with a wrong working counter (accumulated from the chip's 8-bit counter).",
-            c.wkc_errors.to_string(),
+            s.wkc_errors.to_string(),
         ),
         (
             "ecmxf_process_data_flowing",
             "gauge",
             "1 while the engine runs in the target state and input frames arrive within the limit.",
-            u8::from(s.process_data_flowing).to_string(),
+            u8::from(verdict.flowing()).to_string(),
         ),
         (
             "ecmxf_input_age_seconds",
             "gauge",
             "Age of the newest input frame (0 while no cyclic exchange runs).",
-            (s.input_age_us as f64 / 1e6).to_string(),
+            verdict.input_age.map_or(0.0, |(a, _)| a.as_secs_f64()).to_string(),
         ),
         (
             "ecmxf_ring_overflows_total",
             "counter",
             "Input frames dropped before any subscriber saw them (the distributor fell behind).",
-            c.ring_overflows.to_string(),
+            s.ring_overflows.to_string(),
         ),
         (
             "ecmxf_corrupt_answers_total",
             "counter",
             "Answers that failed validation (check word, framing).",
-            c.corrupt_answers.to_string(),
+            s.corrupt.to_string(),
         ),
         (
             "ecmxf_not_ready_answers_total",
             "counter",
             "Answers the chip marked not ready (busy).",
-            c.not_ready_answers.to_string(),
+            s.not_ready.to_string(),
         ),
-        ("ecmxf_transactions_total", "counter", "Blocking-command transactions finished.", c.transactions.to_string()),
-        ("ecmxf_input_frames_total", "counter", "Input frames received from the TxFIFO.", c.input_frames.to_string()),
-        ("ecmxf_output_frames_total", "counter", "Output frames pushed into the RxFIFO.", c.output_frames.to_string()),
+        ("ecmxf_transactions_total", "counter", "Blocking-command transactions finished.", s.transactions.to_string()),
+        ("ecmxf_input_frames_total", "counter", "Input frames received from the TxFIFO.", s.input_frames.to_string()),
+        ("ecmxf_output_frames_total", "counter", "Output frames pushed into the RxFIFO.", s.output_frames.to_string()),
         (
             "ecmxf_input_batches_lost_total",
             "counter",
-            "FIFO answers lost (corrupt): batches of input frames never received.",
-            c.input_batches_lost.to_string(),
+            "FIFO answers lost for good with their input frames; stays 0 (a corrupt FIFO answer is asked again).",
+            s.input_batches_lost.to_string(),
         ),
         (
             "ecmxf_fifo_underruns_total",
             "counter",
             "Times the RxFIFO ran dry (slaves got repeated outputs).",
-            c.fifo_alarms.to_string(),
+            s.fifo_alarms.to_string(),
         ),
-        ("ecmxf_recoveries_total", "counter", "Recoveries started.", c.recoveries.to_string()),
+        ("ecmxf_recoveries_total", "counter", "Recoveries started.", s.recoveries.to_string()),
         (
             "ecmxf_max_fifo_gap_seconds",
             "gauge",
             "Longest gap between FIFO pushes seen.",
-            (c.max_fifo_gap_us as f64 / 1e6).to_string(),
+            (s.max_fifo_gap_us as f64 / 1e6).to_string(),
         ),
-        ("ecmxf_rx_fifo_frames", "gauge", "Output frames waiting in the chip's RxFIFO.", s.rx_fifo_level.to_string()),
-        ("ecmxf_tx_fifo_frames", "gauge", "Input frames waiting in the chip's TxFIFO.", s.tx_fifo_level.to_string()),
+        ("ecmxf_rx_fifo_frames", "gauge", "Output frames waiting in the chip's RxFIFO.", s.rx_fifo.to_string()),
+        ("ecmxf_tx_fifo_frames", "gauge", "Input frames waiting in the chip's TxFIFO.", s.tx_fifo.to_string()),
+        ("ecmxf_rx_fifo_depth_frames", "gauge", "RxFIFO depth in force.", master.layout().fifo_rx_depth.to_string()),
         (
-            "ecmxf_rx_fifo_depth_frames",
+            "ecmxf_dc_stable",
             "gauge",
-            "RxFIFO depth in force.",
-            ctx.master.layout().fifo_rx_depth.to_string(),
+            "1 while the chip reports DC stable.",
+            u8::from(s.status_flags().contains(ecmxf_wire::flags::StatusFlags::DC_STABLE)).to_string(),
         ),
-        ("ecmxf_dc_stable", "gauge", "1 while the chip reports DC stable.", u8::from(s.dc_stable).to_string()),
-        ("ecmxf_link_pin", "gauge", "The chip's LINK pin level.", u8::from(s.link_pin).to_string()),
-        ("ecmxf_output_writers", "gauge", "Clients holding output leases.", s.output_writers.to_string()),
+        (
+            "ecmxf_link_pin",
+            "gauge",
+            "The chip's LINK pin level.",
+            u8::from(s.error_flags().contains(ecmxf_wire::flags::ErrorFlags::LINK_PIN)).to_string(),
+        ),
+        ("ecmxf_output_writers", "gauge", "Clients holding output leases.", master.output_writers().to_string()),
         (
             "ecmxf_config_generation",
             "gauge",
@@ -182,32 +190,34 @@ pub async fn render(ctx: &Context) -> String {
     for (name, kind, help, value) in single {
         metric(&mut out, name, kind, help, value);
     }
-    ctx.sdo_latency.render(&mut out, "ecmxf_sdo_duration_seconds", "SDO upload/download duration through the API.");
-    match tokio::time::timeout(Duration::from_secs(3), crate::api::master::list_slaves(ctx, false)).await {
-        Ok(Ok(list)) => {
-            metric(&mut out, "ecmxf_slaves", "gauge", "Slaves found on the ring.", list.slaves.len());
+    sources.sdo_latency.render(&mut out, "ecmxf_sdo_duration_seconds", "SDO upload/download duration through the API.");
+    let slaves = master.layout().slaves;
+    let read_all = async {
+        let mut states = Vec::with_capacity(slaves.len());
+        for (i, _) in slaves.iter().enumerate() {
+            states.push(slave_state(master, i as u8).await?);
+        }
+        Some(states)
+    };
+    match tokio::time::timeout(Duration::from_secs(3), read_all).await {
+        Ok(Some(states)) => {
+            metric(&mut out, "ecmxf_slaves", "gauge", "Slaves found on the ring.", slaves.len());
             let _ =
                 writeln!(out, "# HELP ecmxf_slave_state A slave's AL state (1 INIT, 2 PREOP, 3 BOOT, 4 SAFEOP, 8 OP).");
             let _ = writeln!(out, "# TYPE ecmxf_slave_state gauge");
-            for sl in &list.slaves {
+            for (i, (sl, (state, _))) in slaves.iter().zip(&states).enumerate() {
                 let _ = writeln!(
                     out,
-                    "ecmxf_slave_state{{position=\"{}\",name=\"{}\"}} {}",
-                    sl.position,
+                    "ecmxf_slave_state{{position=\"{i}\",name=\"{}\"}} {}",
                     label(&sl.name),
-                    sl.state
+                    state_value(*state)
                 );
             }
             let _ = writeln!(out, "# HELP ecmxf_slave_al_status_code A slave's AL status code (0: no error).");
             let _ = writeln!(out, "# TYPE ecmxf_slave_al_status_code gauge");
-            for sl in &list.slaves {
-                let _ = writeln!(
-                    out,
-                    "ecmxf_slave_al_status_code{{position=\"{}\",name=\"{}\"}} {}",
-                    sl.position,
-                    label(&sl.name),
-                    sl.al_status_code
-                );
+            for (i, (sl, (_, code))) in slaves.iter().zip(&states).enumerate() {
+                let _ =
+                    writeln!(out, "ecmxf_slave_al_status_code{{position=\"{i}\",name=\"{}\"}} {code}", label(&sl.name));
             }
             metric(&mut out, "ecmxf_slave_scrape_ok", "gauge", "1 when the per-slave metrics could be read.", 1);
         }
@@ -219,8 +229,8 @@ pub async fn render(ctx: &Context) -> String {
 
 /// Binds the endpoint (before the service reports ready, so a taken port
 /// is a start-up error naming `metrics.listen`).
-pub async fn bind(addr: SocketAddr) -> Result<TcpListener, String> {
-    let l = TcpListener::bind(addr).await.map_err(|e| format!("metrics.listen {addr}: {e}"))?;
+pub async fn bind(addr: SocketAddr) -> std::io::Result<TcpListener> {
+    let l = TcpListener::bind(addr).await?;
     if let Ok(a) = l.local_addr() {
         tracing::info!(address = %a, "metrics listening on http://{a}/metrics");
     }
@@ -228,16 +238,16 @@ pub async fn bind(addr: SocketAddr) -> Result<TcpListener, String> {
 }
 
 /// Serves `/metrics` until `shutdown` changes.
-pub async fn serve(ctx: Arc<Context>, listener: TcpListener, mut shutdown: watch::Receiver<()>) {
+pub async fn serve(sources: Sources, listener: TcpListener, mut shutdown: watch::Receiver<()>) {
     loop {
         tokio::select! {
             _ = shutdown.changed() => return,
             accepted = listener.accept() => {
                 let Ok((stream, _)) = accepted else { continue };
-                let ctx = Arc::clone(&ctx);
+                let sources = sources.clone();
                 tokio::spawn(async move {
                     // A client that never finishes its request is dropped.
-                    let _ = tokio::time::timeout(Duration::from_secs(10), answer(&ctx, stream)).await;
+                    let _ = tokio::time::timeout(Duration::from_secs(10), answer(&sources, stream)).await;
                 });
             }
         }
@@ -245,7 +255,7 @@ pub async fn serve(ctx: Arc<Context>, listener: TcpListener, mut shutdown: watch
 }
 
 /// Reads one request head and answers it (then closes: no keep-alive).
-async fn answer(ctx: &Context, mut stream: TcpStream) -> std::io::Result<()> {
+async fn answer(sources: &Sources, mut stream: TcpStream) -> std::io::Result<()> {
     let mut head = Vec::with_capacity(1024);
     let mut buf = [0u8; 1024];
     while !head.windows(4).any(|w| w == b"\r\n\r\n") {
@@ -264,7 +274,7 @@ async fn answer(ctx: &Context, mut stream: TcpStream) -> std::io::Result<()> {
     let path = path.split('?').next().unwrap_or("");
     match (method, path) {
         ("GET", "/metrics") => {
-            let body = render(ctx).await;
+            let body = render(sources).await;
             respond_with(&mut stream, "200 OK", "text/plain; version=0.0.4; charset=utf-8", &body).await
         }
         ("GET", "/") => respond(&mut stream, "200 OK", "ecmxfd metrics: see /metrics\n").await,
@@ -290,21 +300,6 @@ async fn respond_with(stream: &mut TcpStream, status: &str, content_type: &str, 
 #[cfg(test)]
 mod tests {
     use super::*;
-
-    #[test]
-    fn histogram_buckets_are_cumulative_with_sum_and_count() {
-        let h = Histogram::default();
-        h.observe(Duration::from_micros(300));
-        h.observe(Duration::from_millis(3));
-        h.observe(Duration::from_secs(10));
-        let mut out = String::new();
-        h.render(&mut out, "x", "help");
-        assert!(out.contains("x_bucket{le=\"0.0005\"} 1\n"), "{out}");
-        assert!(out.contains("x_bucket{le=\"0.005\"} 2\n"), "{out}");
-        assert!(out.contains("x_bucket{le=\"3\"} 2\n"), "{out}");
-        assert!(out.contains("x_bucket{le=\"+Inf\"} 3\n"), "{out}");
-        assert!(out.contains("x_count 3\n") && out.contains("x_sum 10.0033\n"), "{out}");
-    }
 
     #[test]
     fn label_values_are_escaped() {

@@ -1,0 +1,333 @@
+//! The daemon's life, as a library: [`run`] starts the engine, the API and
+//! the optional metrics endpoint from a [`Config`], serves until `shutdown`
+//! completes, then brings the bus down safely. The binary (`main.rs`) only
+//! parses arguments, sets up logging and turns signals into `shutdown` and
+//! [`Options::reloads`]; tests and other programs embed the daemon the same
+//! way (mini-redis' `server::run(listener, shutdown)` is the model).
+//!
+//! While it runs, everything it does on its own is driven by events: the
+//! engine's snapshot [`watch`](crate::master::Master::watch_status) (the
+//! first time the network runs, systemd's STATUS and READY, an engine that
+//! stopped), the event stream (logged), reloads, and the watchdog and
+//! status-line timers.
+
+use std::future::Future;
+use std::net::SocketAddr;
+use std::sync::Arc;
+use std::time::Duration;
+
+use tokio::sync::{broadcast, mpsc};
+use tracing::{info, warn};
+
+use crate::api::Context;
+use crate::api::server::ServeError;
+use crate::config::Config;
+use crate::engine::telemetry::{Phase, Snapshot};
+use crate::master::{Master, StartError};
+use crate::service::{Liveness, Logging, Notifier, ReloadPlan};
+
+/// Why the daemon could not start, or ended without being asked to.
+#[derive(Debug)]
+pub enum DaemonError {
+    /// The metrics endpoint could not listen (`metrics.listen`).
+    Metrics {
+        /// The address asked for.
+        addr: SocketAddr,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The engine could not start: the link, the simulator's network file.
+    Start(StartError),
+    /// The API server could not start or failed.
+    Api(ServeError),
+    /// The API server ended by itself.
+    ApiEnded,
+    /// A task of the daemon panicked or was cancelled.
+    Task(String),
+    /// The engine stopped by itself (recovery disabled or given up); why it
+    /// last failed, if it said.
+    EngineStopped(Option<String>),
+}
+
+impl std::fmt::Display for DaemonError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Metrics { addr, source } => write!(f, "metrics.listen {addr}: {source}"),
+            Self::Start(e) => write!(f, "{e}"),
+            Self::Api(e) => write!(f, "{e}"),
+            Self::ApiEnded => f.write_str("the API server ended"),
+            Self::Task(e) => write!(f, "a daemon task failed: {e}"),
+            Self::EngineStopped(Some(why)) => write!(f, "the engine stopped: {why}"),
+            Self::EngineStopped(None) => f.write_str("the engine stopped"),
+        }
+    }
+}
+
+impl std::error::Error for DaemonError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Metrics { source, .. } => Some(source),
+            Self::Start(e) => Some(e),
+            Self::Api(e) => Some(e),
+            _ => None,
+        }
+    }
+}
+
+impl From<StartError> for DaemonError {
+    fn from(e: StartError) -> Self {
+        Self::Start(e)
+    }
+}
+
+/// How the daemon is embedded; [`Options::default`] is a daemon that
+/// nobody reloads and that logs no status lines.
+#[derive(Debug, Default)]
+pub struct Options {
+    /// Log a status line this often (`None`: never).
+    pub status_every: Option<Duration>,
+    /// The service manager to notify (inert when not under systemd).
+    pub notifier: Option<Notifier>,
+    /// The log filter, for reloads of `log.level`.
+    pub logging: Option<Logging>,
+    /// Configurations read again (SIGHUP): what can change while the bus
+    /// runs is applied, the rest is named in the log.
+    pub reloads: Option<mpsc::Receiver<Config>>,
+}
+
+/// How long open streams (events, inputs) get to end by themselves at
+/// shutdown before their connections are cut.
+const STREAM_GRACE: Duration = Duration::from_millis(200);
+
+/// Runs the daemon until `shutdown` completes (or a fatal error): the
+/// engine, the API, the optional metrics endpoint. Then the bus goes down
+/// first (axes disabled, slaves to INIT within a second) while the API
+/// stops taking calls.
+pub async fn run(config: Config, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
+    run_with(config, Options::default(), shutdown).await
+}
+
+/// [`run`], embedded as `options` say (systemd, reloads, status lines).
+pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
+    let notifier = options.notifier.unwrap_or_else(Notifier::disabled);
+    let api = config.api.clone();
+    let metrics_listener = match config.metrics.listen {
+        Some(addr) => Some(crate::metrics::bind(addr).await.map_err(|source| DaemonError::Metrics { addr, source })?),
+        None => None,
+    };
+    let mut running = config.clone();
+    let (master, _sim) = Master::from_config(config)?;
+    let master = Arc::new(master);
+    let ctx = Context::new(Arc::clone(&master), &api, nix::unistd::getuid().as_raw());
+    let (stop_api, api_stopped) = tokio::sync::watch::channel(());
+    if let Some(l) = metrics_listener {
+        let sources =
+            crate::metrics::Sources { master: Arc::clone(&master), sdo_latency: Arc::clone(&ctx.sdo_latency) };
+        tokio::spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
+    }
+    let mut server = tokio::spawn(crate::api::server::serve(Arc::clone(&ctx), api, api_stopped));
+    let status_every = options.status_every;
+    let mut ticker = tokio::time::interval(status_every.unwrap_or(Duration::from_secs(3600)));
+    ticker.tick().await;
+    let watchdog_every = Notifier::watchdog_interval();
+    let mut watchdog = tokio::time::interval(watchdog_every.unwrap_or(Duration::from_secs(3600)));
+    let mut liveness = Liveness::default();
+    let mut announcer = Announcer::default();
+    let mut changes = master.watch_status();
+    let mut events = master.events();
+    let mut events_open = true;
+    let mut reloads = options.reloads;
+    let logging = options.logging;
+    info!(logs = logging.as_ref().map_or("(embedded)", |l| l.sink), systemd = notifier.enabled(), watchdog = ?watchdog_every, "service");
+    let shutdown = shutdown;
+    tokio::pin!(shutdown);
+    loop {
+        tokio::select! {
+            e = events.recv(), if events_open => match e {
+                Ok(e) => e.log(),
+                Err(broadcast::error::RecvError::Lagged(n)) => info!("{n} events not logged"),
+                Err(broadcast::error::RecvError::Closed) => events_open = false,
+            },
+            r = &mut server => {
+                let why = match r {
+                    Ok(Ok(())) => DaemonError::ApiEnded,
+                    Ok(Err(e)) => DaemonError::Api(e),
+                    Err(e) => DaemonError::Task(format!("the API server: {e}")),
+                };
+                notifier.send(&format!("STOPPING=1\nSTATUS=failed: {why}"));
+                let m = Arc::clone(&master);
+                tokio::task::spawn_blocking(move || m.stop()).await.map_err(|e| DaemonError::Task(e.to_string()))?;
+                return Err(why);
+            }
+            () = &mut shutdown => break,
+            Some(new) = async { reloads.as_mut()?.recv().await }, if reloads.is_some() => {
+                notifier.send("RELOADING=1");
+                reload(&mut running, new, &ctx, logging.as_ref());
+                notifier.send(&format!("READY=1\nSTATUS={}", service_status(&master)));
+            }
+            _ = watchdog.tick(), if watchdog_every.is_some() => {
+                let s = master.status();
+                match liveness.verdict(&s, master.health()) {
+                    Ok(()) => notifier.send("WATCHDOG=1"),
+                    Err(why) => warn!(phase = ?s.phase, exchanges = s.exchanges, "{why}: not pinging the watchdog"),
+                }
+            }
+            _ = ticker.tick(), if status_every.is_some() => info!("{}", status_line(&master.status())),
+            r = changes.changed() => {
+                if r.is_err() {
+                    continue;
+                }
+                let s = *changes.borrow_and_update();
+                announcer.snapshot(&s, &master, &notifier)?;
+            }
+        }
+    }
+    // The bus first and at once: axes disabled and slaves in INIT within a
+    // second, whatever clients are attached. The API stops taking calls
+    // meanwhile; streams still open after a short grace are cut.
+    notifier.send("STOPPING=1\nSTATUS=stopping: bringing the network down");
+    let started = std::time::Instant::now();
+    let bus = tokio::task::spawn_blocking({
+        let master = Arc::clone(&master);
+        move || master.stop()
+    });
+    let _ = stop_api.send(());
+    if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
+        server.abort();
+    }
+    bus.await.map_err(|e| DaemonError::Task(e.to_string()))?;
+    info!(took_ms = started.elapsed().as_millis() as u64, "stopped");
+    Ok(())
+}
+
+/// What the daemon says about the engine's snapshots: the network the
+/// first time it runs, systemd's STATUS when it changes, READY once.
+#[derive(Debug, Default)]
+struct Announcer {
+    announced: bool,
+    ready: bool,
+    status_sent: String,
+    status_key: Option<(Phase, ecmxf_wire::EcatState, u64, u64)>,
+}
+
+impl Announcer {
+    fn snapshot(&mut self, s: &Snapshot, master: &Master, notifier: &Notifier) -> Result<(), DaemonError> {
+        if s.phase == Phase::Running && !self.announced {
+            self.announced = true;
+            let l = master.layout();
+            for (i, s) in l.slaves.iter().enumerate() {
+                info!(position = i, name = %s.name, vendor = format_args!("{:#010x}", s.vendor_id), product = format_args!("{:#010x}", s.product_code), revision = format_args!("{:#010x}", s.revision), outputs = s.rx_bytes, inputs = s.tx_bytes, "slave");
+            }
+            info!(state = %l.state, firmware = format_args!("{:#04x}", l.firmware), "ready");
+        }
+        // The status line is rebuilt (layout and config cloned) only when
+        // what it shows may have changed, and only for systemd.
+        if notifier.enabled() && self.status_key != Some(s.key()) {
+            self.status_key = Some(s.key());
+            let status = service_status(master);
+            if status != self.status_sent {
+                notifier.send(&format!("STATUS={status}"));
+                self.status_sent = status;
+            }
+        }
+        // READY only once bring-up reached the configured state and
+        // process data flows.
+        if !self.ready && master.health_of(s, master.now_ns()).is_healthy() {
+            self.ready = true;
+            notifier.send(&format!("READY=1\nSTATUS={}", self.status_sent));
+        }
+        if s.phase == Phase::Stopped {
+            notifier.send("STOPPING=1\nSTATUS=the engine stopped");
+            return Err(DaemonError::EngineStopped(master.last_error()));
+        }
+        Ok(())
+    }
+}
+
+/// The status line logged every `status_every`.
+fn status_line(s: &Snapshot) -> String {
+    format!(
+        "phase={:?} state={} crc_errors={} wkc_errors={} rx_fifo={} exchanges={} corrupt={} not_ready={} transactions={} inputs={} outputs={} fifo_alarms={} ring_overflows={} recoveries={} max_fifo_gap_us={}",
+        s.phase,
+        s.ecat_state,
+        s.crc_errors,
+        s.wkc_errors,
+        s.rx_fifo,
+        s.exchanges,
+        s.corrupt,
+        s.not_ready,
+        s.transactions,
+        s.input_frames,
+        s.output_frames,
+        s.fifo_alarms,
+        s.ring_overflows,
+        s.recoveries,
+        s.max_fifo_gap_us
+    )
+}
+
+/// The one-line state systemd shows (`systemctl status`): phase, state,
+/// slaves, cycle.
+fn service_status(m: &Master) -> String {
+    let s = m.status();
+    let l = m.layout();
+    match s.phase {
+        Phase::Running => {
+            format!("{}: {} slaves, cycle {} us", s.ecat_state, l.slaves.len(), m.config().cycle.sync0_us)
+        }
+        Phase::Recovering => format!("recovering: {}", m.last_error().unwrap_or_default()),
+        p => format!("{p:?}"),
+    }
+}
+
+/// A configuration read again (SIGHUP): applies what can change while the
+/// bus runs (log filter, API roles and tokens) and names what needs a
+/// restart.
+fn reload(running: &mut Config, new: Config, ctx: &Context, logging: Option<&Logging>) {
+    let plan = ReloadPlan::between(running, &new);
+    if plan.log_level {
+        match logging.map(|l| l.set_level(&new.log.level)) {
+            Some(Ok(true)) => info!(level = %new.log.level, "SIGHUP: log.level applied"),
+            Some(Ok(false)) => warn!("SIGHUP: log.level not applied: RUST_LOG is set and wins"),
+            Some(Err(e)) => warn!("SIGHUP: log.level not applied: {e}"),
+            None => warn!("SIGHUP: log.level not applied: the embedding program owns logging"),
+        }
+        running.log = new.log.clone();
+    }
+    if plan.roles {
+        ctx.reload_roles(&new.api);
+        running.api.users = new.api.users.clone();
+        running.api.groups = new.api.groups.clone();
+        running.api.tokens = new.api.tokens.clone();
+        running.api.client_certs = new.api.client_certs.clone();
+        running.api.default_role = new.api.default_role;
+        info!("SIGHUP: api roles, tokens and client certificates applied");
+    }
+    if !plan.needs_restart.is_empty() {
+        warn!(
+            changed = %plan.needs_restart.join(", "),
+            "SIGHUP: not applied while the bus runs; restart the service to apply"
+        );
+    }
+    if !plan.log_level && !plan.roles && plan.needs_restart.is_empty() {
+        info!("SIGHUP: configuration unchanged");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn errors_name_what_failed() {
+        let e = DaemonError::Metrics {
+            addr: "127.0.0.1:9".parse().unwrap(),
+            source: std::io::Error::from(std::io::ErrorKind::AddrInUse),
+        };
+        assert!(e.to_string().starts_with("metrics.listen 127.0.0.1:9: "), "{e}");
+        assert_eq!(
+            DaemonError::EngineStopped(Some("bring-up: no slave".into())).to_string(),
+            "the engine stopped: bring-up: no slave"
+        );
+    }
+}
