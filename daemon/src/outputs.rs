@@ -1,5 +1,5 @@
 //! The async side of the output image: client writes cut into chunks that
-//! the engine applies whole (see `engine::job::OutputAssembler`), and the
+//! the engine applies whole (see `engine::output_writes::OutputAssembler`), and the
 //! counted writer leases behind `outputs.on_last_writer_gone`.
 
 use std::sync::atomic::{AtomicU32, Ordering};
@@ -8,7 +8,7 @@ use std::sync::{Arc, Mutex};
 
 use crate::engine::bringup::NetworkLayout;
 use crate::engine::error::EngineError;
-use crate::engine::job::{OUTPUT_CHUNK, OutputWrite, Writers};
+use crate::engine::output_writes::{OUTPUT_CHUNK, OutputWrite, Writers};
 
 /// A client's lease on the outputs (see [`Master::output_writer`](crate::master::Master::output_writer)).
 #[derive(Debug)]

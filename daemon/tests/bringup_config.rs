@@ -8,7 +8,7 @@ use ecmxf_sim::Chip;
 use ecmxf_wire::payload::cia402::Cia402State;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
-use ecmxfd::engine::job::Immediate;
+use ecmxfd::engine::slot::Immediate;
 use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::SimLink;
 use ecmxfd::master::Master;

@@ -306,7 +306,7 @@ fn raw_datagrams_reach_the_slaves_registers() {
 
 #[test]
 fn foe_files_go_to_a_slave_and_come_back() {
-    use ecmxfd::engine::job::TransferProgress;
+    use ecmxfd::engine::slot::TransferProgress;
     let (m, sim, _serial) = start();
     // Larger than one chunk and not a multiple of it.
     let file: Vec<u8> = (0..5000u32).map(|i| (i * 7 + i / 251) as u8).collect();

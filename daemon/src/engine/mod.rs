@@ -13,15 +13,15 @@ pub mod cyclic;
 pub mod emergencies;
 pub mod error;
 pub mod events;
-mod fair;
 pub mod held;
 pub mod inputs;
-pub mod job;
 pub mod link_budget;
+pub mod network_action;
+pub mod output_writes;
 mod running;
+pub mod slot;
 pub mod supervisor;
 pub mod telemetry;
-mod transaction;
 
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::Relaxed;
@@ -43,12 +43,13 @@ use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
 use error::EngineError;
 use events::{Event, EventKind, EventSink};
-use fair::FairQueue;
 use inputs::InputPublisher;
-use job::{Job, OutputAssembler, OutputWrite, PendingAction, Writers};
+use network_action::PendingAction;
+use output_writes::{OutputAssembler, OutputWrite, Writers};
+use slot::Active;
+use slot::{FairQueue, Job};
 use supervisor::RecoverCause;
 use telemetry::{CounterTotal, Phase, Telemetry};
-use transaction::Active;
 
 /// Messages to the engine.
 #[derive(Debug)]
@@ -79,6 +80,8 @@ pub struct Engine<L> {
     telemetry: Arc<Telemetry>,
     layout: Arc<Mutex<NetworkLayout>>,
     intake: running::Intake,
+    /// The running loop's rules, started over with every run.
+    supervisor: supervisor::Supervisor,
     /// The outputs clients wrote, kept per slave across recoveries:
     /// bring-up prefills the RxFIFO with them and the next run starts from
     /// them, so the slaves see what the lease holders last wrote, not zeros.
@@ -154,6 +157,7 @@ impl<L: Link> Engine<L> {
             telemetry: p.telemetry,
             layout: p.layout,
             intake: running::Intake::new(InputPublisher::new(p.ring, epoch), epoch),
+            supervisor: supervisor::Supervisor::new(supervisor::RunShape::idle(), 0, epoch),
             held: held::HeldOutputs::default(),
             crc_errors: CounterTotal::default(),
             wkc_errors: CounterTotal::default(),

@@ -1,114 +1,93 @@
-//! The running loop: once the network is up, every turn applies output
-//! writes, keeps the RxFIFO fed, advances the transaction in the blocking
-//! slot, publishes inputs and status, and watches for the faults that send
-//! the engine back to bring-up (see `Engine::run`).
+//! The running loop: once the network is up, each turn is a fixed
+//! sequence of named steps ([`Engine::turn`]): take what clients sent
+//! (requests, output writes, actions), count the slaves now and then, keep
+//! the emergency question going, exchange (a FIFO exchange when one is due,
+//! else one step of the blocking-slot transaction), then judge what the
+//! answers said, and idle until the next thing is due. The rules that
+//! decide when to go back to bring-up are the [`Supervisor`]'s: they take
+//! the time as a parameter and are unit-tested there. A step that ends the
+//! run returns the [`Exit`] as its error, so the turn reads top to bottom.
 
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::flags::{ControlFlags, ErrorFlags, StatusFlags};
+use ecmxf_wire::flags::ControlFlags;
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
 use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
-use ecmxf_wire::{CommandCode, EcatState, ResponseHeader, al_status_text};
-use tracing::{debug, info, warn};
+use ecmxf_wire::{CommandCode, EcatState, al_status_text};
+use tracing::{info, warn};
 
 use super::cyclic::Cyclic;
+use super::emergencies;
 use super::events::EventKind;
 use super::inputs::InputPublisher;
-use super::job::{NetworkAction, Request};
-use super::supervisor::{FlowWatch, RecoverCause, flow_limit};
+use super::network_action::NetworkAction;
+use super::slot::{Active, Progress, SlotRequest};
+use super::supervisor::{RecoverCause, RunShape, Supervisor, flow_limit};
 use super::telemetry::{Phase, Telemetry};
-use super::transaction::{Active, Progress};
 use super::{Command, Engine, Exit};
 use crate::config::WriterGoneAction;
 use crate::link::Link;
 use crate::port::PortError;
 
-/// Working-counter errors this long in a row mean a slave left the
-/// exchange (lost, or dropped to a lower state): recover.
-const WKC_STREAK: Duration = Duration::from_millis(50);
-/// A streak ends after this long without a new WKC error.
-const WKC_QUIET: Duration = Duration::from_millis(20);
-
-/// How often the engine counts the slaves while idle.
-const CENSUS: Duration = Duration::from_secs(1);
-
 /// How often a transaction waiting for the chip polls its status.
 const POLL: Duration = Duration::from_micros(100);
 
-/// Where FIFO answers go: input frames to subscribers, and the watch that
-/// they keep coming.
+/// How long the loop idles at most when nothing is due (no cyclic
+/// exchange, no transaction).
+const IDLE: Duration = Duration::from_millis(50);
+
+impl From<PortError> for Exit {
+    fn from(e: PortError) -> Self {
+        Exit::Recover(RecoverCause::from_port(&e))
+    }
+}
+
+impl From<RecoverCause> for Exit {
+    fn from(c: RecoverCause) -> Self {
+        Exit::Recover(c)
+    }
+}
+
+/// Where FIFO answers' input frames go: to subscribers through the ring,
+/// with their freshness published.
 #[derive(Debug)]
 pub(super) struct Intake {
     /// The input ring.
     pub inputs: InputPublisher,
-    flow: FlowWatch,
     epoch: Instant,
-    /// A stall the last answer confirmed, for the loop to act on.
-    stall: Option<RecoverCause>,
 }
 
 impl Intake {
     pub(super) fn new(inputs: InputPublisher, epoch: Instant) -> Self {
-        Self { inputs, flow: FlowWatch::new(Duration::ZERO, epoch), epoch, stall: None }
+        Self { inputs, epoch }
     }
 
     /// A run of the cyclic exchange starts at `now`.
     fn start(&mut self, c: &Cyclic, telemetry: &Telemetry, now: Instant) {
-        let limit = flow_limit(c.cycle());
-        self.flow = FlowWatch::new(limit, now);
-        self.stall = None;
         self.inputs.resume(now, c.cycle());
         telemetry.newest_input_ns.store(self.ns(now), Relaxed);
-        telemetry.flow_limit_ns.store(limit.as_nanos() as u64, Relaxed);
+        telemetry.flow_limit_ns.store(flow_limit(c.cycle()).as_nanos() as u64, Relaxed);
     }
 
     fn ns(&self, t: Instant) -> u64 {
         t.saturating_duration_since(self.epoch).as_nanos() as u64
     }
+}
 
-    /// Handles an intact answer to a FIFO exchange: inputs out, freshness
-    /// noted. A network without inputs counts the answer itself as the
-    /// sign of life.
-    /// Returns the input frames the answer held.
-    fn answer(
-        &mut self,
-        c: &Cyclic,
-        telemetry: &Telemetry,
-        header: &ResponseHeader,
-        data: &[u8],
-        now: Instant,
-    ) -> usize {
-        if header.code != CommandCode::PdoDataFifoOp {
-            return 0;
-        }
-        let n = self.inputs.publish(data, c.tx_size, now);
-        telemetry.input_frames.fetch_add(n as u64, Relaxed);
-        let alive = if c.tx_size == 0 { 1 } else { n };
-        if alive > 0 {
-            telemetry.newest_input_ns.store(self.ns(now), Relaxed);
-        }
-        if let Some(stall) = self.flow.answer(alive, now) {
-            self.stall.get_or_insert(stall);
-        }
-        n
-    }
+/// When the loop last did its periodic things.
+#[derive(Clone, Copy, Debug)]
+struct Clocks {
+    /// The last status poll of a waiting transaction.
+    transaction_poll: Instant,
+    /// The last emergency question.
+    emergency_poll: Instant,
 }
 
 impl<L: Link> Engine<L> {
-    fn check_health(&self, h: &ResponseHeader) -> Result<(), RecoverCause> {
-        if h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) {
-            return Err(RecoverCause::ChipReset);
-        }
-        if h.ecat_state == EcatState::Error {
-            return Err(RecoverCause::SlaveError(String::new()));
-        }
-        Ok(())
-    }
-
     /// Reads every slave's state and AL status code (a fault is being
     /// handled: the time is not the cycle's), reports the codes as events,
     /// and returns them as text, e.g. "slave 2 SAFE-OP, AL status 0x001a
@@ -163,169 +142,170 @@ impl<L: Link> Engine<L> {
         }
     }
 
+    /// Runs the network until a fault, a client's action or a stop.
     pub(super) fn running(&mut self, cyclic: Option<&mut Cyclic>) -> Exit {
         let slaves = self.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
-        match self.run_loop(cyclic, slaves) {
+        let mut cyclic = cyclic;
+        let now = Instant::now();
+        self.start_run(cyclic.as_deref(), slaves, now);
+        let mut clocks = Clocks { transaction_poll: now, emergency_poll: now };
+        let exit = loop {
+            if let Err(exit) = self.turn(&mut cyclic, &mut clocks) {
+                break exit;
+            }
+        };
+        match exit {
             Exit::Recover(why) => Exit::Recover(self.explained(why, slaves)),
             stop => stop,
         }
     }
 
-    fn run_loop(&mut self, cyclic: Option<&mut Cyclic>, slaves: usize) -> Exit {
-        let mut cyclic = cyclic;
-        let mut last_poll = Instant::now();
-        let mut last_census = Instant::now();
-        let mut last_emergency_poll = Instant::now();
-        let mut wkc_errors = self.port.status().wkc_errors;
-        // (first WKC error of a streak, last one seen)
-        let mut wkc_streak: Option<(Instant, Instant)> = None;
-        // A FIFO error bit left from before this run (a fault, the bring-up)
-        // is cleared, not reported.
-        let mut fifo_dry = true;
+    /// A run starts at `now`: the rules start over, and a FIFO error bit
+    /// left from before (a fault, the bring-up) is cleared.
+    fn start_run(&mut self, cyclic: Option<&Cyclic>, slaves: usize, now: Instant) {
+        let shape = RunShape {
+            slaves,
+            cyclic: cyclic.is_some(),
+            has_outputs: cyclic.is_some_and(|c| c.rx_size > 0),
+            flow_limit: cyclic.map_or(Duration::ZERO, |c| flow_limit(c.cycle())),
+        };
+        self.supervisor = Supervisor::new(shape, self.port.status().wkc_errors, now);
         self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
-        if let Some(c) = cyclic.as_deref() {
-            self.intake.start(c, &self.telemetry, Instant::now());
+        if let Some(c) = cyclic {
+            self.intake.start(c, &self.telemetry, now);
         }
-        let mut flowing = false;
-        loop {
-            if !self.take_commands() {
-                return self.safe_stop(cyclic.as_deref_mut());
+    }
+
+    /// One turn of the running loop; `Err` ends the run.
+    fn turn(&mut self, cyclic: &mut Option<&mut Cyclic>, clocks: &mut Clocks) -> Result<(), Exit> {
+        self.take_client_input(cyclic)?;
+        let now = Instant::now();
+        self.count_slaves(now)?;
+        self.ask_emergencies(cyclic.as_deref(), clocks, now)?;
+        let progressed = match cyclic.as_deref_mut() {
+            Some(c) if self.fifo_due(c, now) => {
+                self.fifo_exchange(c, now)?;
+                true
             }
-            while let Ok(w) = self.outputs.try_recv() {
-                self.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice()));
-            }
-            if self.writers.take_gone() {
-                self.last_writer_gone(cyclic.as_deref_mut());
-            }
-            if self.take_new_config() {
-                return Exit::Recover(RecoverCause::NewConfig);
-            }
-            match self.action.take() {
-                Some(NetworkAction::Reinit) => return Exit::Recover(RecoverCause::ReinitRequested),
-                Some(NetworkAction::WarmReset) => {
-                    // The chip resets at once; its answer may never come.
-                    let _ = self.port.call(&WarmReset);
-                    return Exit::Recover(RecoverCause::WarmResetRequested);
-                }
-                None => {}
-            }
-            let now = Instant::now();
-            if self.active.is_none() && self.queue.is_empty() && now.duration_since(last_census) >= CENSUS {
-                // Slaves plugged in or out change the count the chip sees.
-                last_census = now;
-                match self.port.call(&SlaveCountGet) {
-                    Ok(a) if usize::from(a.header.return_value) != slaves => {
-                        let to = usize::from(a.header.return_value);
-                        return Exit::Recover(RecoverCause::SlaveCount { from: slaves, to });
-                    }
-                    Ok(_) => {}
-                    Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
-                }
-            }
-            // An emergency question whose answer no exchange has brought
-            // yet: fetch it with a status exchange.
-            if self.emergencies.asked()
-                && self.active.is_none()
-                && now.duration_since(last_emergency_poll) >= super::emergencies::ANSWER_WAIT
-            {
-                if let Err(e) = self.port.send_once(&InfoUpdate).and_then(|()| self.check_emergencies()) {
-                    return Exit::Recover(RecoverCause::from_port(&e));
-                }
-            }
-            // Emergencies are read when the slot is idle; during a
-            // transaction, its status polls do it (see transaction_step).
-            if self.active.is_none()
-                && self.queue.is_empty()
-                && now.duration_since(last_emergency_poll) >= super::emergencies::POLL
-                && !cyclic.as_deref().is_some_and(|c| self.fifo_due(c, now))
-            {
-                if let Err(e) = self.poll_emergencies(&mut last_emergency_poll, now) {
-                    return Exit::Recover(RecoverCause::from_port(&e));
-                }
-            }
-            let result = match cyclic.as_deref_mut() {
-                Some(c) if self.fifo_due(c, now) => self.fifo_exchange(c, now).map(|()| true),
-                _ => self.transaction_step(cyclic.as_deref_mut(), &mut last_poll, &mut last_emergency_poll),
-            };
-            let progressed = match result {
-                Ok(p) => p,
-                Err(e) => return Exit::Recover(RecoverCause::from_port(&e)),
-            };
-            if let Err(e) = self.check_emergencies() {
-                return Exit::Recover(RecoverCause::from_port(&e));
-            }
-            if self.held_below_target {
-                // Slaves held below OP on purpose may deliver nothing.
-                self.intake.flow.excuse(Instant::now());
-            } else if let Some(stall) = self.intake.stall.take() {
-                if let RecoverCause::InputStall { age, .. } = &stall {
-                    let age_us = age.as_micros() as u64;
-                    self.events.emit(EventKind::ProcessData { flowing: false, age_us });
-                }
-                return Exit::Recover(stall);
-            }
-            if !flowing && cyclic.is_some() && self.intake.flow.flowed() {
-                // Running means process data flows: said at the first frame.
-                flowing = true;
-                self.set_phase(Phase::Running);
-            }
-            let h = *self.port.status();
-            self.publish_status(Instant::now());
-            if let Err(why) = self.check_health(&h) {
-                return Exit::Recover(why);
-            }
-            let now = Instant::now();
-            if self.held_below_target {
-                // Slaves held below the target on purpose miss the
-                // exchange; a streak counts from when the hold ends.
-                wkc_streak = None;
-                wkc_errors = h.wkc_errors;
-            } else if h.wkc_errors != wkc_errors {
-                debug!(count = h.wkc_errors, "working-counter errors");
-                wkc_errors = h.wkc_errors;
-                let first = wkc_streak.map_or(now, |(f, _)| f);
-                wkc_streak = Some((first, now));
-                if now.duration_since(first) > WKC_STREAK {
-                    return Exit::Recover(RecoverCause::WkcStreak(WKC_STREAK));
-                }
-            } else if wkc_streak.is_some_and(|(_, last)| now.duration_since(last) > WKC_QUIET) {
-                wkc_streak = None;
-            }
-            if cyclic.is_some() && !h.status.flags.contains(StatusFlags::PDO_CONFIGURED) {
-                return Exit::Recover(RecoverCause::ExchangeStopped);
-            }
-            // The FIFO error bit stays set until cleared, and headers lag the
-            // clear: one alarm per rising edge, not one per header showing it.
-            // Without outputs there is nothing to run dry.
-            let has_outputs = cyclic.as_deref().is_some_and(|c| c.rx_size > 0);
-            let dry = has_outputs && h.errors.contains(ErrorFlags::FIFO_ERROR);
-            if dry && !fifo_dry {
-                self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
-                self.events.emit(EventKind::FifoUnderrun);
-                warn!("RxFIFO ran dry: outputs repeated");
-            }
-            if h.errors.contains(ErrorFlags::FIFO_ERROR) {
-                self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
-            }
-            fifo_dry = dry;
-            if !progressed {
-                let now = Instant::now();
-                let wake = match cyclic.as_deref() {
-                    Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room(c)),
-                    None => now + Duration::from_millis(50),
-                };
-                // Idle, the next emergency question (or the exchange that
-                // brings its answer) is due too.
-                let emergency = last_emergency_poll
-                    + if self.emergencies.asked() { super::emergencies::ANSWER_WAIT } else { super::emergencies::POLL };
-                let until = if self.active.is_some() { now + POLL } else { wake.min(emergency) };
-                match self.idle_until(until) {
-                    Some(Command::Job(j)) => self.queue.push(j),
-                    Some(Command::Stop) => return self.safe_stop(cyclic.as_deref_mut()),
-                    None => {}
-                }
-            }
+            _ => self.transaction_step(cyclic.as_deref_mut(), clocks, now)?,
+        };
+        self.check_emergencies()?;
+        self.watch_flow(cyclic.is_some(), Instant::now())?;
+        self.watch_header(Instant::now())?;
+        if !progressed {
+            self.idle(cyclic, clocks)?;
         }
+        Ok(())
+    }
+
+    /// Requests, output writes, the last writer leaving, a new
+    /// configuration, a re-init or warm reset.
+    fn take_client_input(&mut self, cyclic: &mut Option<&mut Cyclic>) -> Result<(), Exit> {
+        if !self.take_commands() {
+            return Err(self.safe_stop(cyclic.as_deref_mut()));
+        }
+        while let Ok(w) = self.outputs.try_recv() {
+            self.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice()));
+        }
+        if self.writers.take_gone() {
+            self.last_writer_gone(cyclic.as_deref_mut());
+        }
+        if self.take_new_config() {
+            return Err(Exit::Recover(RecoverCause::NewConfig));
+        }
+        match self.action.take() {
+            Some(NetworkAction::Reinit) => Err(Exit::Recover(RecoverCause::ReinitRequested)),
+            Some(NetworkAction::WarmReset) => {
+                // The chip resets at once; its answer may never come.
+                let _ = self.port.call(&WarmReset);
+                Err(Exit::Recover(RecoverCause::WarmResetRequested))
+            }
+            None => Ok(()),
+        }
+    }
+
+    /// Counts the slaves every `supervisor::CENSUS` while the slot is idle:
+    /// slaves plugged in or out change the count the chip sees.
+    fn count_slaves(&mut self, now: Instant) -> Result<(), Exit> {
+        if self.active.is_none() && self.queue.is_empty() && self.supervisor.census_due(now) {
+            let count = self.port.call(&SlaveCountGet)?.header.return_value;
+            self.supervisor.census(usize::from(count), now)?;
+        }
+        Ok(())
+    }
+
+    /// Keeps the emergency question going: an answer no exchange has
+    /// brought yet is fetched with a status exchange; a new question is
+    /// asked every `emergencies::POLL` while the slot is idle (during a
+    /// transaction, its status polls do it: see `transaction_step`) and no
+    /// FIFO exchange is due.
+    fn ask_emergencies(&mut self, cyclic: Option<&Cyclic>, clocks: &mut Clocks, now: Instant) -> Result<(), Exit> {
+        let since = now.saturating_duration_since(clocks.emergency_poll);
+        if self.emergencies.asked() && self.active.is_none() && since >= emergencies::ANSWER_WAIT {
+            self.port.send_once(&InfoUpdate)?;
+            self.check_emergencies()?;
+        }
+        if self.active.is_none()
+            && self.queue.is_empty()
+            && since >= emergencies::POLL
+            && !cyclic.is_some_and(|c| self.fifo_due(c, now))
+        {
+            self.poll_emergencies(&mut clocks.emergency_poll, now)?;
+        }
+        Ok(())
+    }
+
+    /// Input frames must keep coming (a deliberate hold below the target
+    /// state excuses them); the first one makes the engine "running".
+    fn watch_flow(&mut self, cyclic: bool, now: Instant) -> Result<(), Exit> {
+        if let Some(stall) = self.supervisor.take_stall(self.held_below_target, now) {
+            if let RecoverCause::InputStall { age, .. } = &stall {
+                let age_us = age.as_micros() as u64;
+                self.events.emit(EventKind::ProcessData { flowing: false, age_us });
+            }
+            return Err(stall.into());
+        }
+        if cyclic && self.telemetry.phase() != Phase::Running && self.supervisor.flowed() {
+            // Running means process data flows: said at the first frame.
+            self.set_phase(Phase::Running);
+        }
+        Ok(())
+    }
+
+    /// Publishes the last answer's header and judges it (see
+    /// [`Supervisor::header`]); a RxFIFO that ran dry is an alarm.
+    fn watch_header(&mut self, now: Instant) -> Result<(), Exit> {
+        let h = *self.port.status();
+        self.publish_status(now);
+        let news = self.supervisor.header(&h, self.held_below_target, now)?;
+        if news.ran_dry {
+            self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
+            self.events.emit(EventKind::FifoUnderrun);
+            warn!("RxFIFO ran dry: outputs repeated");
+        }
+        if news.clear_fifo_error {
+            self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
+        }
+        Ok(())
+    }
+
+    /// Nothing progressed: waits until the next exchange, transaction poll
+    /// or emergency question is due, or a command arrives.
+    fn idle(&mut self, cyclic: &mut Option<&mut Cyclic>, clocks: &Clocks) -> Result<(), Exit> {
+        let now = Instant::now();
+        let wake = match cyclic.as_deref() {
+            Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room(c)),
+            None => now + IDLE,
+        };
+        let emergency =
+            clocks.emergency_poll + if self.emergencies.asked() { emergencies::ANSWER_WAIT } else { emergencies::POLL };
+        let until = if self.active.is_some() { now + POLL } else { wake.min(emergency) };
+        match self.idle_until(until) {
+            Some(Command::Job(j)) => self.queue.push(j),
+            Some(Command::Stop) => return Err(self.safe_stop(cyclic.as_deref_mut())),
+            None => {}
+        }
+        Ok(())
     }
 
     /// Waits until `until` or the next command. The last `spin_us` of a
@@ -392,7 +372,16 @@ impl<L: Link> Engine<L> {
         let outputs = c.push_bytes(n);
         let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
         let count = a.header.rx_fifo_count;
-        let read = self.intake.answer(c, &self.telemetry, &a.header, a.data, now);
+        // Inputs out, their freshness noted and judged (a network without
+        // inputs counts the answer itself as the sign of life).
+        let mut read = 0;
+        if a.header.code == CommandCode::PdoDataFifoOp {
+            read = self.intake.inputs.publish(a.data, c.tx_size, now);
+            self.telemetry.input_frames.fetch_add(read as u64, Relaxed);
+            if self.supervisor.fifo_answer(read, c.tx_size > 0, now) {
+                self.telemetry.newest_input_ns.store(self.intake.ns(now), Relaxed);
+            }
+        }
         // A full packet of inputs: more may be waiting.
         let drained = read < self.port.data_size() / c.tx_size.max(1);
         c.answered(now, n, count, drained);
@@ -417,16 +406,18 @@ impl<L: Link> Engine<L> {
         self.emergencies.ask(&mut self.port)
     }
 
+    /// One step of the transaction on the blocking slot (taking the next
+    /// job when the slot is free). True when it sent something worth not
+    /// idling for.
     fn transaction_step(
         &mut self,
         cyclic: Option<&mut Cyclic>,
-        last_poll: &mut Instant,
-        last_emergency_poll: &mut Instant,
+        clocks: &mut Clocks,
+        now: Instant,
     ) -> Result<bool, PortError> {
-        let now = Instant::now();
         if self.active.is_none() {
             while let Some(j) = self.queue.pop() {
-                if let Request::SetState { state, .. } = &j.request {
+                if let SlotRequest::SetState { state, .. } = &j.request {
                     self.held_below_target = state.to_u8() < self.config.cycle.target().to_u8();
                 }
                 if let Some(a) = Active::new(j) {
@@ -445,13 +436,13 @@ impl<L: Link> Engine<L> {
             self.telemetry.transactions.fetch_add(1, Relaxed);
         }
         let sent = self.port.stats().exchanges != exchanges;
-        if progress == Progress::Waiting && now.duration_since(*last_poll) >= POLL {
+        if progress == Progress::Waiting && now.saturating_duration_since(clocks.transaction_poll) >= POLL {
             // The busy bit only changes in answers: fetch one now. An
             // emergency read that is due is the poll; else, with cyclic
             // data running, a FIFO exchange (it reads inputs and tops up
             // outputs anyway).
-            if now.duration_since(*last_emergency_poll) >= super::emergencies::POLL {
-                self.poll_emergencies(last_emergency_poll, now)?;
+            if now.saturating_duration_since(clocks.emergency_poll) >= emergencies::POLL {
+                self.poll_emergencies(&mut clocks.emergency_poll, now)?;
             } else {
                 match cyclic {
                     Some(c) => self.fifo_exchange(c, now)?,
@@ -460,7 +451,7 @@ impl<L: Link> Engine<L> {
                     }
                 }
             }
-            *last_poll = now;
+            clocks.transaction_poll = now;
             return Ok(true);
         }
         Ok(sent && progress != Progress::Waiting)

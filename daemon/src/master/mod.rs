@@ -24,7 +24,9 @@ use crate::engine::bringup::NetworkLayout;
 use crate::engine::error::EngineError;
 use crate::engine::events::Event;
 use crate::engine::inputs::read_record;
-use crate::engine::job::{Job, PendingAction, Request, TransferProgress, Writers};
+use crate::engine::network_action::PendingAction;
+use crate::engine::output_writes::Writers;
+use crate::engine::slot::{Job, SlotRequest, TransferProgress};
 use crate::engine::telemetry::{Phase, Snapshot, Telemetry};
 use crate::engine::{Command, Engine, Parts};
 use crate::link::SimHandle;
@@ -61,18 +63,7 @@ pub struct InputFrame {
     pub data: Vec<u8>,
 }
 
-tokio::task_local! {
-    /// The client the current task works for (see [`as_client`]).
-    static CLIENT: u64;
-}
-
-/// Runs `work` on behalf of client `id` (non-zero: a connection, a peer):
-/// its requests to the chip's blocking slot take turns with other clients'
-/// instead of queuing behind them. Requests made outside any client share
-/// one turn.
-pub async fn as_client<F: std::future::Future>(id: u64, work: F) -> F::Output {
-    CLIENT.scope(id, work).await
-}
+pub use crate::engine::slot::as_client;
 
 /// [`Master::verdict`]: the health, and the input age it was judged on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -333,20 +324,21 @@ impl Master {
         Ok((Self::start(link, config), sim))
     }
 
-    async fn request(&self, request: Request, timeout: Option<Duration>) -> Result<Vec<u8>, EngineError> {
+    async fn request(&self, request: SlotRequest, timeout: Option<Duration>) -> Result<Vec<u8>, EngineError> {
         self.request_with_progress(request, timeout, None).await
     }
 
     async fn request_with_progress(
         &self,
-        request: Request,
+        request: SlotRequest,
         timeout: Option<Duration>,
         progress: Option<Arc<TransferProgress>>,
     ) -> Result<Vec<u8>, EngineError> {
         let timeout = timeout.unwrap_or(self.default_timeout);
         let (reply, rx) = oneshot::channel();
-        let client = CLIENT.try_with(|c| *c).unwrap_or(0);
-        let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client };
+        let client = crate::engine::slot::current_client();
+        let buffer = Vec::with_capacity(crate::engine::slot::request::reply_capacity(&request));
+        let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client, buffer };
         match self.commands.try_send(Command::Job(job)) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),

@@ -10,7 +10,7 @@ use super::Master;
 use crate::config::Config;
 use crate::engine::error::EngineError;
 use crate::engine::events::EventKind;
-use crate::engine::job::NetworkAction;
+use crate::engine::network_action::NetworkAction;
 use crate::engine::telemetry::{Phase, Snapshot};
 
 impl Master {

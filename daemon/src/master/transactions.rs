@@ -14,8 +14,8 @@ use ecmxf_wire::{EcatState, Reply, ReplyFields};
 
 use super::Master;
 use crate::engine::error::EngineError;
-pub use crate::engine::job::Immediate;
-use crate::engine::job::{Request, TransferProgress};
+pub use crate::engine::slot::Immediate;
+use crate::engine::slot::{SlotRequest, TransferProgress};
 
 /// What a raw datagram brought back.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -36,7 +36,7 @@ impl Master {
         complete: bool,
         timeout: Option<Duration>,
     ) -> Result<Vec<u8>, EngineError> {
-        self.request(Request::SdoRead { slave, index, subindex, complete }, timeout).await
+        self.request(SlotRequest::SdoRead { slave, index, subindex, complete }, timeout).await
     }
 
     /// SDO download.
@@ -49,12 +49,12 @@ impl Master {
         data: Vec<u8>,
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
-        self.request(Request::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
+        self.request(SlotRequest::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
     }
 
     /// SII words `word` and `word + 1`.
     pub async fn eeprom_read(&self, slave: u8, word: u16, timeout: Option<Duration>) -> Result<[u8; 4], EngineError> {
-        let d = self.request(Request::EepromRead { slave, word }, timeout).await?;
+        let d = self.request(SlotRequest::EepromRead { slave, word }, timeout).await?;
         let mut out = [0xFF; 4];
         for (o, b) in out.iter_mut().zip(d) {
             *o = b;
@@ -116,7 +116,7 @@ impl Master {
         value: u16,
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
-        self.request(Request::EepromWrite { slave, word, value }, timeout).await.map(|_| ())
+        self.request(SlotRequest::EepromWrite { slave, word, value }, timeout).await.map(|_| ())
     }
 
     /// Requests a state.
@@ -129,20 +129,20 @@ impl Master {
         if !state.is_requestable() {
             return Err(EngineError::BadArgument { field: "state", reason: format!("{state} cannot be requested") });
         }
-        self.request(Request::SetState { target, state }, timeout).await.map(|_| ())
+        self.request(SlotRequest::SetState { target, state }, timeout).await.map(|_| ())
     }
 
     /// The state a slave (or, for `All`, the network) is in now, freshly
     /// read from the slaves.
     pub async fn get_state(&self, target: SlaveSelector, timeout: Option<Duration>) -> Result<EcatState, EngineError> {
-        let d = self.request(Request::GetState { target }, timeout).await?;
+        let d = self.request(SlotRequest::GetState { target }, timeout).await?;
         Ok(EcatState::from_u8(d.first().copied().unwrap_or(0)))
     }
 
     /// One item of slave information, as the chip answers it; decode with
     /// [`SlaveInfo::decode`] for `item`.
     pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
-        let d = self.request(Request::SlaveInfo { slave, item }, None).await?;
+        let d = self.request(SlotRequest::SlaveInfo { slave, item }, None).await?;
         SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("slave {slave} {item:?}: {e}")))?;
         Ok(d)
     }
@@ -159,7 +159,7 @@ impl Master {
             let reason = format!("{assign_index:#06x}; use {RX_PDO_ASSIGN:#06x} or {TX_PDO_ASSIGN:#06x}");
             return Err(EngineError::BadArgument { field: "assign_index", reason });
         }
-        let d = self.request(Request::PdoConfigRead { slave, assign_index }, timeout).await?;
+        let d = self.request(SlotRequest::PdoConfigRead { slave, assign_index }, timeout).await?;
         let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
         PdoConfigReply::decode(&fields, &d)
             .map(|r| r.0)
@@ -187,7 +187,7 @@ impl Master {
             let reason = format!("{:?} is a reading datagram and sends no data", head.command);
             return Err(EngineError::BadArgument { field: "data", reason });
         }
-        let d = self.request(Request::Raw { head, data }, timeout).await?;
+        let d = self.request(SlotRequest::Raw { head, data }, timeout).await?;
         let Some((wkc, data)) = d.split_first_chunk::<2>() else {
             return Err(EngineError::Failed("raw datagram: answer without a working counter".into()));
         };
@@ -205,7 +205,7 @@ impl Master {
         progress: Option<Arc<TransferProgress>>,
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
-        let request = Request::FoeWrite { slave, name: name.to_owned(), password, data };
+        let request = SlotRequest::FoeWrite { slave, name: name.to_owned(), password, data };
         self.request_with_progress(request, timeout, progress).await.map(|_| ())
     }
 
@@ -220,14 +220,14 @@ impl Master {
         progress: Option<Arc<TransferProgress>>,
         timeout: Option<Duration>,
     ) -> Result<Vec<u8>, EngineError> {
-        let request = Request::FoeRead { slave, name: name.to_owned(), password, max_len };
+        let request = SlotRequest::FoeRead { slave, name: name.to_owned(), password, max_len };
         self.request_with_progress(request, timeout, progress).await
     }
 
     /// A non-blocking chip command (peripherals, CiA402 helper, emergency
     /// history): its return value and data.
     pub async fn immediate(&self, command: Immediate, timeout: Option<Duration>) -> Result<(u8, Vec<u8>), EngineError> {
-        let mut d = self.request(Request::Immediate(command), timeout).await?;
+        let mut d = self.request(SlotRequest::Immediate(command), timeout).await?;
         if d.is_empty() {
             return Err(EngineError::Failed(format!("{command:?}: empty answer")));
         }

@@ -28,8 +28,8 @@ use ecmxf_wire::payload::slave_info::SlaveInfoGet;
 use ecmxf_wire::payload::state::{StateCheck, StateGet};
 use ecmxf_wire::{Reply, ReplyFields};
 
-use super::error::EngineError;
-use super::job::{Immediate, Job, Request, TransferProgress};
+use super::request::{Immediate, Job, SlotRequest, TransferProgress};
+use crate::engine::error::EngineError;
 use crate::link::Link;
 use crate::port::{Answer, Port, PortError};
 use foe::{check_foe, chip_timeout_us};
@@ -65,7 +65,7 @@ type ReplyTo = tokio::sync::oneshot::Sender<Result<Vec<u8>, EngineError>>;
 /// The transaction in the slot.
 #[derive(Debug)]
 pub struct Active {
-    request: Request,
+    request: SlotRequest,
     deadline: Instant,
     /// Who waits for the result; `None` once they gave up (orphaned).
     reply: Option<ReplyTo>,
@@ -75,8 +75,20 @@ pub struct Active {
     cursor: u32,
     /// FoE: bytes in all.
     total: u32,
-    /// FoE read: the file so far.
+    /// The reply's bytes (for FoE reads, the file so far): the caller's
+    /// buffer, with room for any answer (see `request::reply_capacity`), so
+    /// this thread copies instead of allocating.
     buffer: Vec<u8>,
+}
+
+/// The reply made of `parts`, in the caller's `buffer` (taken: an empty
+/// `Vec` does not allocate).
+fn fill(buffer: &mut Vec<u8>, parts: &[&[u8]]) -> Vec<u8> {
+    buffer.clear();
+    for p in parts {
+        buffer.extend_from_slice(p);
+    }
+    std::mem::take(buffer)
 }
 
 /// Whether the chip refused the command (error bit7: bad parameter).
@@ -113,7 +125,7 @@ impl Active {
             progress: job.progress,
             cursor: 0,
             total: 0,
-            buffer: Vec::new(),
+            buffer: job.buffer,
         })
     }
 
@@ -154,7 +166,7 @@ impl Active {
         }
         let data_size = port.data_size();
         let answer = refused(&match &self.request {
-            Request::SdoRead { slave, index, subindex, complete } => port.call(&SdoRequest {
+            SlotRequest::SdoRead { slave, index, subindex, complete } => port.call(&SdoRequest {
                 slave: *slave,
                 index: *index,
                 subindex: *subindex,
@@ -162,7 +174,7 @@ impl Active {
                 timeout_us: SDO_TIMEOUT_US,
                 access: SdoAccess::Read { max_len: (data_size - SDO_REQ_HEADER_LEN) as u16 },
             })?,
-            Request::SdoWrite { slave, index, subindex, complete, data } => {
+            SlotRequest::SdoWrite { slave, index, subindex, complete, data } => {
                 if data.len() + SDO_REQ_HEADER_LEN > data_size {
                     let field = "data";
                     let reason = format!("{} bytes do not fit one {data_size}-byte data section", data.len());
@@ -177,29 +189,29 @@ impl Active {
                     access: SdoAccess::Write(data),
                 })?
             }
-            Request::EepromRead { slave, word } => port.call(&EepromRequest {
+            SlotRequest::EepromRead { slave, word } => port.call(&EepromRequest {
                 slave: (*slave).into(),
                 access: EepromAccess::Read { address: *word },
                 timeout_us: 100_000,
             })?,
-            Request::EepromWrite { slave, word, value } => port.call(&EepromRequest {
+            SlotRequest::EepromWrite { slave, word, value } => port.call(&EepromRequest {
                 slave: (*slave).into(),
                 access: EepromAccess::Write { address: *word, value: *value },
                 timeout_us: 100_000,
             })?,
-            Request::SetState { target, state } => port.call(&StateCheck { target: *target, state: *state })?,
-            Request::GetState { .. } => port.call(&StateUpdate)?,
-            Request::PdoConfigRead { slave, assign_index } => {
+            SlotRequest::SetState { target, state } => port.call(&StateCheck { target: *target, state: *state })?,
+            SlotRequest::GetState { .. } => port.call(&StateUpdate)?,
+            SlotRequest::PdoConfigRead { slave, assign_index } => {
                 port.call(&PdoConfigReq { slave: *slave, assign_index: *assign_index })?
             }
-            Request::Raw { head, data } => {
+            SlotRequest::Raw { head, data } => {
                 if data.len() + RAW_HEADER_LEN > data_size {
                     let reason = format!("{} bytes do not fit one {data_size}-byte data section", data.len());
                     return Ok((None, self.finish(Err(EngineError::BadArgument { field: "data", reason }))));
                 }
                 port.call(&RawRequest { head: *head, data })?
             }
-            Request::FoeWrite { name, data, .. } => {
+            SlotRequest::FoeWrite { name, data, .. } => {
                 if let Err(e) = check_foe(name, data.len(), data_size) {
                     return Ok((None, self.finish(Err(e))));
                 }
@@ -207,7 +219,7 @@ impl Active {
                 self.report();
                 return self.foe_stage_next(port, now);
             }
-            Request::FoeRead { slave, name, password, max_len } => {
+            SlotRequest::FoeRead { slave, name, password, max_len } => {
                 if let Err(e) = check_foe(name, *max_len as usize, data_size) {
                     return Ok((None, self.finish(Err(e))));
                 }
@@ -224,7 +236,7 @@ impl Active {
                 let refused = refused(&port.call(&FoeRequest::Upload(transfer))?);
                 return self.started(port, refused, Step::FoeUpload);
             }
-            Request::Immediate(command) => {
+            SlotRequest::Immediate(command) => {
                 let a = match command {
                     Immediate::GpioConfig(c) => port.call(c)?,
                     Immediate::Gpio(c) => port.call(c)?,
@@ -242,15 +254,13 @@ impl Active {
                     let what = self.describe();
                     return Ok((None, self.finish(Err(EngineError::Refused(what)))));
                 }
-                let mut out = Vec::with_capacity(1 + a.data.len());
-                out.push(a.header.return_value);
-                out.extend_from_slice(a.data);
+                let out = fill(&mut self.buffer, &[&[a.header.return_value], a.data]);
                 return Ok((None, self.finish(Ok(out))));
             }
-            Request::SlaveInfo { slave, item } => {
+            SlotRequest::SlaveInfo { slave, item } => {
                 let a = port.call(&SlaveInfoGet { slave: *slave, item: *item })?;
                 let refused = a.header.errors.contains(ErrorFlags::COMMAND_ERROR);
-                let data = a.data.to_vec();
+                let data = fill(&mut self.buffer, &[a.data]);
                 if refused {
                     port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
                     return Ok((
@@ -285,11 +295,11 @@ impl Active {
     /// The request in words, for errors.
     fn describe(&self) -> String {
         match &self.request {
-            Request::Raw { head, .. } => {
+            SlotRequest::Raw { head, .. } => {
                 format!("{:?} datagram ADP {:#06x} ADO {:#06x}", head.command, head.adp, head.ado)
             }
-            Request::FoeWrite { slave, name, .. } => format!("FoE write of {name:?} to slave {slave}"),
-            Request::FoeRead { slave, name, .. } => format!("FoE read of {name:?} from slave {slave}"),
+            SlotRequest::FoeWrite { slave, name, .. } => format!("FoE write of {name:?} to slave {slave}"),
+            SlotRequest::FoeRead { slave, name, .. } => format!("FoE read of {name:?} from slave {slave}"),
             other => format!("{other:?}"),
         }
     }
@@ -326,25 +336,26 @@ impl Active {
             }
             return self.foe_continue(port, now);
         }
-        let request = self.request.clone();
-        let result = match (&request, failed) {
+        // Borrowed, not cloned: a request may hold data (an SDO write's).
+        let result = match (&self.request, failed) {
             (
-                Request::SdoRead { slave, index, subindex, .. } | Request::SdoWrite { slave, index, subindex, .. },
+                SlotRequest::SdoRead { slave, index, subindex, .. }
+                | SlotRequest::SdoWrite { slave, index, subindex, .. },
                 true,
             ) => {
                 let a = port.call(&SdoAbortCodeGet)?;
                 let code = SdoAbortReply::decode(&fields(&a), a.data).map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
-            (Request::SdoRead { .. }, false) => {
+            (SlotRequest::SdoRead { .. }, false) => {
                 let a = port.call(&SdoGet)?;
-                Ok(a.data.to_vec())
+                Ok(fill(&mut self.buffer, &[a.data]))
             }
-            (Request::SdoWrite { .. }, false) => Ok(Vec::new()),
-            (Request::EepromRead { slave, word } | Request::EepromWrite { slave, word, .. }, true) => {
+            (SlotRequest::SdoWrite { .. }, false) => Ok(Vec::new()),
+            (SlotRequest::EepromRead { slave, word } | SlotRequest::EepromWrite { slave, word, .. }, true) => {
                 Err(EngineError::Failed(format!("EEPROM word {word:#06x} of slave {slave}")))
             }
-            (Request::EepromWrite { slave, word, .. }, false) if self.step == Step::Wait => {
+            (SlotRequest::EepromWrite { slave, word, .. }, false) if self.step == Step::Wait => {
                 // Read it back.
                 port.call(&EepromRequest {
                     slave: (*slave).into(),
@@ -354,22 +365,20 @@ impl Active {
                 self.step = Step::Verify;
                 return Ok((Some(self), Progress::Sent));
             }
-            (Request::EepromRead { slave, word }, false) | (Request::EepromWrite { slave, word, .. }, false) => {
+            (SlotRequest::EepromRead { slave, word }, false)
+            | (SlotRequest::EepromWrite { slave, word, .. }, false) => {
                 let a = port.call(&EepromGet)?;
                 let reply = EepromReply::decode(&fields(&a), a.data).ok();
                 match reply {
-                    Some(r) if r.error == 0 && r.data.len() >= 2 => {
-                        let data = r.data.to_vec();
-                        if let Request::EepromWrite { value, .. } = request {
-                            if data[..2] != value.to_le_bytes() {
-                                let got = u16::from_le_bytes([data[0], data[1]]);
-                                return Ok((None, self.finish(Err(EngineError::Failed(format!(
-                                    "EEPROM word {word:#06x} of slave {slave} reads back {got:#06x}, wrote {value:#06x}"
-                                ))))));
-                            }
+                    Some(r) if r.error == 0 && r.data.len() >= 2 => match &self.request {
+                        SlotRequest::EepromWrite { value, .. } if r.data[..2] != value.to_le_bytes() => {
+                            let got = u16::from_le_bytes([r.data[0], r.data[1]]);
+                            Err(EngineError::Failed(format!(
+                                "EEPROM word {word:#06x} of slave {slave} reads back {got:#06x}, wrote {value:#06x}"
+                            )))
                         }
-                        Ok(data)
-                    }
+                        _ => Ok(fill(&mut self.buffer, &[r.data])),
+                    },
                     Some(r) => Err(EngineError::Failed(format!(
                         "EEPROM word {word:#06x} of slave {slave}: error code {}",
                         r.error
@@ -379,43 +388,40 @@ impl Active {
                     }
                 }
             }
-            (Request::SetState { state, .. }, true) => Err(EngineError::WrongState(format!("a slave refused {state}"))),
-            (Request::SetState { .. }, false) => Ok(Vec::new()),
-            (Request::GetState { .. }, true) => {
+            (SlotRequest::SetState { state, .. }, true) => {
+                Err(EngineError::WrongState(format!("a slave refused {state}")))
+            }
+            (SlotRequest::SetState { .. }, false) => Ok(Vec::new()),
+            (SlotRequest::GetState { .. }, true) => {
                 Err(EngineError::Failed("the slaves' states could not be refreshed".into()))
             }
-            (Request::GetState { target }, false) => {
+            (SlotRequest::GetState { target }, false) => {
                 let a = port.call(&StateGet(*target))?;
                 if refused(&a) {
                     port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
                     Err(EngineError::BadArgument { field: "slave", reason: format!("no such slave: {target:?}") })
                 } else {
-                    Ok(vec![a.header.return_value])
+                    Ok(fill(&mut self.buffer, &[&[a.header.return_value]]))
                 }
             }
-            (Request::SlaveInfo { .. } | Request::Immediate(_), _) => Ok(Vec::new()),
-            (Request::PdoConfigRead { slave, assign_index }, true) => Err(EngineError::Failed(format!(
+            (SlotRequest::SlaveInfo { .. } | SlotRequest::Immediate(_), _) => Ok(Vec::new()),
+            (SlotRequest::PdoConfigRead { slave, assign_index }, true) => Err(EngineError::Failed(format!(
                 "PDO assignment {assign_index:#06x} of slave {slave} could not be read"
             ))),
-            (Request::PdoConfigRead { .. }, false) => {
+            (SlotRequest::PdoConfigRead { .. }, false) => {
                 let a = port.call(&PdoConfigGet)?;
-                Ok(a.data.to_vec())
+                Ok(fill(&mut self.buffer, &[a.data]))
             }
-            (Request::Raw { .. }, true) => Err(EngineError::Failed(self.describe())),
-            (Request::Raw { .. }, false) => {
+            (SlotRequest::Raw { .. }, true) => Err(EngineError::Failed(self.describe())),
+            (SlotRequest::Raw { .. }, false) => {
                 let a = port.call(&RawGet)?;
                 match RawReply::decode(&fields(&a), a.data) {
-                    Ok(r) => {
-                        let mut out = Vec::with_capacity(2 + r.data.len());
-                        out.extend_from_slice(&r.working_counter.to_le_bytes());
-                        out.extend_from_slice(r.data);
-                        Ok(out)
-                    }
+                    Ok(r) => Ok(fill(&mut self.buffer, &[&r.working_counter.to_le_bytes(), r.data])),
                     Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
                 }
             }
             // Handled above.
-            (Request::FoeWrite { .. } | Request::FoeRead { .. }, _) => Ok(Vec::new()),
+            (SlotRequest::FoeWrite { .. } | SlotRequest::FoeRead { .. }, _) => Ok(Vec::new()),
         };
         Ok((None, self.finish(result)))
     }

@@ -4,12 +4,12 @@
 //! client's single read by at most one transaction per busy client, not by
 //! two hundred (the vendor driver's one global mutex gives no such promise).
 //!
-//! Clients are numbered by the API layer (see `master::as_client`); requests
+//! Clients are numbered by the API layer (see [`super::as_client`]); requests
 //! made outside any client share line 0.
 
 use std::collections::VecDeque;
 
-use super::job::Job;
+use super::request::Job;
 
 /// Per-client lines served round-robin.
 #[derive(Debug, Default)]
@@ -85,17 +85,17 @@ mod tests {
     use std::time::Instant;
 
     use super::*;
-    use crate::engine::job::Request;
+    use crate::engine::slot::SlotRequest;
 
     fn job(slave: u8) -> Job {
         let (reply, _) = tokio::sync::oneshot::channel();
-        let request = Request::SlaveInfo { slave, item: ecmxf_wire::payload::slave_info::SlaveInfoCode::Name };
-        Job { request, deadline: Instant::now(), reply, progress: None, client: 0 }
+        let request = SlotRequest::SlaveInfo { slave, item: ecmxf_wire::payload::slave_info::SlaveInfoCode::Name };
+        Job { request, deadline: Instant::now(), reply, progress: None, client: 0, buffer: Vec::new() }
     }
 
     fn slave(j: Job) -> u8 {
         match j.request {
-            Request::SlaveInfo { slave, .. } => slave,
+            SlotRequest::SlaveInfo { slave, .. } => slave,
             _ => unreachable!(),
         }
     }

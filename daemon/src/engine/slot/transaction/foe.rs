@@ -13,7 +13,7 @@ use ecmxf_wire::payload::foe::{
 
 use super::{Active, Progress, Step, fields, refused};
 use crate::engine::error::EngineError;
-use crate::engine::job::Request;
+use crate::engine::slot::SlotRequest;
 use crate::link::Link;
 use crate::port::{Port, PortError};
 
@@ -25,7 +25,7 @@ impl Active {
         port: &mut Port<L>,
         now: Instant,
     ) -> Result<(Option<Self>, Progress), PortError> {
-        let Request::FoeWrite { slave, name, password, data } = &self.request else {
+        let SlotRequest::FoeWrite { slave, name, password, data } = &self.request else {
             return Ok((None, Progress::Done));
         };
         let chunk = foe_chunk(port.data_size());
@@ -76,7 +76,7 @@ impl Active {
                 let a = port.call(&FoeGet)?;
                 let stored = a.data.first_chunk::<4>().map(|b| u32::from_le_bytes(*b));
                 let max = match &self.request {
-                    Request::FoeRead { max_len, .. } => *max_len,
+                    SlotRequest::FoeRead { max_len, .. } => *max_len,
                     _ => 0,
                 };
                 let Some(stored) = stored else {
@@ -88,7 +88,9 @@ impl Active {
                     return Ok((None, self.finish(Err(EngineError::Failed(what)))));
                 }
                 self.total = stored;
-                self.buffer = Vec::with_capacity(stored as usize);
+                // The caller made room for `max` bytes: no allocation here.
+                self.buffer.clear();
+                self.buffer.reserve(stored as usize);
                 self.report();
                 self.foe_fetch_next(port)
             }

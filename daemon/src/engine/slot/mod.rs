@@ -1,0 +1,23 @@
+//! The scheduler of the chip's single blocking slot (v049 表三: one
+//! blocking command at a time, its end seen in the busy bit of later
+//! answers).
+//!
+//! - [`request`]: what async code asks for ([`SlotRequest`]) and how it
+//!   travels ([`Job`]: deadline, one-shot reply, client).
+//! - [`client`]: whose turn a request is ([`as_client`]).
+//! - `fair`: the queue in front of the slot, round-robin between clients.
+//! - `transaction`: the one job on the slot, advanced one guarded call at a
+//!   time between FIFO exchanges (FoE transfers in `transaction/foe.rs`).
+//!
+//! The running loop owns one [`Slot`] and asks it for the next job when the
+//! slot is free (see `engine::running`).
+
+pub mod client;
+mod fair;
+pub mod request;
+mod transaction;
+
+pub use client::{as_client, current_client};
+pub(super) use fair::FairQueue;
+pub use request::{Immediate, Job, SlotRequest, TransferProgress};
+pub(super) use transaction::{Active, Progress};
