@@ -1,7 +1,11 @@
-//! End-to-end tests that start the real `ecmxfd` binary on the simulator
-//! and talk to it over its Unix socket (and TCP/TLS), as any client would.
-//! This library is the harness: find or build the binary, start it with a
-//! private socket, wait until the bus runs, stop it with SIGTERM.
+//! End-to-end tests that start the real daemon on the simulator and talk
+//! to it over its Unix socket (and TCP/TLS), as any client would. This
+//! library is the harness. Most tests embed the daemon in the test process
+//! ([`Daemon::sim`], [`Daemon::with_config`]: `ecmxfd::run` on a thread of
+//! its own, stopped through its shutdown future); tests of what only a
+//! process has (signals, exit codes, its log, the CLI against the binary)
+//! start the `ecmxfd` binary ([`Daemon::binary_sim`],
+//! [`Daemon::binary_with_config`]) and stop it with SIGTERM.
 #![forbid(unsafe_code)]
 
 use std::path::{Path, PathBuf};
@@ -223,10 +227,22 @@ fn present(path: PathBuf) -> Option<PathBuf> {
     None
 }
 
+/// How a daemon of the tests runs.
+#[derive(Debug)]
+enum Running {
+    /// The `ecmxfd` binary, logging into a file.
+    Process(Child),
+    /// `ecmxfd::run` on a thread of the test process; the sender ends it.
+    Embedded {
+        stop: Option<tokio::sync::oneshot::Sender<()>>,
+        thread: Option<std::thread::JoinHandle<Result<(), String>>>,
+    },
+}
+
 /// A running daemon.
 #[derive(Debug)]
 pub struct Daemon {
-    child: Child,
+    running: Running,
     /// Its socket.
     pub socket: PathBuf,
     /// A folder for this daemon's files, removed on drop.
@@ -276,35 +292,76 @@ pub fn temp_dir(tag: &str) -> PathBuf {
     dir
 }
 
+/// A configuration file for a test daemon: `{dir}` in the text is
+/// replaced by the daemon's folder, `{repo}` by the workspace root.
+fn write_config(dir: &Path, text: &str) -> PathBuf {
+    let text = text.replace("{dir}", &dir.display().to_string()).replace("{repo}", &repo().display().to_string());
+    let path = dir.join("ecmxfd.toml");
+    std::fs::write(&path, text).expect("write config");
+    path
+}
+
 impl Daemon {
-    /// `ecmxfd --sim` with a private socket.
+    /// The daemon embedded, on the demo simulator (as `ecmxfd --sim`), with
+    /// a private socket.
     pub fn sim() -> Self {
-        Self::start(&["--sim"], "sim")
+        let mut config = ecmxfd::config::Config::simulator();
+        config.link = ecmxfd::config::LinkConfig::Sim { network: None };
+        Self::embed(temp_dir("sim"), config)
     }
 
-    /// `ecmxfd --sim` with more arguments.
-    pub fn sim_with(args: &[&str]) -> Self {
-        let mut all = vec!["--sim"];
-        all.extend_from_slice(args);
-        Self::start(&all, "sim")
-    }
-
-    /// `ecmxfd --config <text written to a file>`; `{dir}` in the text is
-    /// replaced by the daemon's folder, `{repo}` by the workspace root.
+    /// The daemon embedded, configured by `text` (see [`config`]; `{dir}`
+    /// and `{repo}` are replaced by the daemon's folder and the workspace).
     pub fn with_config(text: &str) -> Self {
         let dir = temp_dir("cfg");
-        let text = text.replace("{dir}", &dir.display().to_string()).replace("{repo}", &repo().display().to_string());
-        let path = dir.join("ecmxfd.toml");
-        std::fs::write(&path, text).expect("write config");
-        let path = path.display().to_string();
-        Self::start_in(dir, &["--config", &path])
+        let path = write_config(&dir, text);
+        let config = ecmxfd::config::Config::load(&path).unwrap_or_else(|e| panic!("{e}"));
+        Self::embed(dir, config)
     }
 
-    fn start(args: &[&str], tag: &str) -> Self {
-        Self::start_in(temp_dir(tag), args)
+    /// The `ecmxfd --sim` binary with a private socket.
+    pub fn binary_sim() -> Self {
+        Self::binary_sim_with(&[])
     }
 
-    fn start_in(dir: PathBuf, args: &[&str]) -> Self {
+    /// The `ecmxfd --sim` binary with more arguments.
+    pub fn binary_sim_with(args: &[&str]) -> Self {
+        let mut all = vec!["--sim"];
+        all.extend_from_slice(args);
+        Self::spawn(temp_dir("sim"), &all)
+    }
+
+    /// The `ecmxfd --config <text written to a file>` binary.
+    pub fn binary_with_config(text: &str) -> Self {
+        let dir = temp_dir("cfg");
+        let path = write_config(&dir, text).display().to_string();
+        Self::spawn(dir, &["--config", &path])
+    }
+
+    fn embed(dir: PathBuf, mut config: ecmxfd::config::Config) -> Self {
+        let socket = dir.join("ecmxfd.sock");
+        config.api.socket = Some(socket.clone());
+        let (stop, stopped) = tokio::sync::oneshot::channel::<()>();
+        let thread = std::thread::Builder::new()
+            .name("ecmxfd-embedded".into())
+            .spawn(move || {
+                let rt = tokio::runtime::Builder::new_multi_thread()
+                    .worker_threads(2)
+                    .enable_all()
+                    .build()
+                    .map_err(|e| e.to_string())?;
+                let result = rt.block_on(ecmxfd::run(config, async {
+                    let _ = stopped.await;
+                }));
+                rt.shutdown_timeout(Duration::from_millis(100));
+                result.map_err(|e| e.to_string())
+            })
+            .expect("start the embedded daemon");
+        let running = Running::Embedded { stop: Some(stop), thread: Some(thread) };
+        Self { running, socket, log: dir.join("ecmxfd.log"), dir }
+    }
+
+    fn spawn(dir: PathBuf, args: &[&str]) -> Self {
         let socket = dir.join("ecmxfd.sock");
         let log = dir.join("ecmxfd.log");
         let child = Command::new(daemon_binary())
@@ -314,7 +371,26 @@ impl Daemon {
             .stderr(std::fs::File::create(&log).expect("log file"))
             .spawn()
             .expect("start ecmxfd");
-        Self { child, socket, dir, log }
+        Self { running: Running::Process(child), socket, dir, log }
+    }
+
+    /// Whether it ended (and how), without waiting.
+    fn ended(&mut self) -> Option<String> {
+        match &mut self.running {
+            Running::Process(child) => child.try_wait().ok().flatten().map(|s| format!("exited with {s}")),
+            Running::Embedded { thread, .. } => {
+                if !thread.as_ref().is_some_and(|t| t.is_finished()) {
+                    return None;
+                }
+                let r = thread.take().map(|t| t.join());
+                Some(match r {
+                    Some(Ok(Ok(()))) => "ended".into(),
+                    Some(Ok(Err(e))) => format!("failed: {e}"),
+                    Some(Err(_)) => "panicked".into(),
+                    None => "ended before".into(),
+                })
+            }
+        }
     }
 
     /// Runs `ecmxfctl --socket <this daemon's socket> args...`.
@@ -325,22 +401,29 @@ impl Daemon {
         ctl(&all)
     }
 
-    /// Its process id.
+    /// Its process id (the test's own when embedded).
     pub fn pid(&self) -> u32 {
-        self.child.id()
+        match &self.running {
+            Running::Process(child) => child.id(),
+            Running::Embedded { .. } => std::process::id(),
+        }
     }
 
-    /// What the daemon logged so far.
+    /// What the daemon logged so far (a binary's log file; an embedded
+    /// daemon logs to the test's own subscriber, none by default).
     pub fn log(&self) -> String {
-        std::fs::read_to_string(&self.log).unwrap_or_default()
+        match &self.running {
+            Running::Process(_) => std::fs::read_to_string(&self.log).unwrap_or_default(),
+            Running::Embedded { .. } => "(embedded daemon: its log is not captured)".into(),
+        }
     }
 
     /// Connects, and waits until the engine runs (GetStatus says RUNNING).
     pub async fn connect(&mut self) -> Channel {
         let start = Instant::now();
         loop {
-            if let Ok(Some(status)) = self.child.try_wait() {
-                panic!("ecmxfd exited with {status}:\n{}", self.log());
+            if let Some(how) = self.ended() {
+                panic!("ecmxfd {how}:\n{}", self.log());
             }
             if let Ok(ch) = ecmxf_proto::connect_unix(&self.socket).await {
                 let mut m = pb::master_client::MasterClient::new(ch.clone());
@@ -355,26 +438,46 @@ impl Daemon {
         }
     }
 
-    /// SIGTERM, then the exit status (killed after 10 s).
+    /// Stops it: a binary with SIGTERM (killed after 10 s), an embedded
+    /// daemon through its shutdown future. The exit code: 0 when it
+    /// stopped cleanly, 1 when it failed, `None` when it had to be killed
+    /// or had already ended.
     pub fn stop(&mut self) -> Option<i32> {
-        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
-        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
-        let start = Instant::now();
-        while start.elapsed() < Duration::from_secs(10) {
-            if let Ok(Some(s)) = self.child.try_wait() {
-                return s.code();
+        match &mut self.running {
+            Running::Process(child) => {
+                let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+                let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGTERM);
+                let start = Instant::now();
+                while start.elapsed() < Duration::from_secs(10) {
+                    if let Ok(Some(s)) = child.try_wait() {
+                        return s.code();
+                    }
+                    std::thread::sleep(Duration::from_millis(20));
+                }
+                let _ = child.kill();
+                let _ = child.wait();
+                None
             }
-            std::thread::sleep(Duration::from_millis(20));
+            Running::Embedded { stop, thread } => {
+                if let Some(stop) = stop.take() {
+                    let _ = stop.send(());
+                }
+                match thread.take()?.join() {
+                    Ok(Ok(())) => Some(0),
+                    Ok(Err(e)) => {
+                        eprintln!("embedded ecmxfd: {e}");
+                        Some(1)
+                    }
+                    Err(_) => Some(101),
+                }
+            }
         }
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-        None
     }
 }
 
 impl Drop for Daemon {
     fn drop(&mut self) {
-        if self.child.try_wait().ok().flatten().is_none() {
+        if self.ended().is_none() {
             self.stop();
         }
         let _ = std::fs::remove_dir_all(&self.dir);

@@ -38,7 +38,7 @@ fn config() -> String {
 #[test]
 fn every_command_works_as_a_table_and_as_json() {
     run(async {
-        let mut d = Daemon::with_config(&config());
+        let mut d = Daemon::binary_with_config(&config());
         d.connect().await;
 
         // master, slaves, states.
@@ -269,7 +269,7 @@ fn errors_say_what_went_wrong_with_the_documented_exit_code() {
         let token = "observer-token".to_string();
         let sha = sha256_hex(token.as_bytes());
         let extra = format!("[[api.token]]\nname = \"viewer\"\nsha256 = \"{sha}\"\nrole = \"observer\"\n");
-        let mut d = Daemon::with_config(&ecmxf_e2e::config("backend = \"sim\"", &extra));
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config("backend = \"sim\"", &extra));
         d.connect().await;
 
         // SDO abort: exit 6, the abort code in the message and the JSON details.

@@ -23,7 +23,7 @@ fn snap(d: &Daemon, name: &str, args: &[&str]) {
 #[test]
 fn tables_read_as_they_did() {
     run(async {
-        let mut d = Daemon::with_config(&ecmxf_e2e::config("backend = \"sim\"", TI_AXIS));
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config("backend = \"sim\"", TI_AXIS));
         d.connect().await;
         snap(&d, "master", &["master"]);
         snap(&d, "slaves", &["slaves"]);

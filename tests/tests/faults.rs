@@ -339,7 +339,7 @@ async fn on_the_simulator(sim: &Simulator, extra: &str) -> (Daemon, Channel, pb:
         "fifo_rx_depth = 128\nfifo_tx_depth = 160\nfifo_low = 48\nfifo_high = 96",
     );
     assert!(config.contains("fifo_tx_depth = 160"), "the harness configuration changed: {config}");
-    let mut d = Daemon::with_config(&config);
+    let mut d = Daemon::binary_with_config(&config);
     let ch = d.connect().await;
     let slaves = pb::slaves_client::SlavesClient::new(ch.clone()).list_slaves(pb::ListSlavesRequest {}).await;
     let io = slaves.unwrap().into_inner().slaves.into_iter().find(|s| s.position == IO).expect("the IO slave");
@@ -639,7 +639,7 @@ fn sigterm_is_honoured_during_bring_up_and_recovery() {
         let config = ecmxf_e2e::config(&link, "");
 
         sim.ctl("int0 stuck low");
-        let mut d = Daemon::with_config(&config);
+        let mut d = Daemon::binary_with_config(&config);
         until_phase(&d, &[pb::EnginePhase::BringingUp, pb::EnginePhase::Recovering]).await;
         tokio::time::sleep(Duration::from_millis(300)).await;
         let t0 = Instant::now();
@@ -650,7 +650,7 @@ fn sigterm_is_honoured_during_bring_up_and_recovery() {
         assert!(took <= Duration::from_secs(1), "SIGTERM during bring-up took {took:?}:\n{}", d.log());
         sim.ctl("int0 stuck off");
 
-        let mut d = Daemon::with_config(&config);
+        let mut d = Daemon::binary_with_config(&config);
         d.connect().await;
         sim.kill();
         until_phase(&d, &[pb::EnginePhase::Recovering]).await;

@@ -28,7 +28,7 @@ fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
             let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
             let config =
                 ecmxf_e2e::config(&link, "").replace("[cycle]\n", &format!("[cycle]\nsync0_us = {sync0_us}\n"));
-            let mut d = Daemon::with_config(&config);
+            let mut d = Daemon::binary_with_config(&config);
             let ch = d.connect().await;
             let at = format!("at {sync0_us} us");
             let mut m = MasterClient::new(ch);
@@ -97,7 +97,7 @@ fn an_output_only_network_without_coe_runs_answers_and_its_outputs_reach_the_sla
             let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
             let config =
                 ecmxf_e2e::config(&link, "").replace("[cycle]\n", &format!("[cycle]\nsync0_us = {sync0_us}\n"));
-            let mut d = Daemon::with_config(&config);
+            let mut d = Daemon::binary_with_config(&config);
             let ch = d.connect().await;
             let at = format!("at {sync0_us} us");
             let mut m = MasterClient::new(ch.clone());
