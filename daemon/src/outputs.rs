@@ -7,7 +7,7 @@ use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 
 use crate::engine::bringup::NetworkLayout;
-use crate::engine::error::EngineError;
+use crate::engine::error::{EngineError, NotRunning};
 use crate::engine::output_writes::{OUTPUT_CHUNK, OutputWrite, Writers};
 
 /// A client's lease on the outputs (see [`Master::output_writer`](crate::master::Master::output_writer)).
@@ -76,7 +76,7 @@ impl OutputSender {
             // A write cut short here is dropped whole by the engine.
             self.tx.try_send(w).map_err(|e| match e {
                 TrySendError::Full(_) => EngineError::QueueFull,
-                TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+                TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
             })?;
         }
         Ok(())

@@ -274,9 +274,7 @@ impl ProcessDataApi for ProcessDataService {
         if image.input_bytes == 0 {
             // No input frame will ever come: say so instead of a stream
             // that never yields (an output-only network).
-            return Err(
-                EngineError::WrongState("the process image has no inputs (no slave maps a TxPDO)".into()).into()
-            );
+            return Err(EngineError::WrongState(crate::engine::error::WrongState::NoInputs).into());
         }
         let mut selected: Vec<Entry> = Vec::with_capacity(r.entries.len());
         for name in &r.entries {

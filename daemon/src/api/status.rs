@@ -95,7 +95,7 @@ mod tests {
     fn every_engine_error_maps_to_its_code() {
         let cases = [
             (EngineError::BadArgument { field: "index", reason: "x".into() }, Code::InvalidArgument),
-            (EngineError::WrongState("x".into()), Code::FailedPrecondition),
+            (EngineError::WrongState(crate::engine::error::WrongState::NoInputs), Code::FailedPrecondition),
             (
                 EngineError::SdoAbort { slave: 1, index: 0x6060, subindex: 0, code: SdoAbortCode(0x0602_0000) },
                 Code::Aborted,
@@ -104,7 +104,7 @@ mod tests {
             (EngineError::Refused("x".into()), Code::FailedPrecondition),
             (EngineError::Timeout, Code::DeadlineExceeded),
             (EngineError::QueueFull, Code::ResourceExhausted),
-            (EngineError::Unavailable("x".into()), Code::Unavailable),
+            (EngineError::Unavailable(crate::engine::error::NotRunning::Stopped), Code::Unavailable),
             (EngineError::BadDeviceData("x".into()), Code::FailedPrecondition),
         ];
         for (e, code) in cases {

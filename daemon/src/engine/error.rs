@@ -3,7 +3,11 @@
 
 use std::fmt;
 
+use ecmxf_wire::EcatState;
 use ecmxf_wire::payload::sdo::SdoAbortCode;
+
+use super::supervisor::RecoverCause;
+use super::telemetry::Phase;
 
 /// Why an engine request failed.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -16,7 +20,7 @@ pub enum EngineError {
         reason: String,
     },
     /// The network is not in a state that allows this.
-    WrongState(String),
+    WrongState(WrongState),
     /// The slave aborted an SDO transfer.
     SdoAbort {
         /// Slave.
@@ -37,7 +41,7 @@ pub enum EngineError {
     /// The request queue is full.
     QueueFull,
     /// The engine is not running (stopped, or recovering from a fault).
-    Unavailable(String),
+    Unavailable(NotRunning),
     /// What a slave describes itself with (its SII) is corrupt; says where.
     BadDeviceData(String),
 }
@@ -61,3 +65,52 @@ impl fmt::Display for EngineError {
 }
 
 impl std::error::Error for EngineError {}
+
+/// Why the network's state does not allow a request.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum WrongState {
+    /// A slave refused the state asked for (STATE_CHECK failed).
+    Refused(EcatState),
+    /// Nothing to stream: no slave maps a TxPDO.
+    NoInputs,
+}
+
+impl fmt::Display for WrongState {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Refused(state) => write!(f, "a slave refused {state}"),
+            Self::NoInputs => f.write_str("the process image has no inputs (no slave maps a TxPDO)"),
+        }
+    }
+}
+
+/// Why the engine cannot take a request now.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum NotRunning {
+    /// The engine stopped, or its thread is gone.
+    Stopped,
+    /// It is bringing the network up (at start, or after a fault).
+    BringingUp,
+    /// A fault sent it back to bring-up.
+    Recovering(RecoverCause),
+    /// The network is not running: the engine's phase, and why it last
+    /// failed if it said.
+    Phase {
+        /// The phase.
+        phase: Phase,
+        /// The last bring-up or recovery failure.
+        last_error: Option<String>,
+    },
+}
+
+impl fmt::Display for NotRunning {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Stopped => f.write_str("engine stopped"),
+            Self::BringingUp => f.write_str("bringing the network up"),
+            Self::Recovering(why) => write!(f, "recovering: {why}"),
+            Self::Phase { last_error: Some(why), .. } => write!(f, "the network is not running: {why}"),
+            Self::Phase { phase, last_error: None } => write!(f, "the network is not running: {phase:?}"),
+        }
+    }
+}

@@ -1,12 +1,16 @@
 //! The engine: one thread that owns the chip.
 //!
-//! It brings the network up, then loops: apply output writes, keep the
-//! RxFIFO between its marks with pipelined FIFO exchanges (reading inputs
-//! on the way), advance the one transaction in the blocking slot by at most
-//! one guarded call between FIFO exchanges, watch the status for chip
-//! resets and bus errors, and recover with back-off. Async code talks to it
-//! through bounded channels in and a wait-free ring of input frames out; the
-//! status goes out through atomics ([`telemetry`]).
+//! It brings the network up ([`bringup`]), then runs it (`running.rs`: one
+//! loop turn as named steps): apply output writes, keep the RxFIFO between
+//! its marks with FIFO exchanges (reading inputs on the way), advance the
+//! one transaction in the blocking slot ([`slot`]) by at most one guarded
+//! call between FIFO exchanges, and judge every answer by the
+//! [`supervisor`]'s rules, which decide when to go back to bring-up (with
+//! back-off). Async code talks to it through bounded channels in and a
+//! wait-free ring of input frames out ([`inputs`]); the status goes out
+//! through atomics and a watch of snapshots ([`telemetry`]), supervision
+//! events through a ring of their own ([`events`]). Once running, nothing
+//! on this thread allocates (daemon/tests/zero_alloc.rs).
 
 pub mod bringup;
 pub mod cyclic;
@@ -41,7 +45,7 @@ use crate::link::Link;
 use crate::port::Port;
 use bringup::{NetworkLayout, bring_up};
 use cyclic::Cyclic;
-use error::EngineError;
+use error::{EngineError, NotRunning};
 use events::{Event, EventKind, EventSink};
 use inputs::InputPublisher;
 use network_action::PendingAction;
@@ -271,7 +275,7 @@ impl<L: Link> Engine<L> {
                     self.telemetry.forget_network();
                     self.events.emit(EventKind::Recovering(why.clone()));
                     self.count_recovery();
-                    self.fail_all(EngineError::Unavailable(format!("recovering: {why}")));
+                    self.fail_all(EngineError::Unavailable(NotRunning::Recovering(why.clone())));
                     self.reopen_if_needed(&why);
                     if !self.config.recovery.enabled || !self.pause(backoff) {
                         return self.stopped();
@@ -331,7 +335,7 @@ impl<L: Link> Engine<L> {
     }
 
     fn stopped(mut self) {
-        self.fail_all(EngineError::Unavailable("stopped".into()));
+        self.fail_all(EngineError::Unavailable(NotRunning::Stopped));
         self.set_phase(Phase::Stopped);
         info!("engine stopped");
     }
@@ -365,7 +369,7 @@ impl<L: Link> Engine<L> {
             }
             match self.commands.recv_timeout(left.min(Duration::from_millis(20))) {
                 Ok(Command::Job(j)) => {
-                    let _ = j.reply.send(Err(EngineError::Unavailable("bringing the network up".into())));
+                    let _ = j.reply.send(Err(EngineError::Unavailable(NotRunning::BringingUp)));
                 }
                 Ok(Command::Stop) | Err(RecvTimeoutError::Disconnected) => return false,
                 Err(RecvTimeoutError::Timeout) => {}

@@ -21,7 +21,7 @@ use tokio::sync::{broadcast, oneshot};
 
 use crate::config::{Config, LinkConfig};
 use crate::engine::bringup::NetworkLayout;
-use crate::engine::error::EngineError;
+use crate::engine::error::{EngineError, NotRunning};
 use crate::engine::events::Event;
 use crate::engine::inputs::read_record;
 use crate::engine::network_action::PendingAction;
@@ -342,11 +342,11 @@ impl Master {
         match self.commands.try_send(Command::Job(job)) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),
-            Err(TrySendError::Disconnected(_)) => return Err(EngineError::Unavailable("engine stopped".into())),
+            Err(TrySendError::Disconnected(_)) => return Err(EngineError::Unavailable(NotRunning::Stopped)),
         }
         match tokio::time::timeout(timeout, rx).await {
             Ok(Ok(r)) => r,
-            Ok(Err(_)) => Err(EngineError::Unavailable("engine stopped".into())),
+            Ok(Err(_)) => Err(EngineError::Unavailable(NotRunning::Stopped)),
             // Dropping `rx` here tells the engine.
             Err(_) => Err(EngineError::Timeout),
         }

@@ -8,7 +8,7 @@ use std::time::Duration;
 
 use super::Master;
 use crate::config::Config;
-use crate::engine::error::EngineError;
+use crate::engine::error::{EngineError, NotRunning};
 use crate::engine::events::EventKind;
 use crate::engine::network_action::NetworkAction;
 use crate::engine::telemetry::{Phase, Snapshot};
@@ -50,13 +50,13 @@ impl Master {
             }
         }
         if matches!(self.status().phase, Phase::Stopping | Phase::Stopped) {
-            return Err(EngineError::Unavailable("engine stopped".into()));
+            return Err(EngineError::Unavailable(NotRunning::Stopped));
         }
         let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
         let mut events = self.events();
         self.reconfigure.try_send((generation, config.clone())).map_err(|e| match e {
             TrySendError::Full(_) => EngineError::QueueFull,
-            TrySendError::Disconnected(_) => EngineError::Unavailable("engine stopped".into()),
+            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
         })?;
         *self.config.lock().unwrap_or_else(|e| e.into_inner()) = config;
         // The first bring-up failure with this configuration is the answer
@@ -89,8 +89,8 @@ impl Master {
 
     fn running_or_unavailable(&self) -> Result<(), EngineError> {
         if self.status().phase != Phase::Running {
-            let why = self.last_error().unwrap_or_else(|| format!("{:?}", self.status().phase));
-            return Err(EngineError::Unavailable(format!("the network is not running: {why}")));
+            let (phase, last_error) = (self.status().phase, self.last_error());
+            return Err(EngineError::Unavailable(NotRunning::Phase { phase, last_error }));
         }
         Ok(())
     }
@@ -108,7 +108,7 @@ impl Master {
         let limit = timeout.unwrap_or(Duration::from_secs(30));
         match self.wait_status(limit, |s| done(s) || s.phase == Phase::Stopped).await {
             Ok(s) if s.phase != Phase::Stopped || done(&s) => Ok(()),
-            Ok(_) => Err(EngineError::Unavailable("engine stopped".into())),
+            Ok(_) => Err(EngineError::Unavailable(NotRunning::Stopped)),
             Err(s) => Err(match self.last_error() {
                 Some(why) if s.phase != Phase::Running => {
                     EngineError::Failed(format!("the network is not back up yet: {why}"))

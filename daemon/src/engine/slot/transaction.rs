@@ -29,7 +29,7 @@ use ecmxf_wire::payload::state::{StateCheck, StateGet};
 use ecmxf_wire::{Reply, ReplyFields};
 
 use super::request::{Immediate, Job, SlotRequest, TransferProgress};
-use crate::engine::error::EngineError;
+use crate::engine::error::{EngineError, WrongState};
 use crate::link::Link;
 use crate::port::{Answer, Port, PortError};
 use foe::{check_foe, chip_timeout_us};
@@ -388,9 +388,7 @@ impl Active {
                     }
                 }
             }
-            (SlotRequest::SetState { state, .. }, true) => {
-                Err(EngineError::WrongState(format!("a slave refused {state}")))
-            }
+            (SlotRequest::SetState { state, .. }, true) => Err(EngineError::WrongState(WrongState::Refused(*state))),
             (SlotRequest::SetState { .. }, false) => Ok(Vec::new()),
             (SlotRequest::GetState { .. }, true) => {
                 Err(EngineError::Failed("the slaves' states could not be refreshed".into()))
