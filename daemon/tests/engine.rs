@@ -438,3 +438,47 @@ fn a_busy_client_does_not_starve_another() {
     });
     assert_eq!(done.load(std::sync::atomic::Ordering::Relaxed), 100);
 }
+
+/// Waiters await the engine's snapshots instead of polling: a re-init is
+/// seen as Recovering, then BringUp work, then Running with one more
+/// recovery counted, each phase announced as it happens; and a held state
+/// below the target shows in the next snapshot.
+#[test]
+fn every_phase_and_state_change_reaches_the_snapshot_watch() {
+    let (m, _sim, _serial) = start();
+    rt().block_on(async {
+        let mut watch = m.watch_status();
+        let before = watch.borrow_and_update().recoveries;
+        let seen = tokio::spawn({
+            let mut watch = watch.clone();
+            async move {
+                let mut phases = Vec::new();
+                while watch.changed().await.is_ok() {
+                    let s = *watch.borrow_and_update();
+                    if phases.last() != Some(&s.phase) {
+                        phases.push(s.phase);
+                    }
+                    if s.phase == Phase::Running && s.recoveries > before {
+                        break;
+                    }
+                }
+                phases
+            }
+        });
+        m.reinit(Some(Duration::from_secs(20))).await.unwrap();
+        let phases = tokio::time::timeout(Duration::from_secs(5), seen).await.unwrap().unwrap();
+        let recovering = phases.iter().position(|p| *p == Phase::Recovering);
+        let running = phases.iter().rposition(|p| *p == Phase::Running);
+        assert!(recovering.is_some() && running > recovering, "{phases:?}");
+
+        // A state asked for below the target: the next snapshots say so,
+        // without anyone reading the status in a loop.
+        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::SafeOp, None).await.unwrap();
+        let s = m.wait_status(Duration::from_secs(2), |s| s.ecat_state == EcatState::SafeOp).await;
+        assert!(s.is_ok(), "the watch never showed SAFE-OP: {s:?}");
+        assert!(!m.health().is_healthy(), "{:?}", m.health());
+        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, None).await.unwrap();
+        let s = m.wait_status(Duration::from_secs(2), |s| s.ecat_state == EcatState::Op).await;
+        assert!(s.is_ok(), "the watch never showed OP again: {s:?}");
+    });
+}

@@ -1,0 +1,95 @@
+//! The daemon's modules point one way: link -> port -> engine -> master ->
+//! api -> lifecycle (config and realtime below them all). This reads every
+//! file under `daemon/src`, collects which top-level modules each one uses
+//! (`crate::<module>` outside comments), and fails on any import circle,
+//! naming it.
+
+use std::collections::{BTreeMap, BTreeSet};
+use std::path::Path;
+
+/// The top-level module a file belongs to (`api/sdo.rs` -> `api`).
+fn module_of(src: &Path, file: &Path) -> Option<String> {
+    let rel = file.strip_prefix(src).ok()?;
+    let first = rel.components().next()?.as_os_str().to_str()?;
+    let name = first.strip_suffix(".rs").unwrap_or(first);
+    (!matches!(name, "lib" | "main" | "bin")).then(|| name.to_string())
+}
+
+fn rust_files(dir: &Path, out: &mut Vec<std::path::PathBuf>) {
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        if p.is_dir() {
+            rust_files(&p, out);
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            out.push(p);
+        }
+    }
+}
+
+/// `crate::<name>` paths in code (comment lines left out).
+fn uses(text: &str) -> BTreeSet<String> {
+    let mut out = BTreeSet::new();
+    for line in text.lines().map(str::trim_start).filter(|l| !l.starts_with("//")) {
+        let mut rest = line;
+        while let Some(i) = rest.find("crate::") {
+            rest = &rest[i + "crate::".len()..];
+            let name: String = rest.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect();
+            if !name.is_empty() {
+                out.insert(name);
+            }
+        }
+    }
+    out
+}
+
+#[test]
+fn no_import_circle_between_the_daemons_modules() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src, &mut files);
+    let mut graph: BTreeMap<String, BTreeSet<String>> = BTreeMap::new();
+    for f in &files {
+        let Some(m) = module_of(&src, f) else { continue };
+        let text = std::fs::read_to_string(f).unwrap();
+        let deps = graph.entry(m.clone()).or_default();
+        deps.extend(uses(&text).into_iter().filter(|d| *d != m));
+    }
+    assert!(graph.len() >= 10, "the modules were not found: {graph:?}");
+    // Depth-first search for a cycle; the path names it.
+    fn visit(
+        m: &str,
+        graph: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(i) = path.iter().position(|p| p == m) {
+            let mut cycle = path[i..].to_vec();
+            cycle.push(m.to_string());
+            return Some(cycle);
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m.to_string());
+        for d in graph.get(m).into_iter().flatten() {
+            if let Some(c) = visit(d, graph, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(m.to_string());
+        None
+    }
+    let mut done = BTreeSet::new();
+    for m in graph.keys() {
+        if let Some(cycle) = visit(m, &graph, &mut Vec::new(), &mut done) {
+            panic!("import circle: {}\n(the module graph: {graph:#?})", cycle.join(" -> "));
+        }
+    }
+    // The layers the brief names, checked as edges that must not exist.
+    for (low, high) in
+        [("engine", "master"), ("master", "api"), ("engine", "api"), ("metrics", "api"), ("config", "api")]
+    {
+        assert!(!graph[low].contains(high), "{low} uses {high}: layers point one way");
+    }
+}
