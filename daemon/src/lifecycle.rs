@@ -47,6 +47,8 @@ pub enum DaemonError {
     /// The engine stopped by itself (recovery disabled or given up); why it
     /// last failed, if it said.
     EngineStopped(Option<String>),
+    /// The embedding program could not listen for signals (SIGTERM, SIGHUP).
+    Signals(std::io::Error),
 }
 
 impl std::fmt::Display for DaemonError {
@@ -59,6 +61,7 @@ impl std::fmt::Display for DaemonError {
             Self::Task(e) => write!(f, "a daemon task failed: {e}"),
             Self::EngineStopped(Some(why)) => write!(f, "the engine stopped: {why}"),
             Self::EngineStopped(None) => f.write_str("the engine stopped"),
+            Self::Signals(e) => write!(f, "cannot listen for signals: {e}"),
         }
     }
 }
@@ -69,6 +72,7 @@ impl std::error::Error for DaemonError {
             Self::Metrics { source, .. } => Some(source),
             Self::Start(e) => Some(e),
             Self::Api(e) => Some(e),
+            Self::Signals(e) => Some(e),
             _ => None,
         }
     }

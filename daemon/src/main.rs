@@ -9,9 +9,9 @@ use std::process::ExitCode;
 use std::time::Duration;
 
 use clap::Parser;
-use ecmxfd::Options;
 use ecmxfd::config::{Config, LinkConfig};
 use ecmxfd::service::{Logging, Notifier};
+use ecmxfd::{DaemonError, Options};
 use tokio::signal::unix::SignalKind;
 use tracing::{error, info, warn};
 
@@ -51,8 +51,8 @@ async fn serve(
     config_path: Option<PathBuf>,
     status_every: u64,
     logging: Logging,
-) -> Result<(), String> {
-    let signal = |k| tokio::signal::unix::signal(k).map_err(|e| format!("cannot listen for signals: {e}"));
+) -> Result<(), DaemonError> {
+    let signal = |k| tokio::signal::unix::signal(k).map_err(DaemonError::Signals);
     let mut sigterm = signal(SignalKind::terminate())?;
     let mut sighup = signal(SignalKind::hangup())?;
     let (reload_tx, reloads) = tokio::sync::mpsc::channel(1);
@@ -86,7 +86,7 @@ async fn serve(
         }
     };
     tokio::select! {
-        r = ecmxfd::run_with(config, options, shutdown) => r.map_err(|e| e.to_string()),
+        r = ecmxfd::run_with(config, options, shutdown) => r,
         () = reloader => std::future::pending().await,
     }
 }
