@@ -62,6 +62,7 @@ impl OutputSender {
         }
         let _queuing = self.queuing.lock().unwrap_or_else(|e| e.into_inner());
         let batch = self.next_batch.fetch_add(1, Ordering::Relaxed);
+        let written = std::time::Instant::now();
         let chunks = bytes.len().div_ceil(OUTPUT_CHUNK);
         for (i, chunk) in bytes.chunks(OUTPUT_CHUNK).enumerate() {
             let mut data = [0u8; OUTPUT_CHUNK];
@@ -72,6 +73,7 @@ impl OutputSender {
                 offset: (offset + i * OUTPUT_CHUNK) as u32,
                 len: chunk.len() as u8,
                 data,
+                written,
             };
             // A write cut short here is dropped whole by the engine.
             self.tx.try_send(w).map_err(|e| match e {

@@ -55,6 +55,13 @@ pub struct MasterReport {
     pub flow_limit_us: u64,
     /// The daemon's health verdict in words.
     pub health: String,
+    /// The output latency budget (cycle.output_latency_us), microseconds;
+    /// 0: none.
+    pub output_latency_budget_us: u32,
+    /// Write-to-wire latency of client output writes over the latest 512,
+    /// microseconds (0 before the first write).
+    pub output_latency_p50_us: u64,
+    pub output_latency_p99_us: u64,
     pub counters: CountersReport,
 }
 
@@ -77,6 +84,8 @@ pub struct CountersReport {
     pub fifo_alarms: u64,
     pub recoveries: u64,
     pub max_fifo_gap_us: u64,
+    /// Client writes that reached the wire later than the budget.
+    pub output_latency_misses: u64,
 }
 
 impl From<Option<pb::Counters>> for CountersReport {
@@ -96,6 +105,7 @@ impl From<Option<pb::Counters>> for CountersReport {
             recoveries: c.recoveries,
             max_fifo_gap_us: c.max_fifo_gap_us,
             ring_overflows: c.ring_overflows,
+            output_latency_misses: c.output_latency_misses,
         }
     }
 }
@@ -115,7 +125,8 @@ impl CountersReport {
             .add("Ring overflows", self.ring_overflows)
             .add("FIFO alarms", self.fifo_alarms)
             .add("Recoveries", self.recoveries)
-            .add("Max FIFO gap", format!("{} us", self.max_fifo_gap_us));
+            .add("Max FIFO gap", format!("{} us", self.max_fifo_gap_us))
+            .add("Late writes", self.output_latency_misses);
     }
 }
 
@@ -152,6 +163,20 @@ impl Report for MasterReport {
                 ),
             );
         }
+        let budget = match self.output_latency_budget_us {
+            0 => "no budget".to_string(),
+            b => format!("budget {:.1} ms", f64::from(b) / 1000.0),
+        };
+        let latency = if self.output_latency_p50_us == 0 {
+            format!("{budget}, no write yet")
+        } else {
+            format!(
+                "p50 {:.2} ms, p99 {:.2} ms ({budget})",
+                self.output_latency_p50_us as f64 / 1000.0,
+                self.output_latency_p99_us as f64 / 1000.0
+            )
+        };
+        f.add("Output latency", latency);
         if !self.last_error.is_empty() {
             f.add("Last error", &self.last_error);
         }
@@ -191,6 +216,9 @@ pub async fn fetch(api: &Api) -> Result<MasterReport, CliError> {
         input_age_us: s.input_age_us,
         flow_limit_us: s.flow_limit_us,
         health: s.health,
+        output_latency_budget_us: s.output_latency_budget_us,
+        output_latency_p50_us: s.output_latency_p50_us,
+        output_latency_p99_us: s.output_latency_p99_us,
         counters: s.counters.into(),
     })
 }

@@ -108,6 +108,10 @@ pub fn event_pb(e: &Event) -> pb::Event {
             out.detail = ecmxf_wire::al_status_text(*code).into();
             K::AlStatus
         }
+        EventKind::OutputLate { latency_us, .. } => {
+            out.counter = (*latency_us).into();
+            K::OutputLate
+        }
         EventKind::ProcessData { flowing, age_us } => {
             out.flag = *flowing;
             out.counter = *age_us;

@@ -30,6 +30,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
     use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
     let s = m.status();
     let v = m.verdict(&s);
+    let latency = m.output_latency();
     let age = v.input_age;
     pb::MasterStatus {
         phase: phase_to_pb(s.phase) as i32,
@@ -49,6 +50,9 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
         input_age_us: age.map_or(0, |(a, _)| a.as_micros() as u64),
         flow_limit_us: age.map_or(0, |(_, l)| l.as_micros() as u64),
         health: v.health.to_string(),
+        output_latency_budget_us: m.config().cycle.output_latency_us.unwrap_or(0),
+        output_latency_p50_us: latency.map_or(0, |l| l.p50_us.into()),
+        output_latency_p99_us: latency.map_or(0, |l| l.p99_us.into()),
     }
 }
 
@@ -68,6 +72,7 @@ pub fn counters_pb(s: &crate::engine::telemetry::Snapshot) -> pb::Counters {
         recoveries: s.recoveries,
         max_fifo_gap_us: s.max_fifo_gap_us,
         ring_overflows: s.ring_overflows,
+        output_latency_misses: s.output_latency_misses,
     }
 }
 

@@ -299,9 +299,28 @@ pub struct CycleConfig {
     pub wkc_error_limit: u8,
     /// State to bring the network to: "preop", "safeop" or "op".
     pub target_state: String,
+    /// The output latency budget, us: how long a client's write may take
+    /// to reach the wire (the frame the chip plays). The engine keeps the
+    /// RxFIFO at the shallowest level that meets it (never deeper than
+    /// midway between `fifo_low` and `fifo_high`), trading margin against
+    /// host stalls for latency: a stall longer than the budget empties the
+    /// FIFO (counted, with an event). 250..=1000000 and at least two DC
+    /// cycles; unset: the FIFO is kept midway between its marks.
+    pub output_latency_us: Option<u32>,
 }
 
 impl CycleConfig {
+    /// The DC cycle the chip plays frames at (1 ms free-run without DC).
+    pub fn dc_cycle(&self) -> std::time::Duration {
+        let us = if self.dc_assign_activate != 0 { self.sync0_us } else { 1000 };
+        std::time::Duration::from_micros(u64::from(us))
+    }
+
+    /// The output latency budget, if one is set.
+    pub fn output_latency(&self) -> Option<std::time::Duration> {
+        self.output_latency_us.map(|us| std::time::Duration::from_micros(u64::from(us)))
+    }
+
     /// `target_state` as a state (validated to be preop, safeop or op).
     pub fn target(&self) -> ecmxf_wire::EcatState {
         match self.target_state.as_str() {
@@ -324,6 +343,7 @@ impl Default for CycleConfig {
             fifo_high: 20,
             wkc_error_limit: 255,
             target_state: "op".into(),
+            output_latency_us: None,
         }
     }
 }
@@ -466,6 +486,8 @@ impl Config {
                 fifo_tx_depth: 40,
                 fifo_low: 128,
                 fifo_high: 240,
+                // As config/ecmxfd-sim.toml: deep enough for a VM's stalls.
+                output_latency_us: Some(20_000),
                 ..CycleConfig::default()
             },
             slaves: Vec::new(),
@@ -606,6 +628,18 @@ impl Config {
                     c.fifo_low, c.fifo_high, c.fifo_rx_depth
                 ),
             );
+        }
+        if let Some(budget) = c.output_latency_us {
+            let two_cycles = 2 * c.dc_cycle().as_micros() as u32;
+            if !(250..=1_000_000).contains(&budget) || budget < two_cycles {
+                return bad(
+                    "cycle.output_latency_us",
+                    format!(
+                        "{budget} us is outside 250..=1000000 or shorter than two DC cycles ({two_cycles} us): \
+                         the chip plays one frame per cycle"
+                    ),
+                );
+            }
         }
         if self.outputs.on_last_writer_gone == WriterGoneAction::QuickStop && self.axes.is_empty() {
             return bad(
@@ -778,6 +812,14 @@ slave = 0
         assert!(e.contains("slave[0].sdo[0]"), "{e}");
         let e = parse(&format!("{MINIMAL}[cycle]\nfifo_low = 30\n")).unwrap_err().to_string();
         assert!(e.contains("cycle.fifo_high"), "{e}");
+        for bad in
+            ["output_latency_us = 100", "sync0_us = 1000\noutput_latency_us = 1500", "output_latency_us = 2000000"]
+        {
+            let e = parse(&format!("{MINIMAL}[cycle]\n{bad}\n")).unwrap_err().to_string();
+            assert!(e.contains("cycle.output_latency_us"), "{bad}: {e}");
+        }
+        let ok = parse(&format!("{MINIMAL}[cycle]\nsync0_us = 125\noutput_latency_us = 2000\n")).unwrap();
+        assert_eq!(ok.cycle.output_latency(), Some(std::time::Duration::from_millis(2)));
         let e = parse("version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nidle_us = 20\n")
             .unwrap_err()
             .to_string();

@@ -9,6 +9,13 @@
 //! of the level therefore starts from that count, adds the push, and takes
 //! off one frame per cycle elapsed since then.
 //!
+//! How deep the RxFIFO is kept is the trade between latency and margin: a
+//! client's write reaches the wire after every frame queued before it has
+//! played, one per cycle. Without a budget the level is held midway
+//! between the configured marks; with `cycle.output_latency_us` it is held
+//! at the shallowest level that meets the budget ([`Plan::budget`]), and
+//! refilled before it falls to half of that.
+//!
 //! Input frames go on through [`super::inputs`]. Nothing here allocates or
 //! locks once running.
 
@@ -34,6 +41,42 @@ pub struct Plan {
     pub high: u8,
     /// TxFIFO depth, frames.
     pub tx_depth: u8,
+    /// The output latency budget (`cycle.output_latency_us`), if any.
+    pub budget: Option<Duration>,
+}
+
+/// The RxFIFO levels the exchange keeps, frames.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Levels {
+    /// The level each push brings the FIFO back to.
+    pub target: i64,
+    /// Below this (plus two frames) an exchange is due at once.
+    pub floor: i64,
+    /// The longest gap between exchanges, in cycles, so an estimate that
+    /// is off is corrected before it matters.
+    pub cap_cycles: u32,
+}
+
+impl Plan {
+    /// The levels for this plan. Without a budget: midway between the
+    /// marks, the low mark as the floor. With one: a write waits for the
+    /// frames queued before it (`target` at most) and one cycle of the
+    /// chip's own, so the target is the budget in cycles less one, at
+    /// least 2 frames and never deeper than the midpoint; the floor is half
+    /// of it (or the low mark, when lower).
+    pub fn levels(&self) -> Levels {
+        let (low, high) = (i64::from(self.low), i64::from(self.high));
+        let mid = (low + high) / 2;
+        match self.budget {
+            None => Levels { target: mid, floor: low, cap_cycles: ((high - low).max(2) / 2) as u32 },
+            Some(b) => {
+                let frames = (b.as_nanos() / self.cycle.as_nanos().max(1)) as i64;
+                let target = (frames - 1).clamp(2, mid.max(2));
+                let floor = (target / 2).min(low);
+                Levels { target, floor, cap_cycles: ((target - floor).max(2) / 2) as u32 }
+            }
+        }
+    }
 }
 
 /// The cyclic state.
@@ -49,8 +92,7 @@ pub struct Cyclic {
     /// The host-side output image, pushed as every new frame.
     pub outputs: Vec<u8>,
     push_buf: Vec<u8>,
-    low: u8,
-    high: u8,
+    levels: Levels,
     /// (time, frames pushed) of the last FIFO call.
     last_push: (Instant, u8),
     /// Whether the last FIFO call read every input frame waiting (fewer
@@ -67,7 +109,7 @@ impl Cyclic {
     /// plan's size; otherwise the image starts zeroed.
     pub fn new(plan: Plan, data_size: usize, outputs: Vec<u8>) -> Self {
         let now = Instant::now();
-        let Plan { rx_size, tx_size, cycle, low, high, tx_depth } = plan;
+        let Plan { rx_size, tx_size, cycle, tx_depth, .. } = plan;
         let outputs = if outputs.len() == rx_size { outputs } else { vec![0; rx_size] };
         Self {
             rx_size,
@@ -76,8 +118,7 @@ impl Cyclic {
             cycle,
             outputs,
             push_buf: Vec::with_capacity(data_size),
-            low,
-            high,
+            levels: plan.levels(),
             last_push: (now, 0),
             drained: true,
             reported: 0,
@@ -94,10 +135,15 @@ impl Cyclic {
         (now.saturating_duration_since(t).as_nanos() / self.cycle.as_nanos().max(1)) as u64
     }
 
-    /// Whether the RxFIFO is below its low mark (plus a margin of two
+    /// The levels kept.
+    pub fn levels(&self) -> Levels {
+        self.levels
+    }
+
+    /// Whether the RxFIFO is below its floor (plus a margin of two
     /// frames): never for a network without outputs, which has none to keep.
     pub fn outputs_low(&self, now: Instant) -> bool {
-        self.rx_size > 0 && self.estimate(now) < i64::from(self.low) + 2
+        self.rx_size > 0 && self.estimate(now) < self.levels.floor + 2
     }
 
     /// The estimated RxFIFO level now.
@@ -106,9 +152,9 @@ impl Cyclic {
         i64::from(self.reported) + i64::from(pushed) - self.cycles_since(at, now) as i64
     }
 
-    /// The level aimed at: midway between the marks.
+    /// The level aimed at (see [`Plan::levels`]).
     fn target(&self) -> i64 {
-        (i64::from(self.low) + i64::from(self.high)) / 2
+        self.levels.target
     }
 
     /// Frames to push in an exchange now, at most `room`.
@@ -120,12 +166,14 @@ impl Cyclic {
     /// packet (`rx_room` frames) below the target, so one exchange brings it
     /// back; when `tx_room` input frames have queued since the last
     /// exchange drained the TxFIFO (at once if it could not drain it); and
-    /// never later than half the gap between the marks, so an estimate that
-    /// is off (the lag is the chip's, not a law) is corrected soon.
+    /// never later than half the gap between target and floor, so an
+    /// estimate that is off (the lag is the chip's, not a law) is corrected
+    /// soon. A small target refills before the floor, a packet at a time
+    /// or less.
     /// A network without outputs has no RxFIFO level to keep: only inputs
     /// and the cap decide.
     pub fn next_exchange(&self, now: Instant, rx_room: usize, tx_room: usize) -> Instant {
-        let refill_at = self.target() - rx_room as i64;
+        let refill_at = (self.target() - rx_room as i64).max(self.levels.floor);
         let by_level =
             if self.rx_size == 0 { Duration::MAX } else { self.cycle * (self.estimate(now) - refill_at).max(0) as u32 };
         // Counted from the last exchange (one input frame per cycle since
@@ -136,7 +184,7 @@ impl Cyclic {
             (_, true) => since + self.cycle * (tx_room.max(1) as u32),
             (_, false) => now,
         };
-        let cap = since + (self.cycle * u32::from((self.high - self.low).max(2) / 2)).min(MAX_EXCHANGE_INTERVAL);
+        let cap = since + (self.cycle * self.levels.cap_cycles).min(MAX_EXCHANGE_INTERVAL);
         now.checked_add(by_level).unwrap_or(cap).min(by_inputs).min(cap)
     }
 
@@ -170,7 +218,15 @@ mod tests {
     use super::*;
 
     fn cyclic() -> (Cyclic, ()) {
-        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_micros(125), low: 8, high: 20, tx_depth: 32 };
+        let plan = Plan {
+            rx_size: 4,
+            tx_size: 3,
+            cycle: Duration::from_micros(125),
+            low: 8,
+            high: 20,
+            tx_depth: 32,
+            budget: None,
+        };
         (Cyclic::new(plan, 112, Vec::new()), ())
     }
 
@@ -214,14 +270,30 @@ mod tests {
 
     #[test]
     fn an_image_of_the_right_size_is_kept_across_runs() {
-        let plan = Plan { rx_size: 2, tx_size: 1, cycle: Duration::from_millis(1), low: 8, high: 20, tx_depth: 32 };
+        let plan = Plan {
+            rx_size: 2,
+            tx_size: 1,
+            cycle: Duration::from_millis(1),
+            low: 8,
+            high: 20,
+            tx_depth: 32,
+            budget: None,
+        };
         assert_eq!(Cyclic::new(plan, 112, vec![7, 9]).outputs, [7, 9]);
         assert_eq!(Cyclic::new(plan, 112, vec![7, 9, 1]).outputs, [0, 0], "another layout starts zeroed");
     }
 
     #[test]
     fn exchanges_happen_at_least_every_max_interval() {
-        let plan = Plan { rx_size: 4, tx_size: 3, cycle: Duration::from_millis(1), low: 128, high: 240, tx_depth: 40 };
+        let plan = Plan {
+            rx_size: 4,
+            tx_size: 3,
+            cycle: Duration::from_millis(1),
+            low: 128,
+            high: 240,
+            tx_depth: 40,
+            budget: None,
+        };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
         cy.answered(t0, 0, 240, true);
@@ -233,7 +305,15 @@ mod tests {
 
     #[test]
     fn a_network_without_outputs_keeps_no_level() {
-        let plan = Plan { rx_size: 0, tx_size: 1, cycle: Duration::from_millis(1), low: 128, high: 240, tx_depth: 40 };
+        let plan = Plan {
+            rx_size: 0,
+            tx_size: 1,
+            cycle: Duration::from_millis(1),
+            low: 128,
+            high: 240,
+            tx_depth: 40,
+            budget: None,
+        };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
         let t0 = Instant::now();
         cy.answered(t0, 0, 0, true);
@@ -246,6 +326,35 @@ mod tests {
         let mut cy = Cyclic::new(plan, 512, Vec::new());
         cy.answered(t0, 0, 0, true);
         assert!(cy.outputs_low(t0));
+    }
+
+    #[test]
+    fn a_latency_budget_keeps_the_shallowest_level_that_meets_it() {
+        let us = Duration::from_micros;
+        let plan = |budget: Option<u64>| Plan {
+            rx_size: 53,
+            tx_size: 53,
+            cycle: us(125),
+            low: 128,
+            high: 240,
+            tx_depth: 40,
+            budget: budget.map(us),
+        };
+        assert_eq!(plan(None).levels(), Levels { target: 184, floor: 128, cap_cycles: 56 }, "no budget: as before");
+        // 2 ms at 125 us: 16 cycles, 15 frames ahead of a write.
+        assert_eq!(plan(Some(2000)).levels(), Levels { target: 15, floor: 7, cap_cycles: 4 });
+        assert_eq!(plan(Some(250)).levels().target, 2, "never fewer than two frames");
+        assert_eq!(plan(Some(1_000_000)).levels().target, 184, "never deeper than the midpoint");
+        // Held at the target: a packet of 19 frames is more than the room
+        // between target and floor, so it refills at the floor.
+        let mut cy = Cyclic::new(plan(Some(2000)), 1024, Vec::new());
+        let t0 = Instant::now();
+        cy.answered(t0, 0, 15, true);
+        assert_eq!(cy.frames_to_push(t0, 19), 0);
+        assert_eq!(cy.next_exchange(t0, 19, 1000), t0 + us(125 * 4), "the cap: half of 15 - 7 cycles");
+        assert!(!cy.outputs_low(t0 + us(125 * 5)));
+        assert!(cy.outputs_low(t0 + us(125 * 7)), "below the floor plus two");
+        assert_eq!(cy.frames_to_push(t0 + us(125 * 8), 19), 8, "back to 15");
     }
 
     #[test]

@@ -107,6 +107,15 @@ pub enum EventKind {
     /// A CoE emergency the chip received (read within
     /// `emergencies::POLL`; the event's time is when it was read).
     Emergency(EmergencyRecord),
+    /// A client's write reached the wire later than
+    /// `cycle.output_latency_us` allows (told at most every
+    /// [`COUNTER_QUIET`]): the host stalled longer than the FIFO's margin.
+    OutputLate {
+        /// The budget, us.
+        budget_us: u32,
+        /// The write's latency, us.
+        latency_us: u32,
+    },
     /// Events dropped because no one read them in time.
     Lost(u64),
 }
@@ -129,6 +138,7 @@ impl EventKind {
             Self::LastWriterGone(_) => "last_writer_gone",
             Self::Recovered { .. } => "recovered",
             Self::Emergency(_) => "emergency",
+            Self::OutputLate { .. } => "output_late",
             Self::Lost(_) => "lost",
         }
     }
@@ -141,6 +151,7 @@ impl EventKind {
             | Self::BringUpFailed(_)
             | Self::Recovering(_)
             | Self::Emergency(_)
+            | Self::OutputLate { .. }
             | Self::Lost(_) => true,
             Self::ProcessData { flowing, .. } => !flowing,
             Self::EcatState { to, .. } => *to == EcatState::Error,
@@ -203,6 +214,11 @@ impl std::fmt::Display for EventKind {
                 "emergency {:#06x} from slave {} (error register {:#04x})",
                 r.error_code, r.slave, r.error_register
             ),
+            Self::OutputLate { budget_us, latency_us } => write!(
+                f,
+                "output write reached the wire after {latency_us} us, over the {budget_us} us budget by {} us",
+                latency_us.saturating_sub(*budget_us)
+            ),
             Self::Lost(n) => write!(f, "{n} events lost (no one read them in time)"),
         }
     }
@@ -230,6 +246,7 @@ impl Event {
             EventKind::Recovering(why) => log!(cause = why.name(),),
             EventKind::Recovered { axes_disabled, .. } => log!(axes_disabled = *axes_disabled,),
             EventKind::Lost(n) => log!(lost = *n,),
+            EventKind::OutputLate { budget_us, latency_us } => log!(budget_us = *budget_us, latency_us = *latency_us,),
             _ => log!(),
         }
     }
@@ -244,6 +261,7 @@ pub struct EventSink {
     seen: Option<Seen>,
     crc_reported: Option<Instant>,
     wkc_reported: Option<Instant>,
+    late_reported: Option<Instant>,
     /// Totals last reported.
     crc_told: u64,
     wkc_told: u64,
@@ -278,6 +296,7 @@ impl EventSink {
             seen: None,
             crc_reported: None,
             wkc_reported: None,
+            late_reported: None,
             crc_told: 0,
             wkc_told: 0,
             lost: 0,
@@ -330,6 +349,14 @@ impl EventSink {
         if wkc != self.wkc_told && quiet(&mut self.wkc_reported, now) {
             self.wkc_told = wkc;
             self.emit(EventKind::WkcErrors { total: wkc });
+        }
+    }
+
+    /// A write was late for the budget; told at most every
+    /// [`COUNTER_QUIET`] (the misses are counted in the telemetry).
+    pub fn output_late(&mut self, budget_us: u32, latency_us: u32, now: Instant) {
+        if quiet(&mut self.late_reported, now) {
+            self.emit(EventKind::OutputLate { budget_us, latency_us });
         }
     }
 

@@ -103,6 +103,8 @@ pub struct Engine<L> {
     assembler: OutputAssembler,
     queue: FairQueue,
     active: Option<Active>,
+    /// When the oldest client write not yet pushed reached the daemon.
+    unplayed_write: Option<Instant>,
     /// What the last snapshot sent to waiters showed, and when it went.
     announced: ((Phase, EcatState, u64, u64), Instant),
 }
@@ -176,6 +178,7 @@ impl<L: Link> Engine<L> {
             events,
             queue: FairQueue::default(),
             active: None,
+            unplayed_write: None,
             announced: (Default::default(), epoch),
         }
     }
@@ -236,11 +239,7 @@ impl<L: Link> Engine<L> {
             }
             first = false;
             let cyclic = (layout.state == EcatState::Op && (layout.rx_size > 0 || layout.tx_size > 0)).then(|| {
-                let cycle = Duration::from_micros(u64::from(if self.config.cycle.dc_assign_activate != 0 {
-                    self.config.cycle.sync0_us
-                } else {
-                    1000
-                }));
+                let cycle = self.config.cycle.dc_cycle();
                 let plan = cyclic::Plan {
                     rx_size: layout.rx_size,
                     tx_size: layout.tx_size,
@@ -248,6 +247,7 @@ impl<L: Link> Engine<L> {
                     low: layout.fifo_low,
                     high: layout.fifo_high,
                     tx_depth: layout.fifo_tx_depth,
+                    budget: self.config.cycle.output_latency(),
                 };
                 Cyclic::new(plan, self.port.data_size(), self.held.image_for(&layout.slaves, layout.rx_size))
             });

@@ -4,6 +4,7 @@
 //! `outputs.on_last_writer_gone` ([`Writers`]).
 
 use std::sync::atomic::{AtomicBool, AtomicUsize, Ordering};
+use std::time::Instant;
 
 /// One chunk of a write into the host-side output image. Fixed size, so
 /// queuing one allocates nothing. A client write longer than one chunk is
@@ -22,6 +23,9 @@ pub struct OutputWrite {
     pub len: u8,
     /// The bytes.
     pub data: [u8; OUTPUT_CHUNK],
+    /// When the client's write reached the daemon (for the write-to-wire
+    /// latency).
+    pub written: Instant,
 }
 
 /// Bytes per [`OutputWrite`].
@@ -45,16 +49,18 @@ impl OutputAssembler {
     /// Takes a chunk; on a write's last chunk, copies the whole write into
     /// `image` (bytes beyond it are ignored). A write whose last chunk never
     /// came (its sender found the queue full) is dropped when the next one
-    /// starts: a partial write is never applied.
-    pub fn push(&mut self, w: OutputWrite, image: Option<&mut [u8]>) {
+    /// starts: a partial write is never applied. Returns when the write
+    /// reached the daemon, once it is applied.
+    pub fn push(&mut self, w: OutputWrite, image: Option<&mut [u8]>) -> Option<Instant> {
         if self.batch != Some(w.batch) {
             self.pending.clear();
             self.batch = Some(w.batch);
         }
         self.pending.push(w);
         if !w.last {
-            return;
+            return None;
         }
+        let applied = image.is_some().then_some(w.written);
         if let Some(image) = image {
             for p in &self.pending {
                 let at = p.offset as usize;
@@ -66,6 +72,7 @@ impl OutputAssembler {
         }
         self.pending.clear();
         self.batch = None;
+        applied
     }
 }
 
@@ -108,7 +115,7 @@ mod tests {
     use super::*;
 
     fn chunk(batch: u32, last: bool, offset: u32, byte: u8) -> OutputWrite {
-        OutputWrite { batch, last, offset, len: 2, data: [byte; OUTPUT_CHUNK] }
+        OutputWrite { batch, last, offset, len: 2, data: [byte; OUTPUT_CHUNK], written: std::time::Instant::now() }
     }
 
     #[test]

@@ -85,7 +85,17 @@ struct Clocks {
     transaction_poll: Instant,
     /// The last emergency question.
     emergency_poll: Instant,
+    /// The blocking slot had its step since the last FIFO exchange.
+    slot_waited: bool,
+    /// FIFO exchanges in a row that went first while a transaction waited.
+    slot_skipped: u32,
 }
+
+/// FIFO exchanges that may go first in a row, with the level low, while a
+/// transaction waits: a budget the host cannot hold keeps the level low,
+/// and the blocking slot must still move (the shortfall shows as
+/// underruns, counted and reported).
+const SLOT_SKIPS: u32 = 4;
 
 impl<L: Link> Engine<L> {
     /// Reads every slave's state and AL status code (a fault is being
@@ -148,7 +158,7 @@ impl<L: Link> Engine<L> {
         let mut cyclic = cyclic;
         let now = Instant::now();
         self.start_run(cyclic.as_deref(), slaves, now);
-        let mut clocks = Clocks { transaction_poll: now, emergency_poll: now };
+        let mut clocks = Clocks { transaction_poll: now, emergency_poll: now, slot_waited: false, slot_skipped: 0 };
         let exit = loop {
             if let Err(exit) = self.turn(&mut cyclic, &mut clocks) {
                 break exit;
@@ -183,11 +193,19 @@ impl<L: Link> Engine<L> {
         self.count_slaves(now)?;
         self.ask_emergencies(cyclic.as_deref(), clocks, now)?;
         let progressed = match cyclic.as_deref_mut() {
-            Some(c) if self.fifo_due(c, now) => {
+            Some(c) if self.fifo_first(c, clocks, now) => {
+                if self.slot_waits() {
+                    clocks.slot_skipped += 1;
+                }
                 self.fifo_exchange(c, now)?;
+                clocks.slot_waited = false;
                 true
             }
-            _ => self.transaction_step(cyclic.as_deref_mut(), clocks, now)?,
+            _ => {
+                clocks.slot_waited = true;
+                clocks.slot_skipped = 0;
+                self.transaction_step(cyclic.as_deref_mut(), clocks, now)?
+            }
         };
         self.check_emergencies()?;
         self.watch_flow(cyclic.is_some(), Instant::now())?;
@@ -205,7 +223,10 @@ impl<L: Link> Engine<L> {
             return Err(self.safe_stop(cyclic.as_deref_mut()));
         }
         while let Ok(w) = self.outputs.try_recv() {
-            self.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice()));
+            if let Some(written) = self.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice())) {
+                // The oldest write not yet on its way to the wire.
+                self.unplayed_write.get_or_insert(written);
+            }
         }
         if self.writers.take_gone() {
             self.last_writer_gone(cyclic.as_deref_mut());
@@ -279,9 +300,9 @@ impl<L: Link> Engine<L> {
         self.publish_status(now);
         let news = self.supervisor.header(&h, self.held_below_target, now)?;
         if news.ran_dry {
+            // Logged with the event (one line, not two).
             self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
             self.events.emit(EventKind::FifoUnderrun);
-            warn!("RxFIFO ran dry: outputs repeated");
         }
         if news.clear_fifo_error {
             self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
@@ -345,6 +366,28 @@ impl<L: Link> Engine<L> {
         per_packet.min(usize::from(c.tx_depth / 2).max(1))
     }
 
+    /// Whether a transaction is in the slot or queued for it.
+    fn slot_waits(&self) -> bool {
+        self.active.is_some() || !self.queue.is_empty()
+    }
+
+    /// Whether this turn is the FIFO's. When it is due: yes if no
+    /// transaction waits, or the slot had its step since the last
+    /// exchange; if only the clock says so (the level is not low), the
+    /// waiting transaction goes first; if the level is low, the FIFO goes
+    /// first at most [`SLOT_SKIPS`] times in a row. With a small latency
+    /// budget exchanges are due every few cycles; without these rules the
+    /// blocking slot would never get a turn.
+    fn fifo_first(&self, c: &Cyclic, clocks: &Clocks, now: Instant) -> bool {
+        if !self.fifo_due(c, now) {
+            return false;
+        }
+        if !self.slot_waits() || clocks.slot_waited {
+            return true;
+        }
+        c.outputs_low(now) && clocks.slot_skipped < SLOT_SKIPS
+    }
+
     fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
         now >= c.next_exchange(now, self.rx_room(c), self.tx_room(c)) || c.outputs_low(now)
     }
@@ -369,6 +412,8 @@ impl<L: Link> Engine<L> {
         let mut op = FifoOpFlags::empty();
         op.set(FifoOpFlags::WRITE, c.rx_size > 0);
         op.set(FifoOpFlags::READ, c.tx_size > 0);
+        // The first frame pushed now plays after the ones queued before it.
+        let ahead = c.estimate(now).max(0) as u32;
         let outputs = c.push_bytes(n);
         let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
         let count = a.header.rx_fifo_count;
@@ -386,10 +431,29 @@ impl<L: Link> Engine<L> {
         let drained = read < self.port.data_size() / c.tx_size.max(1);
         c.answered(now, n, count, drained);
         self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
+        if n > 0 {
+            if let Some(written) = self.unplayed_write.take() {
+                let on_wire = now + c.cycle() * ahead;
+                self.output_latency(on_wire.saturating_duration_since(written), now);
+            }
+        }
         if let Some(t) = &self.distributor {
             t.unpark();
         }
         Ok(())
+    }
+
+    /// A client's write reaches the wire `latency` after it reached the
+    /// daemon: into the window the API reads, and against the budget.
+    fn output_latency(&mut self, latency: Duration, now: Instant) {
+        let us = latency.as_micros().min(u128::from(u32::MAX)) as u32;
+        self.telemetry.output_latency.record(us);
+        if let Some(budget) = self.config.cycle.output_latency_us {
+            if us > budget {
+                self.telemetry.output_latency_misses.fetch_add(1, Relaxed);
+                self.events.output_late(budget, us, now);
+            }
+        }
     }
 
     /// Looks at the answer to an emergency question, once an exchange has

@@ -8,7 +8,7 @@
 //! [`ANNOUNCE_EVERY`] while it runs, so counters reach waiters too.
 
 use std::sync::Mutex;
-use std::sync::atomic::{AtomicU8, AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicU8, AtomicU32, AtomicU64, Ordering::Relaxed};
 use std::time::Duration;
 
 use ecmxf_wire::{EcatState, ResponseHeader};
@@ -108,6 +108,60 @@ pub struct Telemetry {
     last_error: Mutex<Option<String>>,
     /// Snapshots for waiters (see the module comment).
     changes: watch::Sender<Snapshot>,
+    /// The latest write-to-wire latencies of client output writes.
+    pub output_latency: LatencyWindow,
+    /// Writes that reached the wire later than the budget.
+    pub output_latency_misses: AtomicU64,
+}
+
+/// The latest [`LatencyWindow::LEN`] latencies, us, written by the engine
+/// without a lock; readers copy them and take percentiles.
+#[derive(Debug)]
+pub struct LatencyWindow {
+    samples: [AtomicU32; LatencyWindow::LEN],
+    recorded: AtomicU64,
+}
+
+impl Default for LatencyWindow {
+    fn default() -> Self {
+        Self { samples: std::array::from_fn(|_| AtomicU32::new(0)), recorded: AtomicU64::new(0) }
+    }
+}
+
+/// Percentiles of a [`LatencyWindow`].
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct LatencyStats {
+    /// Median, us.
+    pub p50_us: u32,
+    /// 99th percentile, us.
+    pub p99_us: u32,
+    /// Samples they are taken over.
+    pub samples: usize,
+}
+
+impl LatencyWindow {
+    /// Samples kept.
+    pub const LEN: usize = 512;
+
+    /// Records one latency (the engine thread).
+    pub fn record(&self, us: u32) {
+        let n = self.recorded.load(Relaxed);
+        self.samples[(n % Self::LEN as u64) as usize].store(us, Relaxed);
+        self.recorded.store(n + 1, Relaxed);
+    }
+
+    /// Median and 99th percentile of the latest samples; `None` before the
+    /// first. Sorts a copy: for readers, never the engine thread.
+    pub fn stats(&self) -> Option<LatencyStats> {
+        let n = (self.recorded.load(Relaxed) as usize).min(Self::LEN);
+        if n == 0 {
+            return None;
+        }
+        let mut v: Vec<u32> = self.samples[..n].iter().map(|a| a.load(Relaxed)).collect();
+        v.sort_unstable();
+        let at = |p: f64| v[((n - 1) as f64 * p).round() as usize];
+        Some(LatencyStats { p50_us: at(0.5), p99_us: at(0.99), samples: n })
+    }
 }
 
 impl Default for Telemetry {
@@ -138,6 +192,8 @@ impl Default for Telemetry {
             epoch_monotonic_ns: AtomicU64::default(),
             last_error: Mutex::default(),
             changes: watch::Sender::new(Snapshot::default()),
+            output_latency: LatencyWindow::default(),
+            output_latency_misses: AtomicU64::default(),
         }
     }
 }
@@ -219,6 +275,8 @@ pub struct Snapshot {
     pub max_fifo_gap_us: u64,
     /// The last applied configuration the engine has taken (0: the first).
     pub config_generation: u64,
+    /// Client writes that reached the wire later than the budget.
+    pub output_latency_misses: u64,
 }
 
 impl Snapshot {
@@ -325,6 +383,7 @@ impl Telemetry {
             recoveries: self.recoveries.load(Relaxed),
             max_fifo_gap_us: self.max_fifo_gap_us.load(Relaxed),
             config_generation: self.config_generation.load(Relaxed),
+            output_latency_misses: self.output_latency_misses.load(Relaxed),
         }
     }
 }
@@ -351,6 +410,21 @@ mod tests {
         c.rebase();
         assert_eq!(c.update(3), 200, "the reset's 0..3 is not counted as 59");
         assert_eq!(c.update(4), 201);
+    }
+
+    #[test]
+    fn latency_percentiles_come_from_the_latest_samples() {
+        let w = LatencyWindow::default();
+        assert_eq!(w.stats(), None);
+        for us in 1..=100 {
+            w.record(us);
+        }
+        assert_eq!(w.stats(), Some(LatencyStats { p50_us: 51, p99_us: 99, samples: 100 }));
+        // The window slides: old samples are overwritten.
+        for _ in 0..LatencyWindow::LEN {
+            w.record(7);
+        }
+        assert_eq!(w.stats(), Some(LatencyStats { p50_us: 7, p99_us: 7, samples: LatencyWindow::LEN }));
     }
 
     #[test]

@@ -450,6 +450,12 @@ impl Master {
         Verdict { health: self.health_of(s, now), input_age: s.input_age(now) }
     }
 
+    /// Write-to-wire latency of client output writes over the latest ones
+    /// (see `Telemetry::output_latency`); `None` before the first.
+    pub fn output_latency(&self) -> Option<crate::engine::telemetry::LatencyStats> {
+        self.telemetry.output_latency.stats()
+    }
+
     /// Why bring-up last failed or recovery last started.
     pub fn last_error(&self) -> Option<String> {
         self.telemetry.last_error()

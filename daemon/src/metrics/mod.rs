@@ -92,7 +92,7 @@ pub async fn render(sources: &Sources) -> String {
         let _ = writeln!(out, "ecmxf_engine_phase{{phase=\"{name}\"}} {}", u8::from(p == s.phase));
     }
     // (name, type, help, value): one sample each.
-    let single: [(&str, &str, &str, String); 23] = [
+    let single: [(&str, &str, &str, String); 25] = [
         (
             "ecmxf_network_state",
             "gauge",
@@ -181,6 +181,18 @@ pub async fn render(sources: &Sources) -> String {
         ),
         ("ecmxf_output_writers", "gauge", "Clients holding output leases.", master.output_writers().to_string()),
         (
+            "ecmxf_output_latency_budget_seconds",
+            "gauge",
+            "The output latency budget in force (cycle.output_latency_us; 0: none).",
+            (f64::from(master.config().cycle.output_latency_us.unwrap_or(0)) / 1e6).to_string(),
+        ),
+        (
+            "ecmxf_output_latency_misses_total",
+            "counter",
+            "Client output writes that reached the wire later than the budget.",
+            s.output_latency_misses.to_string(),
+        ),
+        (
             "ecmxf_config_generation",
             "gauge",
             "Configurations applied since the daemon started.",
@@ -189,6 +201,16 @@ pub async fn render(sources: &Sources) -> String {
     ];
     for (name, kind, help, value) in single {
         metric(&mut out, name, kind, help, value);
+    }
+    if let Some(l) = master.output_latency() {
+        let name = "ecmxf_output_latency_seconds";
+        let _ = writeln!(
+            out,
+            "# HELP {name} Write-to-wire latency of client output writes over the latest {} writes.\n# TYPE {name} summary",
+            l.samples
+        );
+        let _ = writeln!(out, "{name}{{quantile=\"0.5\"}} {}", f64::from(l.p50_us) / 1e6);
+        let _ = writeln!(out, "{name}{{quantile=\"0.99\"}} {}", f64::from(l.p99_us) / 1e6);
     }
     sources.sdo_latency.render(&mut out, "ecmxf_sdo_duration_seconds", "SDO upload/download duration through the API.");
     let slaves = master.layout().slaves;

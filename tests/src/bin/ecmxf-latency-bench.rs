@@ -1,0 +1,162 @@
+//! Output latency benchmark: how long a client's `WriteOutputs` takes to
+//! come back through the simulated IO slave's loopback, at several
+//! `cycle.output_latency_us` budgets and DC cycles. Run it with
+//! `cargo run --release -p ecmxf-e2e --bin ecmxf-latency-bench` (`--secs N`
+//! per configuration, default 5).
+//!
+//! For each (cycle, budget) it starts the daemon (embedded, on the demo
+//! simulator), takes a lease on the IO slave, and repeatedly writes a new
+//! byte to its outputs, then waits for the byte in the input image streamed
+//! back (StreamInputs). It prints, from this one run:
+//! - write -> loopback: from just before the WriteOutputs call to the
+//!   engine receiving the input frame that carries the byte (the frame's
+//!   CLOCK_MONOTONIC stamp), p50/p99/max;
+//! - the daemon's own write-to-wire figure (GetStatus
+//!   output_latency_p50/p99_us) and late writes;
+//! - RxFIFO underruns (fifo_alarms) during the run.
+#![forbid(unsafe_code)]
+
+use std::time::{Duration, Instant};
+
+use ecmxf_e2e::Daemon;
+use ecmxf_proto::v1 as pb;
+use pb::master_client::MasterClient;
+use pb::process_data_client::ProcessDataClient;
+use tokio_stream::StreamExt;
+
+fn monotonic_ns() -> u64 {
+    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
+        Ok(t) => (t.tv_sec() as u64) * 1_000_000_000 + t.tv_nsec() as u64,
+        Err(_) => 0,
+    }
+}
+
+fn pct(sorted: &[u64], p: f64) -> u64 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+/// The IO slave (position 2): (output byte offset, input byte offset).
+fn io_offsets(layout: &pb::ProcessImage) -> (u32, u32) {
+    let first = |dir: pb::Direction| {
+        layout
+            .entries
+            .iter()
+            .filter(|e| e.slave == 2 && e.direction == dir as i32)
+            .map(|e| e.bit_offset / 8)
+            .min()
+            .expect("the demo network's IO slave")
+    };
+    (first(pb::Direction::Output), first(pb::Direction::Input))
+}
+
+struct Outcome {
+    loopback_us: Vec<u64>,
+    status: pb::MasterStatus,
+    underruns: u64,
+    late: u64,
+}
+
+async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
+    let extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
+    let config = ecmxf_e2e::config("backend = \"sim\"", "").replace("[cycle]\n", &format!("[cycle]\n{extra}"));
+    let mut d = Daemon::with_config(&config);
+    let ch = d.connect().await;
+    let mut pd = ProcessDataClient::new(ch.clone());
+    let mut master = MasterClient::new(ch.clone());
+    let layout = pd.get_layout(pb::GetLayoutRequest {}).await.expect("layout").into_inner();
+    let (out_at, in_at) = io_offsets(&layout);
+    let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 5000 }).await.expect("lease");
+    let lease = lease.into_inner().id;
+    let mut inputs = pd
+        .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
+        .await
+        .expect("stream")
+        .into_inner();
+    let counters = |s: &pb::MasterStatus| s.counters.unwrap_or_default();
+    let before = master.get_status(pb::GetStatusRequest {}).await.expect("status").into_inner();
+    let until = Instant::now() + Duration::from_secs(secs);
+    let mut loopback_us = Vec::new();
+    let mut value = 0u8;
+    let mut k = 0u64;
+    while Instant::now() < until {
+        value = value % 250 + 1;
+        k += 1;
+        let write = pb::OutputWrite {
+            target: Some(pb::output_write::Target::Offset(out_at)),
+            value: Some(pb::Value { kind: Some(pb::value::Kind::Raw(vec![value])) }),
+        };
+        let t0 = monotonic_ns();
+        pd.write_outputs(pb::WriteOutputsRequest { lease_id: lease.clone(), writes: vec![write] })
+            .await
+            .expect("write");
+        let deadline = Instant::now() + Duration::from_secs(2);
+        loop {
+            let s = tokio::time::timeout_at(deadline.into(), inputs.next()).await;
+            let Ok(Some(Ok(s))) = s else {
+                eprintln!("write {k}: the loopback never showed {value} within 2 s");
+                break;
+            };
+            if s.monotonic_ns >= t0 && s.image.get(in_at as usize) == Some(&value) {
+                loopback_us.push((s.monotonic_ns - t0) / 1000);
+                break;
+            }
+        }
+        // Writes at no fixed phase to the cycle.
+        tokio::time::sleep(Duration::from_micros(300 + (k * 137) % 900)).await;
+    }
+    let status = master.get_status(pb::GetStatusRequest {}).await.expect("status").into_inner();
+    let (b, a) = (counters(&before), counters(&status));
+    drop(inputs);
+    d.stop();
+    loopback_us.sort_unstable();
+    Outcome {
+        loopback_us,
+        underruns: a.fifo_alarms - b.fifo_alarms,
+        late: a.output_latency_misses - b.output_latency_misses,
+        status,
+    }
+}
+
+fn main() {
+    let mut secs = 5u64;
+    let mut only: Option<(u32, u32)> = None;
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--secs" => secs = args.next().and_then(|v| v.parse().ok()).expect("--secs N"),
+            "--only" => {
+                let v = args.next().expect("--only CYCLE_US:BUDGET_US");
+                let (c, b) = v.split_once(':').expect("--only CYCLE_US:BUDGET_US");
+                only = Some((c.parse().expect("cycle"), b.parse().expect("budget")));
+            }
+            other => panic!("unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US"),
+        }
+    }
+    let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
+    println!(
+        "{:>8} {:>9} {:>7} | {:>24} | {:>20} {:>6} {:>9}",
+        "cycle", "budget", "writes", "write->loopback p50/p99/max", "daemon wire p50/p99", "late", "underruns"
+    );
+    let all = [(125, 1000), (125, 2000), (125, 5000), (125, 20000), (1000, 2000), (1000, 5000), (1000, 20000)];
+    for (cycle_us, budget_us) in all.into_iter().filter(|c| only.is_none_or(|o| o == *c)) {
+        let o = rt.block_on(measure(cycle_us, budget_us, secs));
+        let l = &o.loopback_us;
+        println!(
+            "{:>5} us {:>6} us {:>7} | {:>7.2} {:>7.2} {:>7.2} ms | {:>8.2} {:>8.2} ms {:>6} {:>9}",
+            cycle_us,
+            budget_us,
+            l.len(),
+            pct(l, 0.5) as f64 / 1000.0,
+            pct(l, 0.99) as f64 / 1000.0,
+            l.last().copied().unwrap_or(0) as f64 / 1000.0,
+            o.status.output_latency_p50_us as f64 / 1000.0,
+            o.status.output_latency_p99_us as f64 / 1000.0,
+            o.late,
+            o.underruns
+        );
+    }
+    println!("(1 ms cycle with a 1 ms budget is refused: a budget must cover two cycles)");
+}
