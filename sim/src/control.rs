@@ -22,6 +22,9 @@ qei EDGES                       encoder edges (X4 count)
 adc VOLTS                       analog input voltage
 io-input SLAVE BYTE             bits ORed into a digital-IO slave's inputs
 outputs SLAVE                   the output bytes the slave holds (hex) and its state
+record SLAVE|all [MAX]          record the output frames played from now (MAX, default 100000)
+recorded [FROM [COUNT]]         the recorded frames: cycle, bytes (hex), \"repeat\" when the RxFIFO was empty
+record off                      stop recording and forget the frames
 help                            this list";
 
 fn num(s: Option<&str>, what: &str) -> Result<u64, String> {
@@ -194,6 +197,42 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
             let hex: String = s.outputs.iter().map(|b| format!("{b:02x}")).collect();
             Ok(format!("ok state={} outputs={hex}", s.esm.state))
         }
+        "record" => match w.next() {
+            Some("off") => {
+                chip.fifo.played = None;
+                ok()
+            }
+            which => {
+                let (start, len, what) = match which {
+                    Some("all") => (0, chip.master.outputs.len(), "all".to_string()),
+                    other => {
+                        let i = slave_index(chip, other)?;
+                        let slot = chip.master.slots.iter().find(|s| s.slave == i);
+                        let Some(slot) = slot.filter(|s| s.rx_len > 0) else {
+                            return Err(format!("slave {i} has no outputs in the mapping"));
+                        };
+                        (slot.rx_offset, slot.rx_len, format!("slave {i}"))
+                    }
+                };
+                let max = match w.next() {
+                    Some(m) => num(Some(m), "max")? as usize,
+                    None => 100_000,
+                };
+                chip.fifo.played = Some(crate::chip::fifo::PlayRecord { start, len, max, ..Default::default() });
+                Ok(format!("ok recording {what} bytes={start}..{} max={max}", start + len))
+            }
+        },
+        "recorded" => {
+            let Some(r) = &chip.fifo.played else { return Err("not recording; use record SLAVE|all".into()) };
+            let from = w.next().map(|v| num(Some(v), "from")).transpose()?.unwrap_or(0) as usize;
+            let count = w.next().map(|v| num(Some(v), "count")).transpose()?.unwrap_or(u64::MAX) as usize;
+            let mut out = format!("ok frames={} not_kept={}", r.frames.len(), r.not_kept);
+            for f in r.frames.iter().skip(from).take(count) {
+                let hex: String = f.bytes.iter().map(|b| format!("{b:02x}")).collect();
+                out.push_str(&format!("\n{} {hex}{}", f.cycle, if f.repeated { " repeat" } else { "" }));
+            }
+            Ok(out)
+        }
         other => Err(format!("unknown command {other:?}; try help")),
     }
 }
@@ -220,6 +259,16 @@ mod tests {
         assert!(execute(&mut c, "al-error 0 0x1B").is_ok());
         assert_eq!(c.net.slaves[0].esm.al_status, 0x1B);
         assert!(execute(&mut c, "io-input 2 0x0F").is_ok());
+        assert_eq!(execute(&mut c, "recorded"), Err("not recording; use record SLAVE|all".into()));
+        assert!(execute(&mut c, "record 0").unwrap_err().contains("no outputs"), "no mapping yet");
+        assert_eq!(execute(&mut c, "record all 2"), Ok("ok recording all bytes=0..0 max=2".into()));
+        c.fifo.played.as_mut().unwrap().note(7, &[], false);
+        c.fifo.played.as_mut().unwrap().note(8, &[], true);
+        c.fifo.played.as_mut().unwrap().note(9, &[], false);
+        assert_eq!(execute(&mut c, "recorded"), Ok("ok frames=2 not_kept=1\n7 \n8  repeat".into()));
+        assert_eq!(execute(&mut c, "recorded 1"), Ok("ok frames=2 not_kept=1\n8  repeat".into()));
+        assert!(execute(&mut c, "record off").is_ok());
+        assert!(c.fifo.played.is_none());
         c.net.slaves[2].outputs = vec![0xA5, 0x01];
         assert_eq!(execute(&mut c, "outputs 2"), Ok("ok state=INIT outputs=a501".into()));
         assert!(execute(&mut c, "bogus").unwrap_err().contains("unknown command"));

@@ -489,3 +489,19 @@ pub fn run<F: std::future::Future<Output = ()>>(body: F) {
     let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
     tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime").block_on(body);
 }
+
+/// The demo network's digital-IO slave (position 2, its outputs looped back
+/// to its inputs): the byte offsets of its outputs and inputs in the
+/// process image.
+pub fn io_slave_bytes(image: &pb::ProcessImage) -> (u32, u32) {
+    let first = |dir: pb::Direction| {
+        image
+            .entries
+            .iter()
+            .filter(|e| e.slave == 2 && e.direction == dir as i32)
+            .map(|e| e.bit_offset / 8)
+            .min()
+            .expect("the demo network's IO slave")
+    };
+    (first(pb::Direction::Output), first(pb::Direction::Input))
+}

@@ -365,10 +365,7 @@ fn a_latency_budget_bounds_how_long_writes_take_to_come_back() {
         let mut pd = ProcessDataClient::new(ch.clone());
         let mut master = MasterClient::new(ch);
         let image = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
-        let byte = |dir: pb::Direction| {
-            image.entries.iter().filter(|e| e.slave == 2 && e.direction == dir as i32).map(|e| e.bit_offset / 8).min()
-        };
-        let (out_at, in_at) = (byte(pb::Direction::Output).unwrap(), byte(pb::Direction::Input).unwrap());
+        let (out_at, in_at) = ecmxf_e2e::io_slave_bytes(&image);
         let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 5000 }).await.unwrap();
         let lease = lease.into_inner().id;
         let mut inputs = pd
@@ -415,5 +412,61 @@ fn a_latency_budget_bounds_how_long_writes_take_to_come_back() {
         // cycles with this budget; about 4.8 ms in all, release build): far
         // under the deep FIFO's 23 ms, with room for a loaded debug build.
         assert!(median <= 10_000, "median write -> loopback {median} us: {took:?}");
+    });
+}
+
+/// What reaches the slaves, frame by frame: the simulator records the
+/// output frames it plays (`record 2`), and a sequence of writes to the IO
+/// slave shows there in order, each value one unbroken run of cycles,
+/// never an older value after a newer one.
+#[test]
+fn writes_reach_the_slave_in_order_as_the_simulator_records_them() {
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("record");
+        let sim = ecmxf_e2e::Simulator::serve(&dir, &[]);
+        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
+        let config =
+            ecmxf_e2e::config(&link, "").replace("[cycle]\n", "[cycle]\nsync0_us = 125\noutput_latency_us = 2000\n");
+        let mut d = Daemon::with_config(&config);
+        let ch = d.connect().await;
+        let mut pd = ProcessDataClient::new(ch);
+        let image = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
+        let (out_at, _) = ecmxf_e2e::io_slave_bytes(&image);
+        let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 5000 }).await.unwrap();
+        let lease = lease.into_inner().id;
+        assert!(sim.ctl("record 2").starts_with("ok recording slave 2"), "{}", sim.ctl("status"));
+        let values: Vec<u8> = (1..=40).collect();
+        for v in &values {
+            pd.write_outputs(pb::WriteOutputsRequest {
+                lease_id: lease.clone(),
+                writes: vec![pb::OutputWrite {
+                    target: Some(pb::output_write::Target::Offset(out_at)),
+                    value: raw(vec![*v]),
+                }],
+            })
+            .await
+            .unwrap();
+            tokio::time::sleep(Duration::from_millis(5)).await;
+        }
+        tokio::time::sleep(Duration::from_millis(50)).await;
+        let text = sim.ctl("recorded");
+        let mut lines = text.lines();
+        assert!(lines.next().is_some_and(|l| l.starts_with("ok frames=")), "{text}");
+        // (cycle, value) per played frame; cycles count up by one.
+        let played: Vec<(u64, u8)> = lines
+            .map(|l| {
+                let mut f = l.split_whitespace();
+                let cycle = f.next().unwrap().parse().unwrap();
+                (cycle, u8::from_str_radix(f.next().unwrap(), 16).unwrap())
+            })
+            .collect();
+        assert!(played.len() > 1000, "{} frames recorded", played.len());
+        assert!(played.windows(2).all(|w| w[1].0 == w[0].0 + 1), "a frame per cycle, none missing");
+        // The values in the order they were played, each run once.
+        let mut runs: Vec<u8> = played.iter().map(|(_, v)| *v).collect();
+        runs.dedup();
+        let runs: Vec<u8> = runs.into_iter().filter(|v| *v != 0).collect();
+        assert_eq!(runs, values, "every write reached the slave, in order, once");
+        drop(sim);
     });
 }

@@ -44,14 +44,21 @@ impl Chip {
         // RxFIFO to run dry (modelling decision: the manual describes the
         // underrun as repeating the last outputs, and there are none).
         if running && self.fifo.enabled && self.master.rx_size > 0 {
-            match self.fifo.rx.pop_front() {
-                Some(frame) if frame.len() == self.master.outputs.len() => self.master.outputs = frame,
-                Some(_) => {}
+            let repeated = match self.fifo.rx.pop_front() {
+                Some(frame) if frame.len() == self.master.outputs.len() => {
+                    self.master.outputs = frame;
+                    false
+                }
+                Some(_) => false,
                 None => {
                     // Dry RxFIFO: the last outputs repeat.
                     self.fifo.underruns += 1;
                     self.errors |= ErrorFlags::FIFO_ERROR;
+                    true
                 }
+            };
+            if let Some(r) = &mut self.fifo.played {
+                r.note(self.stats.cycles, &self.master.outputs, repeated);
             }
         }
         if running {

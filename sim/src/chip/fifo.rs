@@ -36,6 +36,50 @@ pub struct Fifos {
     pub rx_dropped: u64,
     /// Input frames dropped because the TxFIFO was full.
     pub tx_dropped: u64,
+    /// The output frames played, when a test asked for them (`record`).
+    pub played: Option<PlayRecord>,
+}
+
+/// The output frames the chip played, one per DC cycle while the RxFIFO
+/// feeds the slaves, as a test asked for them (control command `record`):
+/// the exact sequence a host's frames reached the slaves in, with the
+/// cycles that repeated the last frame because the RxFIFO was empty.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct PlayRecord {
+    /// The bytes kept of each frame: `start..start + len` of the output
+    /// image (one slave's share, or all of it).
+    pub start: usize,
+    /// Bytes kept per frame.
+    pub len: usize,
+    /// Frames kept at most; later ones are counted, not kept.
+    pub max: usize,
+    /// The frames, oldest first.
+    pub frames: Vec<PlayedFrame>,
+    /// Frames played after `max` was reached.
+    pub not_kept: u64,
+}
+
+/// One cycle's output frame.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct PlayedFrame {
+    /// The chip's DC cycle count when it played.
+    pub cycle: u64,
+    /// The kept bytes.
+    pub bytes: Vec<u8>,
+    /// The RxFIFO was empty: the last frame repeated.
+    pub repeated: bool,
+}
+
+impl PlayRecord {
+    /// Notes the frame of `cycle`.
+    pub fn note(&mut self, cycle: u64, image: &[u8], repeated: bool) {
+        if self.frames.len() >= self.max {
+            self.not_kept += 1;
+            return;
+        }
+        let bytes = image.get(self.start..self.start + self.len).unwrap_or_default().to_vec();
+        self.frames.push(PlayedFrame { cycle, bytes, repeated });
+    }
 }
 
 impl Default for Fifos {
@@ -53,6 +97,7 @@ impl Default for Fifos {
             underruns: 0,
             rx_dropped: 0,
             tx_dropped: 0,
+            played: None,
         }
     }
 }

@@ -38,20 +38,6 @@ fn pct(sorted: &[u64], p: f64) -> u64 {
     sorted[((sorted.len() - 1) as f64 * p).round() as usize]
 }
 
-/// The IO slave (position 2): (output byte offset, input byte offset).
-fn io_offsets(layout: &pb::ProcessImage) -> (u32, u32) {
-    let first = |dir: pb::Direction| {
-        layout
-            .entries
-            .iter()
-            .filter(|e| e.slave == 2 && e.direction == dir as i32)
-            .map(|e| e.bit_offset / 8)
-            .min()
-            .expect("the demo network's IO slave")
-    };
-    (first(pb::Direction::Output), first(pb::Direction::Input))
-}
-
 struct Outcome {
     loopback_us: Vec<u64>,
     status: pb::MasterStatus,
@@ -67,7 +53,7 @@ async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
     let mut pd = ProcessDataClient::new(ch.clone());
     let mut master = MasterClient::new(ch.clone());
     let layout = pd.get_layout(pb::GetLayoutRequest {}).await.expect("layout").into_inner();
-    let (out_at, in_at) = io_offsets(&layout);
+    let (out_at, in_at) = ecmxf_e2e::io_slave_bytes(&layout);
     let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 5000 }).await.expect("lease");
     let lease = lease.into_inner().id;
     let mut inputs = pd
