@@ -101,8 +101,12 @@ fn main() -> ExitCode {
                     LinkConfig::SimSocket { socket } => format!("simulator socket {}", socket.display()),
                     LinkConfig::Spidev { device, .. } => format!("{}", device.display()),
                 };
+                let latency = match c.cycle.output_latency_us {
+                    Some(us) => format!(", output latency budget {us} us"),
+                    None => String::new(),
+                };
                 println!(
-                    "{}: ok ({link}, {} expected slaves, {} us cycle)",
+                    "{}: ok ({link}, {} expected slaves, {} us cycle{latency})",
                     path.display(),
                     c.slaves.len(),
                     c.cycle.sync0_us

@@ -22,6 +22,7 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         let out = Command::new(BIN).args(["--check-config", &repo(file)]).output().unwrap();
         assert!(out.status.success(), "{file}: {}", String::from_utf8_lossy(&out.stderr));
         assert!(String::from_utf8_lossy(&out.stdout).contains(&format!(": ok ({link}")), "{file}");
+        assert!(String::from_utf8_lossy(&out.stdout).contains("output latency budget"), "{file}: the budget is said");
     }
     let examples: Vec<String> = std::fs::read_dir(repo("config"))
         .unwrap()
@@ -37,6 +38,10 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         ("version = 1\n", "link"),
         ("version = 1\n[link]\nbackend = \"sim\"\n[log]\nlevel = \"info,=[\"\n", "log.level"),
         ("version = 1\n[link]\nbackend = \"sim\"\n[metrics]\nlisten = \"localhost\"\n", "line 5"),
+        (
+            "version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 1000\noutput_latency_us = 1500\n",
+            "cycle.output_latency_us",
+        ),
     ] {
         std::fs::write(&bad, text).unwrap();
         let out = Command::new(BIN).args(["--check-config", bad.to_str().unwrap()]).output().unwrap();
