@@ -345,8 +345,11 @@ impl Daemon {
         let thread = std::thread::Builder::new()
             .name("ecmxfd-embedded".into())
             .spawn(move || {
+                // Named, so a benchmark can tell the daemon's threads
+                // (these, ecmxf-rt, ecmxf-inputs) from its own.
                 let rt = tokio::runtime::Builder::new_multi_thread()
                     .worker_threads(2)
+                    .thread_name("ecmxfd-api")
                     .enable_all()
                     .build()
                     .map_err(|e| e.to_string())?;

@@ -13,7 +13,12 @@
 //!   CLOCK_MONOTONIC stamp), p50/p99/max;
 //! - the daemon's own write-to-wire figure (GetStatus
 //!   output_latency_p50/p99_us) and late writes;
-//! - RxFIFO underruns (fifo_alarms) during the run.
+//! - RxFIFO underruns (fifo_alarms) during the run;
+//! - the daemon's CPU: its threads' user+system time over the run (the
+//!   engine `ecmxf-rt`, the input distributor `ecmxf-inputs`, the API's
+//!   runtime `ecmxfd-api`), in % of one core. The simulator runs inside the
+//!   engine thread here (in-process link), so this includes the simulated
+//!   chip.
 #![forbid(unsafe_code)]
 
 use std::time::{Duration, Instant};
@@ -38,7 +43,31 @@ fn pct(sorted: &[u64], p: f64) -> u64 {
     sorted[((sorted.len() - 1) as f64 * p).round() as usize]
 }
 
+/// CPU time of this process' threads with these names, seconds, from
+/// /proc/self/task/*/stat (utime + stime, in USER_HZ = 100 ticks per
+/// second on Linux).
+fn cpu_seconds(names: &[&str]) -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return 0.0 };
+    let mut ticks = 0u64;
+    for t in tasks.flatten() {
+        let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
+        if !names.contains(&comm.trim()) {
+            continue;
+        }
+        let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
+        // Fields after the ")" that ends the name: state is field 3, utime 14, stime 15.
+        let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let field = |n: usize| f.get(n - 3).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+        ticks += field(14) + field(15);
+    }
+    ticks as f64 / 100.0
+}
+
+const DAEMON_THREADS: [&str; 3] = ["ecmxf-rt", "ecmxf-inputs", "ecmxfd-api"];
+
 struct Outcome {
+    cpu_percent: f64,
     loopback_us: Vec<u64>,
     status: pb::MasterStatus,
     underruns: u64,
@@ -63,6 +92,7 @@ async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
         .into_inner();
     let counters = |s: &pb::MasterStatus| s.counters.unwrap_or_default();
     let before = master.get_status(pb::GetStatusRequest {}).await.expect("status").into_inner();
+    let (cpu0, t0) = (cpu_seconds(&DAEMON_THREADS), Instant::now());
     let until = Instant::now() + Duration::from_secs(secs);
     let mut loopback_us = Vec::new();
     let mut value = 0u8;
@@ -94,11 +124,13 @@ async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
         tokio::time::sleep(Duration::from_micros(300 + (k * 137) % 900)).await;
     }
     let status = master.get_status(pb::GetStatusRequest {}).await.expect("status").into_inner();
+    let cpu_percent = (cpu_seconds(&DAEMON_THREADS) - cpu0) / t0.elapsed().as_secs_f64() * 100.0;
     let (b, a) = (counters(&before), counters(&status));
     drop(inputs);
     d.stop();
     loopback_us.sort_unstable();
     Outcome {
+        cpu_percent,
         loopback_us,
         underruns: a.fifo_alarms - b.fifo_alarms,
         late: a.output_latency_misses - b.output_latency_misses,
@@ -123,15 +155,15 @@ fn main() {
     }
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
     println!(
-        "{:>8} {:>9} {:>7} | {:>24} | {:>20} {:>6} {:>9}",
-        "cycle", "budget", "writes", "write->loopback p50/p99/max", "daemon wire p50/p99", "late", "underruns"
+        "{:>8} {:>9} {:>7} | {:>24} | {:>20} {:>6} {:>9} {:>7}",
+        "cycle", "budget", "writes", "write->loopback p50/p99/max", "daemon wire p50/p99", "late", "underruns", "cpu %"
     );
     let all = [(125, 1000), (125, 2000), (125, 5000), (125, 20000), (1000, 2000), (1000, 5000), (1000, 20000)];
     for (cycle_us, budget_us) in all.into_iter().filter(|c| only.is_none_or(|o| o == *c)) {
         let o = rt.block_on(measure(cycle_us, budget_us, secs));
         let l = &o.loopback_us;
         println!(
-            "{:>5} us {:>6} us {:>7} | {:>7.2} {:>7.2} {:>7.2} ms | {:>8.2} {:>8.2} ms {:>6} {:>9}",
+            "{:>5} us {:>6} us {:>7} | {:>7.2} {:>7.2} {:>7.2} ms | {:>8.2} {:>8.2} ms {:>6} {:>9} {:>7.0}",
             cycle_us,
             budget_us,
             l.len(),
@@ -141,7 +173,8 @@ fn main() {
             o.status.output_latency_p50_us as f64 / 1000.0,
             o.status.output_latency_p99_us as f64 / 1000.0,
             o.late,
-            o.underruns
+            o.underruns,
+            o.cpu_percent
         );
     }
     println!("(1 ms cycle with a 1 ms budget is refused: a budget must cover two cycles)");
