@@ -132,6 +132,7 @@ fn health_follows_the_bus_and_reflection_lists_the_services() {
         let set =
             |s: pb::EcatState| pb::SetStateRequest { slave: Some(2), state: s as i32, wait: true, timeout_ms: 3000 };
         state.set_state(set(pb::EcatState::SafeOp)).await.unwrap();
+        let changed = std::time::Instant::now();
         let wait_for = |want: tonic_health::pb::health_check_response::ServingStatus| {
             let mut health = health.clone();
             async move {
@@ -148,6 +149,12 @@ fn health_follows_the_bus_and_reflection_lists_the_services() {
             }
         };
         wait_for(tonic_health::pb::health_check_response::ServingStatus::NotServing).await;
+        // Health follows the engine's snapshots, not a slow timer: it
+        // flips within a few ms of the state change (20 ms between looks
+        // here; 250 ms allows for a loaded host).
+        let lag = changed.elapsed();
+        println!("health NOT_SERVING {} ms after SetState returned", lag.as_millis());
+        assert!(lag < std::time::Duration::from_millis(250), "health lagged the state change by {lag:?}");
         // Held there on purpose: no recovery undoes it.
         tokio::time::sleep(std::time::Duration::from_millis(300)).await;
         let one = state
