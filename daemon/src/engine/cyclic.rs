@@ -190,8 +190,17 @@ impl Cyclic {
 
     /// The bytes of `n` output frames, each the current image.
     pub fn push_bytes(&mut self, n: u8) -> &[u8] {
+        self.push_frames(n, None)
+    }
+
+    /// The bytes of `n` output frames: each the current image, after the
+    /// next frame of `stream` (if any) was taken into its range.
+    pub fn push_frames(&mut self, n: u8, mut stream: Option<&mut super::frames::FrameConsumer>) -> &[u8] {
         self.push_buf.clear();
         for _ in 0..n {
+            if let Some(s) = stream.as_deref_mut() {
+                s.next_into(&mut self.outputs);
+            }
             self.push_buf.extend_from_slice(&self.outputs);
         }
         &self.push_buf

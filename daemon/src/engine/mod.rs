@@ -17,6 +17,7 @@ pub mod cyclic;
 pub mod emergencies;
 pub mod error;
 pub mod events;
+pub mod frames;
 pub mod held;
 pub mod inputs;
 pub mod link_budget;
@@ -100,6 +101,10 @@ pub struct Engine<L> {
     events: EventSink,
     action: Arc<PendingAction>,
     reconfigure: Receiver<(u64, Config)>,
+    /// New per-cycle frame streams.
+    frame_streams: Receiver<frames::FrameConsumer>,
+    /// The stream in force, if any.
+    frames: Option<frames::FrameConsumer>,
     assembler: OutputAssembler,
     queue: FairQueue,
     active: Option<Active>,
@@ -145,6 +150,8 @@ pub struct Parts<L> {
     /// A new configuration to bring the network up with, and its number
     /// (published in the telemetry once taken).
     pub reconfigure: Receiver<(u64, Config)>,
+    /// Per-cycle output frame streams clients open.
+    pub frame_streams: Receiver<frames::FrameConsumer>,
 }
 
 impl<L: Link> Engine<L> {
@@ -174,6 +181,8 @@ impl<L: Link> Engine<L> {
             writers: p.writers,
             action: p.action,
             reconfigure: p.reconfigure,
+            frame_streams: p.frame_streams,
+            frames: None,
             assembler: OutputAssembler::default(),
             events,
             queue: FairQueue::default(),

@@ -228,6 +228,12 @@ impl<L: Link> Engine<L> {
                 self.unplayed_write.get_or_insert(written);
             }
         }
+        while let Ok(f) = self.frame_streams.try_recv() {
+            self.frames = Some(f);
+        }
+        if self.frames.as_ref().is_some_and(|f| f.finished()) {
+            self.frames = None;
+        }
         if self.writers.take_gone() {
             self.last_writer_gone(cyclic.as_deref_mut());
         }
@@ -414,7 +420,7 @@ impl<L: Link> Engine<L> {
         op.set(FifoOpFlags::READ, c.tx_size > 0);
         // The first frame pushed now plays after the ones queued before it.
         let ahead = c.estimate(now).max(0) as u32;
-        let outputs = c.push_bytes(n);
+        let outputs = c.push_frames(n, self.frames.as_mut());
         let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
         let count = a.header.rx_fifo_count;
         // Inputs out, their freshness noted and judged (a network without

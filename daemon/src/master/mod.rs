@@ -185,6 +185,7 @@ pub struct Master {
     writers: Arc<Writers>,
     action: Arc<PendingAction>,
     reconfigure: SyncSender<(u64, Config)>,
+    frame_streams: SyncSender<crate::engine::frames::FrameConsumer>,
     config: Mutex<Config>,
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
@@ -249,6 +250,7 @@ impl Master {
         let writers = Arc::new(Writers::default());
         let action = Arc::new(PendingAction::default());
         let (reconfigure, reconfigure_rx) = sync_channel(1);
+        let (frame_streams, frame_streams_rx) = sync_channel(4);
         let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
         let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
         let (events, _) = broadcast::channel(EVENT_BACKLOG);
@@ -289,6 +291,7 @@ impl Master {
             action: Arc::clone(&action),
             stop: Arc::clone(&stop_engine),
             reconfigure: reconfigure_rx,
+            frame_streams: frame_streams_rx,
         };
         let rt = config.realtime.clone();
         let engine = std::thread::Builder::new()
@@ -311,6 +314,7 @@ impl Master {
             writers,
             action,
             reconfigure,
+            frame_streams,
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
@@ -454,6 +458,32 @@ impl Master {
     /// (see `Telemetry::output_latency`); `None` before the first.
     pub fn output_latency(&self) -> Option<crate::engine::telemetry::LatencyStats> {
         self.telemetry.output_latency.stats()
+    }
+
+    /// Opens a stream of per-cycle output frames for the output image's
+    /// bytes `start..start + len`, queuing up to `capacity` frames on this
+    /// side: from now on every frame the engine pushes into the RxFIFO takes
+    /// the next queued frame into that range (in order, one per DC cycle;
+    /// when the queue is empty the last frame repeats, counted). It
+    /// replaces the stream in force, if any; dropping the producer ends it
+    /// once its frames are played.
+    pub fn stream_frames(
+        &self,
+        start: usize,
+        len: usize,
+        capacity: usize,
+    ) -> Result<crate::engine::frames::FrameProducer, EngineError> {
+        let size = self.layout().rx_size;
+        if len == 0 || start + len > size {
+            let reason = format!("bytes {start}..{} are not within the {size}-byte output image", start + len);
+            return Err(EngineError::BadArgument { field: "range", reason });
+        }
+        let (producer, consumer) = crate::engine::frames::channel(start, len, capacity);
+        self.frame_streams.try_send(consumer).map_err(|e| match e {
+            TrySendError::Full(_) => EngineError::QueueFull,
+            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
+        })?;
+        Ok(producer)
     }
 
     /// Why bring-up last failed or recovery last started.
