@@ -384,6 +384,16 @@ impl ProcessDataApi for ProcessDataService {
         Ok(Response::new(pb::WriteOutputsResponse { applied: 1 }))
     }
 
+    type StreamFramesStream = super::BoxStream<pb::FrameReport>;
+
+    async fn stream_frames(
+        &self,
+        request: Request<Streaming<pb::FrameBatch>>,
+    ) -> Result<Response<Self::StreamFramesStream>, Status> {
+        self.0.authorize(&request, Role::Operator)?;
+        Ok(Response::new(super::frames::serve(Arc::clone(&self.0), request.into_inner()).await?))
+    }
+
     async fn stream_outputs(
         &self,
         request: Request<Streaming<pb::WriteOutputsRequest>>,
