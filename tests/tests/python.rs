@@ -1,6 +1,7 @@
 //! The Python end-to-end test (`tests/python/test_api.py`): grpcio stubs
 //! generated from proto/, the real daemon, a scan, an SDO read and write, a
-//! CiA402 axis enabled, one second of streamed inputs.
+//! CiA402 axis enabled, one second of streamed inputs, two seconds of
+//! per-cycle frames (StreamFrames) checked through the IO slave's loopback.
 //!
 //! It needs the venv `.ci/run` creates (`target/py-venv`, or the Python in
 //! `ECMXF_PYTHON`). Without one it is skipped with a note, unless
@@ -32,5 +33,5 @@ fn python_client_scans_reads_writes_enables_and_streams() {
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     println!("{text}");
     assert!(out.status.success(), "the Python test failed:\n{text}");
-    assert!(text.contains("Ran 4 tests") && text.contains("OK"), "{text}");
+    assert!(text.contains("Ran 5 tests") && text.contains("OK"), "{text}");
 }
