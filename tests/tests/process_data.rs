@@ -580,6 +580,34 @@ fn streamed_frames_reach_the_slave_once_each_in_order() {
         assert_eq!(seen, total, "every frame played");
         println!("{total} frames through StreamFrames at 8 kHz: once each, in order; {repeats} underrun cycles");
 
+        // A client that stops sending with its stream open: the queue runs
+        // dry, which is counted and said once (FRAMES_DRY, the policy as
+        // its detail); the outputs hold (hold-last).
+        let mut diag = pb::diagnostics_client::DiagnosticsClient::new(d.connect().await);
+        let mut events = diag.stream_events(pb::StreamEventsRequest {}).await.unwrap().into_inner();
+        let (tx, rx) = tokio::sync::mpsc::channel(4);
+        tx.send(batch((0..100).map(frame).collect())).await.unwrap();
+        let mut reports = pd.stream_frames(tokio_stream::wrappers::ReceiverStream::new(rx)).await.unwrap().into_inner();
+        let dry = loop {
+            let r = reports.next().await.unwrap().unwrap();
+            if r.dry > 0 {
+                break r;
+            }
+        };
+        assert_eq!(dry.pushed, 100, "{dry:?}");
+        let event = loop {
+            let e = tokio::time::timeout(Duration::from_secs(2), events.next()).await.expect("a FRAMES_DRY event");
+            let e = e.unwrap().unwrap();
+            if e.kind == pb::EventKind::FramesDry as i32 {
+                break e;
+            }
+        };
+        assert_eq!((event.counter, event.detail.as_str()), (100, "hold-last"), "{event:?}");
+        assert!(event.text.contains("ran dry after 100 frames"), "{}", event.text);
+        drop(tx);
+        drop(reports);
+        tokio::time::sleep(Duration::from_millis(50)).await;
+
         // Frames without credit, and of the wrong size, end a stream by name.
         let (tx, rx) = tokio::sync::mpsc::channel(4);
         let mut b = batch((0..600).map(frame).collect());

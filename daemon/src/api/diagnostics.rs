@@ -108,6 +108,11 @@ pub fn event_pb(e: &Event) -> pb::Event {
             out.detail = ecmxf_wire::al_status_text(*code).into();
             K::AlStatus
         }
+        EventKind::FramesDry { pushed, action } => {
+            out.counter = *pushed;
+            out.detail = action.as_str().into();
+            K::FramesDry
+        }
         EventKind::OutputLate { latency_us, .. } => {
             out.counter = (*latency_us).into();
             K::OutputLate

@@ -180,7 +180,9 @@ pub async fn serve(
                 }
             }
         }
-        // The client is done: report until its frames are played.
+        // The client is done: its queue plays out, which is no dry spell;
+        // report until its frames are played.
+        producer.close();
         let deadline = std::time::Instant::now() + DRAIN_LIMIT;
         while producer.counters().pushed.load(Ordering::Relaxed) < sent && std::time::Instant::now() < deadline {
             tick.tick().await;

@@ -116,6 +116,15 @@ pub enum EventKind {
         /// The write's latency, us.
         latency_us: u32,
     },
+    /// A client's per-cycle frame queue ran dry while its stream was open
+    /// (the client sent too slowly): the policy `action` applies until
+    /// frames come again.
+    FramesDry {
+        /// Frames taken from the queue before it ran dry.
+        pushed: u64,
+        /// `outputs.on_last_writer_gone`, applied to the stream's range.
+        action: WriterGoneAction,
+    },
     /// Events dropped because no one read them in time.
     Lost(u64),
 }
@@ -139,6 +148,7 @@ impl EventKind {
             Self::Recovered { .. } => "recovered",
             Self::Emergency(_) => "emergency",
             Self::OutputLate { .. } => "output_late",
+            Self::FramesDry { .. } => "frames_dry",
             Self::Lost(_) => "lost",
         }
     }
@@ -152,6 +162,7 @@ impl EventKind {
             | Self::Recovering(_)
             | Self::Emergency(_)
             | Self::OutputLate { .. }
+            | Self::FramesDry { .. }
             | Self::Lost(_) => true,
             Self::ProcessData { flowing, .. } => !flowing,
             Self::EcatState { to, .. } => *to == EcatState::Error,
@@ -219,6 +230,11 @@ impl std::fmt::Display for EventKind {
                 "output write reached the wire after {latency_us} us, over the {budget_us} us budget by {} us",
                 latency_us.saturating_sub(*budget_us)
             ),
+            Self::FramesDry { pushed, action } => write!(
+                f,
+                "the client's frame queue ran dry after {pushed} frames: outputs {} until frames come again",
+                outputs_text(*action)
+            ),
             Self::Lost(n) => write!(f, "{n} events lost (no one read them in time)"),
         }
     }
@@ -246,6 +262,7 @@ impl Event {
             EventKind::Recovering(why) => log!(cause = why.name(),),
             EventKind::Recovered { axes_disabled, .. } => log!(axes_disabled = *axes_disabled,),
             EventKind::Lost(n) => log!(lost = *n,),
+            EventKind::FramesDry { pushed, .. } => log!(pushed = *pushed,),
             EventKind::OutputLate { budget_us, latency_us } => log!(budget_us = *budget_us, latency_us = *latency_us,),
             _ => log!(),
         }

@@ -4,16 +4,18 @@
 //! range of the output image (its slaves' share); each frame pushed into
 //! the RxFIFO takes the next queued frame into that range, so frames reach
 //! the slaves in order, exactly one per cycle, none repeated or dropped
-//! while the queue has frames. When the queue runs dry the image keeps the
-//! last frame (the chip would repeat it too) and the dry frames are
-//! counted.
+//! while the queue has frames. When the queue of an open stream runs dry
+//! the dry frames are counted, the range keeps the last frame or is zeroed
+//! ([`DryAction`], from `outputs.on_last_writer_gone`), and the engine is
+//! told once per dry spell ([`FrameConsumer::take_dry_start`]). A stream
+//! the client closed plays out and ends without a dry spell.
 //!
 //! The queue is a wait-free single-producer ring of fixed-size records
 //! (`seq: u64` then the bytes) allocated by the producer's side; the engine
 //! only copies out of it.
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 
 /// Bytes before each frame's bytes in the ring.
 const SEQ_LEN: usize = 8;
@@ -25,8 +27,19 @@ pub struct StreamCounters {
     pub pushed: AtomicU64,
     /// The sequence number of the last frame taken.
     pub last_seq: AtomicU64,
-    /// Frames pushed while the queue was empty (the last frame repeated).
+    /// Frames pushed while the queue of the open stream was empty.
     pub dry: AtomicU64,
+    /// The client sent its last frame ([`FrameProducer::close`]).
+    closed: AtomicBool,
+}
+
+/// What a dry queue does to the stream's range.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum DryAction {
+    /// Keep the last frame (the chip's own behaviour on an empty RxFIFO).
+    Hold,
+    /// Zero the range.
+    Zero,
 }
 
 /// Why a frame was not queued.
@@ -68,6 +81,10 @@ pub struct FrameProducer {
 #[derive(Debug)]
 pub struct FrameConsumer {
     ring: rtrb::Consumer<u8>,
+    /// What a dry queue does to the range.
+    pub on_dry: DryAction,
+    /// In a dry spell; whether the engine was told of its start.
+    dry: Option<bool>,
     /// First byte of the range in the output image.
     pub start: usize,
     /// Bytes per frame.
@@ -80,7 +97,10 @@ pub struct FrameConsumer {
 pub fn channel(start: usize, len: usize, capacity: usize) -> (FrameProducer, FrameConsumer) {
     let (p, c) = rtrb::RingBuffer::new(capacity.max(1) * (SEQ_LEN + len));
     let counters = Arc::new(StreamCounters::default());
-    (FrameProducer { ring: p, len, counters: Arc::clone(&counters) }, FrameConsumer { ring: c, start, len, counters })
+    (
+        FrameProducer { ring: p, len, counters: Arc::clone(&counters) },
+        FrameConsumer { ring: c, on_dry: DryAction::Hold, dry: None, start, len, counters },
+    )
 }
 
 impl FrameProducer {
@@ -108,6 +128,12 @@ impl FrameProducer {
     pub fn counters(&self) -> &StreamCounters {
         &self.counters
     }
+
+    /// No more frames will come: the queue plays out and the stream ends,
+    /// without counting the end as a dry spell.
+    pub fn close(&self) {
+        self.counters.closed.store(true, Relaxed);
+    }
 }
 
 impl FrameConsumer {
@@ -115,9 +141,21 @@ impl FrameConsumer {
     /// queue is empty (the image keeps the last frame: counted as dry).
     pub fn next_into(&mut self, image: &mut [u8]) -> Option<u64> {
         let Ok(chunk) = self.ring.read_chunk(SEQ_LEN + self.len) else {
+            // Before the first frame, and after the client closed, an
+            // empty queue is no shortage.
+            if self.counters.closed.load(Relaxed) || self.counters.pushed.load(Relaxed) == 0 {
+                return None;
+            }
             self.counters.dry.fetch_add(1, Relaxed);
+            self.dry.get_or_insert(false);
+            if self.on_dry == DryAction::Zero {
+                if let Some(dst) = image.get_mut(self.start..self.start + self.len) {
+                    dst.fill(0);
+                }
+            }
             return None;
         };
+        self.dry = None;
         let (a, b) = chunk.as_slices();
         let mut bytes = a.iter().chain(b.iter()).copied();
         let mut seq = [0u8; SEQ_LEN];
@@ -136,9 +174,27 @@ impl FrameConsumer {
         Some(seq)
     }
 
-    /// The producer is gone and every frame it queued was taken.
+    /// The producer closed the stream or is gone, and every frame it
+    /// queued was taken.
     pub fn finished(&self) -> bool {
-        self.ring.is_abandoned() && self.ring.is_empty()
+        (self.ring.is_abandoned() || self.counters.closed.load(Relaxed)) && self.ring.is_empty()
+    }
+
+    /// Whether a dry spell started since the last call (once per spell):
+    /// the engine reports it and applies what needs more than the image.
+    pub fn take_dry_start(&mut self) -> bool {
+        match self.dry {
+            Some(false) => {
+                self.dry = Some(true);
+                true
+            }
+            _ => false,
+        }
+    }
+
+    /// Frames taken so far.
+    pub fn pushed(&self) -> u64 {
+        self.counters.pushed.load(Relaxed)
     }
 }
 
@@ -166,9 +222,43 @@ mod tests {
         assert_eq!(image, [0xEE, 0xEE, 3, 3, 3, 0xEE]);
         let n = p.counters();
         assert_eq!((n.pushed.load(Relaxed), n.last_seq.load(Relaxed), n.dry.load(Relaxed)), (4, 3, 1));
+        assert!(c.take_dry_start(), "a dry spell is told once");
+        assert!(!c.take_dry_start());
         assert!(!c.finished());
         drop(p);
         assert!(c.finished());
+    }
+
+    #[test]
+    fn an_empty_queue_before_the_first_frame_is_not_dry() {
+        let (_p, mut c) = channel(0, 1, 4);
+        let mut image = [7u8];
+        assert_eq!(c.next_into(&mut image), None);
+        assert!(!c.take_dry_start());
+        assert_eq!(c.counters.dry.load(Relaxed), 0);
+    }
+
+    #[test]
+    fn a_closed_stream_plays_out_without_a_dry_spell_and_zero_clears_the_range() {
+        let (p, mut c) = channel(0, 2, 4);
+        let mut p = p;
+        p.push(1, &[5, 5]).unwrap();
+        p.close();
+        let mut image = [9u8; 3];
+        assert!(!c.finished(), "a frame is still queued");
+        assert_eq!(c.next_into(&mut image), Some(1));
+        assert!(c.finished());
+        assert_eq!(c.next_into(&mut image), None);
+        assert!(!c.take_dry_start());
+        assert_eq!(p.counters().dry.load(Relaxed), 0);
+        let (mut p, mut c) = channel(1, 2, 4);
+        c.on_dry = DryAction::Zero;
+        p.push(1, &[5, 5]).unwrap();
+        c.next_into(&mut image);
+        assert_eq!(image, [5, 5, 5]);
+        c.next_into(&mut image);
+        assert_eq!(image, [5, 0, 0], "zeroed when dry");
+        assert!(c.take_dry_start());
     }
 
     #[test]

@@ -228,7 +228,11 @@ impl<L: Link> Engine<L> {
                 self.unplayed_write.get_or_insert(written);
             }
         }
-        while let Ok(f) = self.frame_streams.try_recv() {
+        while let Ok(mut f) = self.frame_streams.try_recv() {
+            f.on_dry = match self.config.outputs.on_last_writer_gone {
+                WriterGoneAction::Zero => super::frames::DryAction::Zero,
+                _ => super::frames::DryAction::Hold,
+            };
             self.frames = Some(f);
         }
         if self.frames.as_ref().is_some_and(|f| f.finished()) {
@@ -437,6 +441,9 @@ impl<L: Link> Engine<L> {
         let drained = read < self.port.data_size() / c.tx_size.max(1);
         c.answered(now, n, count, drained);
         self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
+        if let Some(pushed) = self.frames.as_mut().and_then(|f| f.take_dry_start().then(|| f.pushed())) {
+            self.frames_ran_dry(pushed);
+        }
         if n > 0 {
             if let Some(written) = self.unplayed_write.take() {
                 let on_wire = now + c.cycle() * ahead;
@@ -525,6 +532,22 @@ impl<L: Link> Engine<L> {
             return Ok(true);
         }
         Ok(sent && progress != Progress::Waiting)
+    }
+
+    /// A client's frame queue ran dry after `pushed` frames: said once per
+    /// spell; the range already holds or is zeroed (see `frames`), a
+    /// quick-stop policy stops the axes.
+    fn frames_ran_dry(&mut self, pushed: u64) {
+        let action = self.config.outputs.on_last_writer_gone;
+        self.events.emit(EventKind::FramesDry { pushed, action });
+        if action == WriterGoneAction::QuickStop {
+            for n in 0..self.config.axes.len() {
+                let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
+                if let Err(e) = r {
+                    warn!("quick stop of axis {n}: {e}");
+                }
+            }
+        }
     }
 
     /// The last output writer went away: `outputs.on_last_writer_gone`.
