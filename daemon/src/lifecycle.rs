@@ -143,7 +143,6 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     let mut reloads = options.reloads;
     let logging = options.logging;
     info!(logs = logging.as_ref().map_or("(embedded)", |l| l.sink), systemd = notifier.enabled(), watchdog = ?watchdog_every, "service");
-    let shutdown = shutdown;
     tokio::pin!(shutdown);
     loop {
         tokio::select! {

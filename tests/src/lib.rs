@@ -508,3 +508,11 @@ pub fn io_slave_bytes(image: &pb::ProcessImage) -> (u32, u32) {
     };
     (first(pb::Direction::Output), first(pb::Direction::Input))
 }
+
+/// The `p` quantile (0..=1) of `sorted`, nearest rank; 0 for none.
+pub fn percentile(sorted: &[u64], p: f64) -> u64 {
+    if sorted.is_empty() {
+        return 0;
+    }
+    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}

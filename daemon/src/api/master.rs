@@ -50,7 +50,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
         input_age_us: age.map_or(0, |(a, _)| a.as_micros() as u64),
         flow_limit_us: age.map_or(0, |(_, l)| l.as_micros() as u64),
         health: v.health.to_string(),
-        output_latency_budget_us: m.config().cycle.output_latency_us.unwrap_or(0),
+        output_latency_budget_us: m.output_latency_budget_us().unwrap_or(0),
         output_latency_p50_us: latency.map_or(0, |l| l.p50_us.into()),
         output_latency_p99_us: latency.map_or(0, |l| l.p99_us.into()),
     }

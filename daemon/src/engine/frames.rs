@@ -103,6 +103,28 @@ pub fn channel(start: usize, len: usize, capacity: usize) -> (FrameProducer, Fra
     )
 }
 
+/// Copies bytes `at..at + dst.len()` of a record the ring holds as two
+/// slices (it wraps around the ring's end) into `dst`.
+fn read_split(a: &[u8], b: &[u8], at: usize, dst: &mut [u8]) {
+    let in_a = a.len().saturating_sub(at).min(dst.len());
+    if in_a > 0 {
+        dst[..in_a].copy_from_slice(&a[at..at + in_a]);
+    }
+    let from_b = (at + in_a).saturating_sub(a.len());
+    let rest = dst.len() - in_a;
+    dst[in_a..].copy_from_slice(&b[from_b..from_b + rest]);
+}
+
+/// Writes `src` at `at` of a record the ring holds as two slices.
+fn write_split(a: &mut [u8], b: &mut [u8], at: usize, src: &[u8]) {
+    let in_a = a.len().saturating_sub(at).min(src.len());
+    if in_a > 0 {
+        a[at..at + in_a].copy_from_slice(&src[..in_a]);
+    }
+    let from_b = (at + in_a).saturating_sub(a.len());
+    b[from_b..from_b + src.len() - in_a].copy_from_slice(&src[in_a..]);
+}
+
 impl FrameProducer {
     /// Frames that may be queued now.
     pub fn credits(&self) -> usize {
@@ -116,10 +138,8 @@ impl FrameProducer {
         }
         let Ok(mut chunk) = self.ring.write_chunk(SEQ_LEN + self.len) else { return Err(FrameError::Full) };
         let (a, b) = chunk.as_mut_slices();
-        let record = seq.to_le_bytes().into_iter().chain(bytes.iter().copied());
-        for (dst, v) in a.iter_mut().chain(b.iter_mut()).zip(record) {
-            *dst = v;
-        }
+        write_split(a, b, 0, &seq.to_le_bytes());
+        write_split(a, b, SEQ_LEN, bytes);
         chunk.commit_all();
         Ok(())
     }
@@ -157,15 +177,10 @@ impl FrameConsumer {
         };
         self.dry = None;
         let (a, b) = chunk.as_slices();
-        let mut bytes = a.iter().chain(b.iter()).copied();
         let mut seq = [0u8; SEQ_LEN];
-        for (dst, v) in seq.iter_mut().zip(&mut bytes) {
-            *dst = v;
-        }
+        read_split(a, b, 0, &mut seq);
         if let Some(dst) = image.get_mut(self.start..self.start + self.len) {
-            for (d, v) in dst.iter_mut().zip(bytes) {
-                *d = v;
-            }
+            read_split(a, b, SEQ_LEN, dst);
         }
         chunk.commit_all();
         let seq = u64::from_le_bytes(seq);
@@ -259,6 +274,22 @@ mod tests {
         c.next_into(&mut image);
         assert_eq!(image, [5, 0, 0], "zeroed when dry");
         assert!(c.take_dry_start());
+    }
+
+    #[test]
+    fn a_record_split_at_the_ring_end_is_read_and_written_whole() {
+        let record: Vec<u8> = (0..13).collect();
+        for split in 0..=13 {
+            let (mut a, mut b) = (vec![0u8; split], vec![0u8; 13 - split]);
+            write_split(&mut a, &mut b, 0, &record[..8]);
+            write_split(&mut a, &mut b, 8, &record[8..]);
+            let joined: Vec<u8> = a.iter().chain(&b).copied().collect();
+            assert_eq!(joined, record, "split at {split}");
+            let (mut seq, mut data) = ([0u8; 8], [0u8; 5]);
+            read_split(&a, &b, 0, &mut seq);
+            read_split(&a, &b, 8, &mut data);
+            assert_eq!((&seq[..], &data[..]), (&record[..8], &record[8..]), "split at {split}");
+        }
     }
 
     #[test]

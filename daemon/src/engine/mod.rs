@@ -1,8 +1,8 @@
 //! The engine: one thread that owns the chip.
 //!
 //! It brings the network up ([`bringup`]), then runs it (`running.rs`: one
-//! loop turn as named steps): apply output writes, keep the RxFIFO between
-//! its marks with FIFO exchanges (reading inputs on the way), advance the
+//! loop turn as named steps): apply output writes, keep the RxFIFO at its
+//! level (`cyclic`: the latency budget's, or midway between the marks) with FIFO exchanges (reading inputs on the way), advance the
 //! one transaction in the blocking slot ([`slot`]) by at most one guarded
 //! call between FIFO exchanges, and judge every answer by the
 //! [`supervisor`]'s rules, which decide when to go back to bring-up (with
@@ -51,8 +51,7 @@ use events::{Event, EventKind, EventSink};
 use inputs::InputPublisher;
 use network_action::PendingAction;
 use output_writes::{OutputAssembler, OutputWrite, Writers};
-use slot::Active;
-use slot::{FairQueue, Job};
+use slot::{Active, FairQueue, Job};
 use supervisor::RecoverCause;
 use telemetry::{CounterTotal, Phase, Telemetry};
 
@@ -424,9 +423,9 @@ impl<L: Link> Engine<L> {
         self.telemetry.corrupt.store(s.corrupt, Relaxed);
         self.telemetry.not_ready.store(s.not_ready, Relaxed);
         self.telemetry.ring_overflows.store(self.intake.inputs.ring_overflows, Relaxed);
-        let t = &self.telemetry;
-        let key = (t.phase(), h.ecat_state, t.config_generation.load(Relaxed), t.recoveries.load(Relaxed));
-        if key != self.announced.0 || now.saturating_duration_since(self.announced.1) >= telemetry::ANNOUNCE_EVERY {
+        if self.telemetry.key() != self.announced.0
+            || now.saturating_duration_since(self.announced.1) >= telemetry::ANNOUNCE_EVERY
+        {
             self.announce(now);
         }
     }

@@ -541,11 +541,17 @@ impl<L: Link> Engine<L> {
         let action = self.config.outputs.on_last_writer_gone;
         self.events.emit(EventKind::FramesDry { pushed, action });
         if action == WriterGoneAction::QuickStop {
-            for n in 0..self.config.axes.len() {
-                let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
-                if let Err(e) = r {
-                    warn!("quick stop of axis {n}: {e}");
-                }
+            self.quick_stop_axes();
+        }
+    }
+
+    /// Every `[[axis]]` to QUICK STOP ACTIVE through the chip's CiA402
+    /// helper (the `quick-stop` outputs policy); failures are logged.
+    fn quick_stop_axes(&mut self) {
+        for n in 0..self.config.axes.len() {
+            let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
+            if let Err(e) = r {
+                warn!("quick stop of axis {n}: {e}");
             }
         }
     }
@@ -562,12 +568,7 @@ impl<L: Link> Engine<L> {
                 warn!("last output writer gone: outputs zeroed");
             }
             WriterGoneAction::QuickStop => {
-                for n in 0..self.config.axes.len() {
-                    let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
-                    if let Err(e) = r {
-                        warn!("quick stop of axis {n}: {e}");
-                    }
-                }
+                self.quick_stop_axes();
                 warn!("last output writer gone: {} axes quick-stopped", self.config.axes.len());
             }
         }

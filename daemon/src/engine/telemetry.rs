@@ -51,7 +51,7 @@ impl Phase {
 }
 
 /// The published values.
-#[derive(Debug)]
+#[derive(Debug, Default)]
 pub struct Telemetry {
     phase: AtomicU8,
     ecat_state: AtomicU8,
@@ -161,40 +161,6 @@ impl LatencyWindow {
         v.sort_unstable();
         let at = |p: f64| v[((n - 1) as f64 * p).round() as usize];
         Some(LatencyStats { p50_us: at(0.5), p99_us: at(0.99), samples: n })
-    }
-}
-
-impl Default for Telemetry {
-    fn default() -> Self {
-        Self {
-            phase: AtomicU8::default(),
-            ecat_state: AtomicU8::default(),
-            error_byte: AtomicU8::default(),
-            status_byte: AtomicU8::default(),
-            rx_fifo: AtomicU8::default(),
-            tx_fifo: AtomicU8::default(),
-            crc_errors: AtomicU64::default(),
-            wkc_errors: AtomicU64::default(),
-            exchanges: AtomicU64::default(),
-            corrupt: AtomicU64::default(),
-            not_ready: AtomicU64::default(),
-            input_frames: AtomicU64::default(),
-            input_batches_lost: AtomicU64::default(),
-            ring_overflows: AtomicU64::default(),
-            newest_input_ns: AtomicU64::default(),
-            flow_limit_ns: AtomicU64::default(),
-            output_frames: AtomicU64::default(),
-            fifo_alarms: AtomicU64::default(),
-            transactions: AtomicU64::default(),
-            recoveries: AtomicU64::default(),
-            max_fifo_gap_us: AtomicU64::default(),
-            config_generation: AtomicU64::default(),
-            epoch_monotonic_ns: AtomicU64::default(),
-            last_error: Mutex::default(),
-            changes: watch::Sender::new(Snapshot::default()),
-            output_latency: LatencyWindow::default(),
-            output_latency_misses: AtomicU64::default(),
-        }
     }
 }
 
@@ -343,6 +309,17 @@ impl Telemetry {
     /// The last failure, if any.
     pub fn last_error(&self) -> Option<String> {
         self.last_error.lock().unwrap_or_else(|p| p.into_inner()).clone()
+    }
+
+    /// What a waiter may be waiting for, from the values now (as
+    /// [`Snapshot::key`]): a change is announced at once.
+    pub fn key(&self) -> (Phase, EcatState, u64, u64) {
+        (
+            self.phase(),
+            EcatState::from_u8(self.ecat_state.load(Relaxed)),
+            self.config_generation.load(Relaxed),
+            self.recoveries.load(Relaxed),
+        )
     }
 
     /// Sends the snapshot to every waiter; returns what was sent. Nothing

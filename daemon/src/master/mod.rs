@@ -460,6 +460,12 @@ impl Master {
         self.telemetry.output_latency.stats()
     }
 
+    /// The output latency budget in force (`cycle.output_latency_us`), us;
+    /// read without copying the configuration.
+    pub fn output_latency_budget_us(&self) -> Option<u32> {
+        self.config.lock().unwrap_or_else(|e| e.into_inner()).cycle.output_latency_us
+    }
+
     /// Opens a stream of per-cycle output frames for the output image's
     /// bytes `start..start + len`, queuing up to `capacity` frames on this
     /// side: from now on every frame the engine pushes into the RxFIFO takes

@@ -184,7 +184,7 @@ pub async fn render(sources: &Sources) -> String {
             "ecmxf_output_latency_budget_seconds",
             "gauge",
             "The output latency budget in force (cycle.output_latency_us; 0: none).",
-            (f64::from(master.config().cycle.output_latency_us.unwrap_or(0)) / 1e6).to_string(),
+            (f64::from(master.output_latency_budget_us().unwrap_or(0)) / 1e6).to_string(),
         ),
         (
             "ecmxf_output_latency_misses_total",

@@ -70,7 +70,66 @@ pub struct PlayedFrame {
     pub repeated: bool,
 }
 
+/// How a record followed a sequence of frames ([`PlayRecord::follows`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Followed {
+    /// Frames of the sequence that played.
+    pub played: usize,
+    /// Cycles that repeated a frame because the RxFIFO was empty.
+    pub underruns: usize,
+    /// Where (index into the frames) the sequence's last frame played.
+    pub last_at: usize,
+}
+
+impl PlayedFrame {
+    /// One line of the `recorded` control answer: `cycle hex [repeat]`.
+    pub fn parse(line: &str) -> Option<Self> {
+        let mut f = line.split_whitespace();
+        let cycle = f.next()?.parse().ok()?;
+        let hex = f.next().unwrap_or("");
+        let bytes = (0..hex.len() / 2)
+            .map(|i| u8::from_str_radix(hex.get(2 * i..2 * i + 2)?, 16).ok())
+            .collect::<Option<_>>()?;
+        Some(Self { cycle, bytes, repeated: f.next() == Some("repeat") })
+    }
+}
+
 impl PlayRecord {
+    /// Whether `frames` (oldest first) played `sequence` in order, each
+    /// once, one per cycle, from where its first element shows: a frame
+    /// may repeat only in a cycle marked as an underrun, and cycles count
+    /// up by one. Says which cycle broke the sequence, and how.
+    pub fn follows(frames: &[PlayedFrame], sequence: &[Vec<u8>]) -> Result<Followed, String> {
+        if let Some(w) = frames.windows(2).find(|w| w[1].cycle != w[0].cycle + 1) {
+            return Err(format!("no frame recorded between cycles {} and {}", w[0].cycle, w[1].cycle));
+        }
+        let Some(first) = sequence.first() else { return Ok(Followed { played: 0, underruns: 0, last_at: 0 }) };
+        let Some(start) = frames.iter().position(|f| f.bytes == *first) else {
+            return Err(format!("the first frame {first:02x?} never played"));
+        };
+        let mut out = Followed { played: 1, underruns: 0, last_at: start };
+        for (i, w) in frames[start..].windows(2).enumerate() {
+            if out.played == sequence.len() {
+                break;
+            }
+            let (before, now) = (&w[0], &w[1]);
+            if now.repeated && now.bytes == before.bytes {
+                out.underruns += 1;
+                continue;
+            }
+            let want = &sequence[out.played];
+            if now.bytes != *want {
+                return Err(format!(
+                    "cycle {}: {:02x?} after {:02x?}, wanted {want:02x?} (a gap, an unmarked repeat or a reorder)",
+                    now.cycle, now.bytes, before.bytes
+                ));
+            }
+            out.played += 1;
+            out.last_at = start + i + 1;
+        }
+        Ok(out)
+    }
+
     /// Notes the frame of `cycle`.
     pub fn note(&mut self, cycle: u64, image: &[u8], repeated: bool) {
         if self.frames.len() >= self.max {
@@ -155,6 +214,30 @@ impl Fifos {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn frame(cycle: u64, v: u8, repeated: bool) -> PlayedFrame {
+        PlayedFrame { cycle, bytes: vec![v], repeated }
+    }
+
+    #[test]
+    fn a_record_follows_a_sequence_only_in_order_once_each() {
+        let seq: Vec<Vec<u8>> = (1..=3).map(|v| vec![v]).collect();
+        let ok =
+            [frame(9, 0, false), frame(10, 1, false), frame(11, 1, true), frame(12, 2, false), frame(13, 3, false)];
+        assert_eq!(PlayRecord::follows(&ok, &seq), Ok(Followed { played: 3, underruns: 1, last_at: 4 }));
+        let unmarked = [frame(10, 1, false), frame(11, 1, false), frame(12, 2, false)];
+        assert!(PlayRecord::follows(&unmarked, &seq).unwrap_err().contains("cycle 11"));
+        let gap = [frame(10, 1, false), frame(11, 3, false)];
+        assert!(PlayRecord::follows(&gap, &seq).unwrap_err().contains("wanted [02]"));
+        let hole = [frame(10, 1, false), frame(12, 2, false)];
+        assert!(PlayRecord::follows(&hole, &seq).unwrap_err().contains("between cycles 10 and 12"));
+        assert_eq!(
+            PlayedFrame::parse("12 0a0b repeat"),
+            Some(PlayedFrame { cycle: 12, bytes: vec![10, 11], repeated: true })
+        );
+        assert_eq!(PlayedFrame::parse("12 0a"), Some(frame(12, 10, false)));
+        assert_eq!(PlayedFrame::parse("x"), None);
+    }
 
     #[test]
     fn tx_full_drops_the_oldest() {

@@ -14,8 +14,9 @@
 
 use std::time::{Duration, Instant};
 
-use ecmxf_e2e::Daemon;
+use ecmxf_e2e::{Daemon, percentile};
 use ecmxf_proto::v1 as pb;
+use ecmxfd::realtime::monotonic_ns;
 use pb::process_data_client::ProcessDataClient;
 use pb::sdo_client::SdoClient;
 use tokio_stream::StreamExt;
@@ -23,28 +24,14 @@ use tonic::transport::Channel;
 
 const CLIENTS: usize = 16;
 
-fn monotonic_ns() -> u64 {
-    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
-        Ok(t) => (t.tv_sec() as u64) * 1_000_000_000 + t.tv_nsec() as u64,
-        Err(_) => 0,
-    }
-}
-
-fn pct(sorted: &[u64], p: f64) -> u64 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-}
-
 fn report(name: &str, mut us: Vec<u64>, secs: f64) {
     us.sort_unstable();
     println!(
         "{name:<44} n={:>7} {:>8.0}/s  p50={:>6} us  p99={:>6} us  max={:>6} us",
         us.len(),
         us.len() as f64 / secs,
-        pct(&us, 0.5),
-        pct(&us, 0.99),
+        percentile(&us, 0.5),
+        percentile(&us, 0.99),
         us.last().copied().unwrap_or(0)
     );
 }

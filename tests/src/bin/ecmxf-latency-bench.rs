@@ -23,25 +23,12 @@
 
 use std::time::{Duration, Instant};
 
-use ecmxf_e2e::Daemon;
+use ecmxf_e2e::{Daemon, percentile};
 use ecmxf_proto::v1 as pb;
+use ecmxfd::realtime::monotonic_ns;
 use pb::master_client::MasterClient;
 use pb::process_data_client::ProcessDataClient;
 use tokio_stream::StreamExt;
-
-fn monotonic_ns() -> u64 {
-    match nix::time::clock_gettime(nix::time::ClockId::CLOCK_MONOTONIC) {
-        Ok(t) => (t.tv_sec() as u64) * 1_000_000_000 + t.tv_nsec() as u64,
-        Err(_) => 0,
-    }
-}
-
-fn pct(sorted: &[u64], p: f64) -> u64 {
-    if sorted.is_empty() {
-        return 0;
-    }
-    sorted[((sorted.len() - 1) as f64 * p).round() as usize]
-}
 
 /// CPU time of this process' threads with these names, seconds, from
 /// /proc/self/task/*/stat (utime + stime, in USER_HZ = 100 ticks per
@@ -167,8 +154,8 @@ fn main() {
             cycle_us,
             budget_us,
             l.len(),
-            pct(l, 0.5) as f64 / 1000.0,
-            pct(l, 0.99) as f64 / 1000.0,
+            percentile(l, 0.5) as f64 / 1000.0,
+            percentile(l, 0.99) as f64 / 1000.0,
             l.last().copied().unwrap_or(0) as f64 / 1000.0,
             o.status.output_latency_p50_us as f64 / 1000.0,
             o.status.output_latency_p99_us as f64 / 1000.0,
