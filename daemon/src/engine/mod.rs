@@ -241,8 +241,8 @@ impl<L: Link> Engine<L> {
             info!(slaves = layout.slaves.len(), state = %layout.state, rx = layout.rx_size, tx = layout.tx_size, "network up");
             backoff = Duration::from_millis(self.config.recovery.backoff_ms);
             if !first {
+                // Logged with its event (a sentence, with axes_disabled as a field).
                 let (axes, outputs) = (self.config.axes.len(), self.config.outputs.on_last_writer_gone);
-                warn!(axes, ?outputs, "back after a fault: axes disabled until a client enables them");
                 self.events.emit(EventKind::Recovered { axes_disabled: axes, outputs });
             }
             first = false;
