@@ -8,6 +8,8 @@
 //! [`Daemon::binary_with_config`]) and stop it with SIGTERM.
 #![forbid(unsafe_code)]
 
+pub mod frames;
+
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::sync::Mutex;
@@ -515,4 +517,29 @@ pub fn percentile(sorted: &[u64], p: f64) -> u64 {
         return 0;
     }
     sorted[((sorted.len() - 1) as f64 * p).round() as usize]
+}
+
+/// The daemon's threads when it runs embedded in this process: the engine,
+/// the input distributor, the API's runtime.
+pub const DAEMON_THREADS: [&str; 3] = ["ecmxf-rt", "ecmxf-inputs", "ecmxfd-api"];
+
+/// CPU time of this process' threads with these names, seconds, from
+/// /proc/self/task/*/stat (utime + stime, in USER_HZ = 100 ticks per
+/// second on Linux).
+pub fn cpu_seconds(names: &[&str]) -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return 0.0 };
+    let mut ticks = 0u64;
+    for t in tasks.flatten() {
+        let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
+        if !names.contains(&comm.trim()) {
+            continue;
+        }
+        let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
+        // Fields after the ")" that ends the name: state is field 3, utime 14, stime 15.
+        let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+        let f: Vec<&str> = rest.split_whitespace().collect();
+        let field = |n: usize| f.get(n - 3).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+        ticks += field(14) + field(15);
+    }
+    ticks as f64 / 100.0
 }

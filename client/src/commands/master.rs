@@ -86,6 +86,8 @@ pub struct CountersReport {
     pub max_fifo_gap_us: u64,
     /// Client writes that reached the wire later than the budget.
     pub output_latency_misses: u64,
+    /// Input frames the chip dropped (TxFIFO full).
+    pub inputs_dropped_by_chip: u64,
 }
 
 impl From<Option<pb::Counters>> for CountersReport {
@@ -106,6 +108,7 @@ impl From<Option<pb::Counters>> for CountersReport {
             max_fifo_gap_us: c.max_fifo_gap_us,
             ring_overflows: c.ring_overflows,
             output_latency_misses: c.output_latency_misses,
+            inputs_dropped_by_chip: c.inputs_dropped_by_chip,
         }
     }
 }
@@ -123,6 +126,7 @@ impl CountersReport {
             .add("Not-ready answers", self.not_ready_answers)
             .add("Input batches lost", self.input_batches_lost)
             .add("Ring overflows", self.ring_overflows)
+            .add("Inputs dropped by the chip", self.inputs_dropped_by_chip)
             .add("FIFO alarms", self.fifo_alarms)
             .add("Recoveries", self.recoveries)
             .add("Max FIFO gap", format!("{} us", self.max_fifo_gap_us))

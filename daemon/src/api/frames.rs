@@ -10,9 +10,10 @@
 //! total that only grows, so a late report never lets a client overfill
 //! the queue), frames taken, the last `seq` taken, dry pushes.
 
-use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::time::Duration;
+use std::collections::VecDeque;
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
 
 use ecmxf_proto::v1 as pb;
 use tokio::sync::mpsc;
@@ -20,7 +21,8 @@ use tonic::{Status, Streaming};
 
 use super::status::{bad_argument, to_status};
 use super::{BoxStream, Context};
-use crate::engine::frames::{FrameError, FrameProducer};
+use crate::engine::frames::{FrameError, FrameProducer, MAX_STREAMS, Played};
+use crate::master::InputFrame;
 
 /// How often the daemon reports credits and progress.
 pub const REPORT_EVERY: Duration = Duration::from_millis(5);
@@ -31,14 +33,61 @@ pub const MAX_QUEUE: u32 = 65_536;
 /// How long the daemon waits, after the client's last frame, for the
 /// queue to play out before it ends the stream.
 const DRAIN_LIMIT: Duration = Duration::from_secs(10);
+/// How long, once the client's side ended, the daemon waits for the cycle
+/// numbers of its frames (see the task in [`serve`]).
+const TELL_GRACE: Duration = Duration::from_secs(1);
 
-/// Held while a stream is open: one at a time.
+/// The output ranges open streams have, so two streams never feed the
+/// same bytes and WriteOutputs leaves them alone.
+#[derive(Debug, Default)]
+pub struct StreamClaims(Mutex<Vec<Claim>>);
+
+#[derive(Clone, Copy, Debug)]
+struct Claim {
+    id: u64,
+    start: usize,
+    len: usize,
+}
+
+/// A range claimed while its stream is open.
 #[derive(Debug)]
-struct Open<'a>(&'a AtomicBool);
+struct Claimed {
+    claims: Arc<StreamClaims>,
+    id: u64,
+}
 
-impl Drop for Open<'_> {
+impl Drop for Claimed {
     fn drop(&mut self) {
-        self.0.store(false, Ordering::Release);
+        self.claims.lock().retain(|c| c.id != self.id);
+    }
+}
+
+impl StreamClaims {
+    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Claim>> {
+        self.0.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Claims `start..start + len` (the slaves named for errors) for a
+    /// new stream.
+    fn claim(self: &Arc<Self>, start: usize, len: usize, slaves: &[u32]) -> Result<Claimed, Status> {
+        static NEXT: AtomicU64 = AtomicU64::new(1);
+        let mut claims = self.lock();
+        if claims.iter().any(|c| c.start < start + len && start < c.start + c.len) {
+            return Err(Status::failed_precondition(format!(
+                "the outputs of slaves {slaves:?} are (partly) fed by another StreamFrames: one stream per set of slaves"
+            )));
+        }
+        if claims.len() >= MAX_STREAMS {
+            return Err(Status::resource_exhausted(format!("{MAX_STREAMS} StreamFrames are open: the most at once")));
+        }
+        let id = NEXT.fetch_add(1, Ordering::Relaxed);
+        claims.push(Claim { id, start, len });
+        Ok(Claimed { claims: Arc::clone(self), id })
+    }
+
+    /// The first claimed range `start..start + len` overlaps, if any.
+    pub fn overlapping(&self, start: usize, len: usize) -> Option<(usize, usize)> {
+        self.lock().iter().find(|c| c.start < start + len && start < c.start + c.len).map(|c| (c.start, c.len))
     }
 }
 
@@ -98,8 +147,9 @@ fn queue(producer: &mut FrameProducer, frames: &[pb::OutputFrame]) -> Result<(),
     Ok(())
 }
 
-/// A report; `received` frames came from the client so far.
-fn report(p: &FrameProducer, received: u64, start: usize, len: usize) -> pb::FrameReport {
+/// A report; `received` frames came from the client so far, `played` the
+/// frames known to have played since the last one.
+fn report(p: &FrameProducer, received: u64, start: usize, len: usize, played: Vec<pb::PlayedFrame>) -> pb::FrameReport {
     let c = p.counters();
     let credits = p.credits();
     pb::FrameReport {
@@ -110,6 +160,74 @@ fn report(p: &FrameProducer, received: u64, start: usize, len: usize) -> pb::Fra
         dry: c.dry.load(Ordering::Relaxed),
         frame_bytes: len as u32,
         image_offset: start as u32,
+        played,
+    }
+}
+
+/// Played frames on their way to a report: at once, or (pairing) once the
+/// input frame of their cycle arrived.
+#[derive(Debug)]
+struct Pairing {
+    /// Frames the engine told as played so far.
+    told: u64,
+    /// Waiting for their cycle's input frame (pairing only).
+    waiting: VecDeque<Played>,
+    /// Ready for the next report.
+    ready: Vec<pb::PlayedFrame>,
+    pair: bool,
+}
+
+impl Pairing {
+    fn new(pair: bool) -> Self {
+        Self { told: 0, waiting: VecDeque::new(), ready: Vec::new(), pair }
+    }
+
+    /// Takes what the engine says has played.
+    fn take(&mut self, producer: &mut FrameProducer) {
+        while let Some(p) = producer.next_played() {
+            self.told += 1;
+            if self.pair {
+                self.waiting.push_back(p);
+            } else {
+                self.ready.push(pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs: Vec::new() });
+            }
+        }
+    }
+
+    /// An input frame arrived: the frames that played in its cycle get its
+    /// image; those of earlier cycles (never received) go without.
+    fn input(&mut self, frame: &InputFrame) {
+        while let Some(p) = self.waiting.front().copied() {
+            if p.cycle > frame.seq {
+                break;
+            }
+            self.waiting.pop_front();
+            let inputs = if p.cycle == frame.seq { frame.data.clone() } else { Vec::new() };
+            self.ready.push(pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs });
+        }
+    }
+
+    /// The rest, without inputs (the stream ends).
+    fn flush(&mut self) {
+        let rest = self.waiting.drain(..).map(|p| pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs: Vec::new() });
+        self.ready.extend(rest);
+    }
+}
+
+/// The next input frame, when pairing (never otherwise). A subscriber that
+/// fell behind skips on: the frames of the cycles it missed go without.
+async fn next_input(inputs: &mut Option<tokio::sync::broadcast::Receiver<Arc<InputFrame>>>) -> Option<Arc<InputFrame>> {
+    use tokio::sync::broadcast::error::RecvError;
+    let Some(rx) = inputs else { return std::future::pending().await };
+    loop {
+        match rx.recv().await {
+            Ok(f) => return Some(f),
+            Err(RecvError::Lagged(_)) => continue,
+            Err(RecvError::Closed) => {
+                *inputs = None;
+                return None;
+            }
+        }
     }
 }
 
@@ -126,34 +244,36 @@ pub async fn serve(
         n if n <= MAX_QUEUE => n,
         n => return Err(bad_argument("queue_frames", format!("{n} is more than {MAX_QUEUE}"))),
     };
-    if ctx.frame_stream_open.swap(true, Ordering::AcqRel) {
-        return Err(Status::failed_precondition("another StreamFrames is open; one at a time"));
-    }
-    let guard_ctx = Arc::clone(&ctx);
-    let mut producer = match ctx.master.stream_frames(start, len, capacity as usize) {
-        Ok(p) => p,
-        Err(e) => {
-            ctx.frame_stream_open.store(false, Ordering::Release);
-            return Err(to_status(e));
-        }
-    };
+    let claim = ctx.frame_streams.claim(start, len, &first.slaves)?;
+    let mut producer = ctx.master.stream_frames(start, len, capacity as usize).map_err(to_status)?;
+    // Subscribed before the first frame can play.
+    let mut inputs = first.pair_inputs.then(|| ctx.master.subscribe());
+    // Cycles are numbered by input frames: a network without them has no
+    // played frames to tell.
+    let inputs_numbered = ctx.master.layout().tx_size > 0;
     let (tx, rx) = mpsc::channel::<Result<pb::FrameReport, Status>>(4);
     let lease = first.lease_id.clone();
     tokio::spawn(async move {
-        let _open = Open(&guard_ctx.frame_stream_open);
-        let ctx = &guard_ctx;
+        let _claim = claim;
+        let mut pairing = Pairing::new(first.pair_inputs);
         let mut sent = first.frames.len() as u64;
         if let Err(e) = queue(&mut producer, &first.frames) {
             let _ = tx.send(Err(e)).await;
             return;
         }
-        let r = report(&producer, sent, start, len);
-        let _ = tx.send(Ok(r)).await;
+        let r = report(&producer, sent, start, len, Vec::new());
+        if tx.send(Ok(r)).await.is_err() {
+            return;
+        }
         let mut tick = tokio::time::interval(REPORT_EVERY);
         tick.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        // Set when the client's side ended: the queue plays out (no dry
+        // spell) and reports go on until every frame played and was told.
+        let mut draining: Option<Instant> = None;
+        let mut told_by: Option<Instant> = None;
         loop {
             tokio::select! {
-                msg = input.message() => match msg {
+                msg = input.message(), if draining.is_none() => match msg {
                     Ok(Some(m)) => {
                         if ctx.leases.keep_alive(&lease).is_err() {
                             let e = Status::permission_denied(format!("lease {lease:?} is gone: the stream ends"));
@@ -166,33 +286,43 @@ pub async fn serve(
                             return;
                         }
                     }
-                    Ok(None) => break,
+                    Ok(None) => {
+                        producer.close();
+                        draining = Some(Instant::now() + DRAIN_LIMIT);
+                    }
                     Err(e) => {
                         let _ = tx.send(Err(e)).await;
                         return;
                     }
                 },
+                Some(frame) = next_input(&mut inputs) => {
+                    // The engine tells a push's frames before any of them
+                    // can play, so their cycles are known by now.
+                    pairing.take(&mut producer);
+                    pairing.input(&frame);
+                }
                 _ = tick.tick() => {
-                    let r = report(&producer, sent, start, len);
-                    if tx.send(Ok(r)).await.is_err() {
+                    pairing.take(&mut producer);
+                    let last = draining.is_some_and(|limit| {
+                        let now = Instant::now();
+                        let played = producer.counters().pushed.load(Ordering::Relaxed) >= sent;
+                        // Frames pushed by a call whose answer never came
+                        // (a fault) are never told: a short grace for them.
+                        let all_told = !inputs_numbered || pairing.told >= sent;
+                        let grace = played.then(|| *told_by.get_or_insert(now + TELL_GRACE));
+                        let told = all_told || grace.is_some_and(|g| now >= g);
+                        now >= limit || (played && pairing.waiting.is_empty() && told)
+                    });
+                    if last {
+                        pairing.flush();
+                    }
+                    let r = report(&producer, sent, start, len, std::mem::take(&mut pairing.ready));
+                    if tx.send(Ok(r)).await.is_err() || last {
                         return;
                     }
                 }
             }
         }
-        // The client is done: its queue plays out, which is no dry spell;
-        // report until its frames are played.
-        producer.close();
-        let deadline = std::time::Instant::now() + DRAIN_LIMIT;
-        while producer.counters().pushed.load(Ordering::Relaxed) < sent && std::time::Instant::now() < deadline {
-            tick.tick().await;
-            let r = report(&producer, sent, start, len);
-            if tx.send(Ok(r)).await.is_err() {
-                return;
-            }
-        }
-        let r = report(&producer, sent, start, len);
-        let _ = tx.send(Ok(r)).await;
     });
     Ok(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))
 }

@@ -73,6 +73,7 @@ pub fn counters_pb(s: &crate::engine::telemetry::Snapshot) -> pb::Counters {
         max_fifo_gap_us: s.max_fifo_gap_us,
         ring_overflows: s.ring_overflows,
         output_latency_misses: s.output_latency_misses,
+        inputs_dropped_by_chip: s.inputs_dropped_by_chip,
     }
 }
 

@@ -59,8 +59,8 @@ pub struct Context {
     /// The newest input frame (for CiA 402 actual values), and the event
     /// that a new one arrived (drive states change only with one).
     pub latest: tokio::sync::watch::Sender<Option<Arc<InputFrame>>>,
-    /// A `StreamFrames` call is open (one at a time).
-    pub frame_stream_open: std::sync::atomic::AtomicBool,
+    /// The output ranges open `StreamFrames` calls feed.
+    pub frame_streams: Arc<frames::StreamClaims>,
     /// The output image as the API last wrote it (bit-sized entries are
     /// merged into it, so writing one bit keeps its neighbours).
     pub shadow: Mutex<Vec<u8>>,
@@ -79,7 +79,7 @@ impl Context {
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             latest: tokio::sync::watch::Sender::new(None),
             shadow: Mutex::new(Vec::new()),
-            frame_stream_open: std::sync::atomic::AtomicBool::new(false),
+            frame_streams: Arc::default(),
         })
     }
 

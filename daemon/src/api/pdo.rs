@@ -81,6 +81,19 @@ fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>,
         .collect()
 }
 
+/// Bytes `from..to` of the output image are no StreamFrames' (its frames
+/// replace them every cycle: a write there would be lost or, while the
+/// stream is dry, break the policy).
+fn not_streamed(ctx: &Context, from: usize, to: usize) -> Result<(), Status> {
+    match ctx.frame_streams.overlapping(from, to.saturating_sub(from).max(1)) {
+        None => Ok(()),
+        Some((start, len)) => Err(Status::failed_precondition(format!(
+            "output bytes {from}..{to} are fed by a StreamFrames (bytes {start}..{}): send them as frames",
+            start + len
+        ))),
+    }
+}
+
 /// Applies client writes to the shadow image and sends the touched span as
 /// one write under the lease (so it reaches the slaves in one frame). A bad
 /// write rejects the whole request and changes nothing.
@@ -111,9 +124,11 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
                         format!("{} bytes given for the {}-bit entry {name:?}", bytes.len(), e.bit_length),
                     ));
                 }
+                let (b0, b1) = ((e.bit_offset / 8) as usize, (e.bit_offset + e.bit_length).div_ceil(8) as usize);
+                not_streamed(ctx, b0, b1)?;
                 write_bits(&mut staged, e.bit_offset, e.bit_length, &bytes);
-                lo = lo.min((e.bit_offset / 8) as usize);
-                hi = hi.max((e.bit_offset + e.bit_length).div_ceil(8) as usize);
+                lo = lo.min(b0);
+                hi = hi.max(b1);
             }
             Some(pb::output_write::Target::Offset(o)) => {
                 let Some(pb::value::Kind::Raw(bytes)) = &value.kind else {
@@ -126,6 +141,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
                         format!("{} bytes at {o} exceed the {size}-byte output image", bytes.len()),
                     ));
                 }
+                not_streamed(ctx, o, o + bytes.len())?;
                 staged[o..o + bytes.len()].copy_from_slice(bytes);
                 lo = lo.min(o);
                 hi = hi.max(o + bytes.len());

@@ -101,6 +101,13 @@ pub struct Cyclic {
     /// Level reported just before that push.
     reported: u8,
     started: Instant,
+    /// Frames pushed and input frames read in this run so far.
+    pushed_total: u64,
+    read_total: u64,
+    lost_total: u64,
+    /// (frames consumed, input frames produced) as of the last answer's
+    /// counts: see [`Cyclic::inputs_lost`].
+    sample: Option<(u64, u64)>,
 }
 
 impl Cyclic {
@@ -123,6 +130,10 @@ impl Cyclic {
             drained: true,
             reported: 0,
             started: now,
+            pushed_total: 0,
+            read_total: 0,
+            lost_total: 0,
+            sample: None,
         }
     }
 
@@ -190,16 +201,19 @@ impl Cyclic {
 
     /// The bytes of `n` output frames, each the current image.
     pub fn push_bytes(&mut self, n: u8) -> &[u8] {
-        self.push_frames(n, None)
+        self.push_frames(n, &mut [])
     }
 
     /// The bytes of `n` output frames: each the current image, after the
-    /// next frame of `stream` (if any) was taken into its range.
-    pub fn push_frames(&mut self, n: u8, mut stream: Option<&mut super::frames::FrameConsumer>) -> &[u8] {
+    /// next frame of every stream was taken into its range.
+    pub fn push_frames(&mut self, n: u8, streams: &mut [super::frames::FrameConsumer]) -> &[u8] {
         self.push_buf.clear();
-        for _ in 0..n {
-            if let Some(s) = stream.as_deref_mut() {
-                s.next_into(&mut self.outputs);
+        for s in streams.iter_mut() {
+            s.start_push();
+        }
+        for i in 0..n {
+            for s in streams.iter_mut() {
+                s.next_into(&mut self.outputs, i);
             }
             self.push_buf.extend_from_slice(&self.outputs);
         }
@@ -213,6 +227,38 @@ impl Cyclic {
         self.last_push = (now, pushed);
         self.reported = count;
         self.drained = drained;
+    }
+
+    /// Input frames the chip dropped (its TxFIFO full: the oldest go)
+    /// since the last answer, from an answer's counts (taken at the packet
+    /// before the call, when every frame pushed and read before the call
+    /// was in): `ahead` output frames and `waiting` input frames queued.
+    /// Each DC cycle consumes one output frame and produces one input
+    /// frame, so the cycles between two answers are the output frames
+    /// consumed in between, and the input frames produced are as many: any
+    /// not read nor waiting were dropped. Exact while the RxFIFO did not run
+    /// dry in between (fewer frames consumed than cycles: then it counts
+    /// low, never high). Call before [`Cyclic::answered`]'s bookkeeping of
+    /// this call ([`Cyclic::count`]).
+    pub fn inputs_lost(&mut self, ahead: u8, waiting: u8) -> u64 {
+        let consumed = self.pushed_total.saturating_sub(u64::from(ahead));
+        // Dropped frames were produced too.
+        let produced = self.read_total + u64::from(waiting) + self.lost_total;
+        let lost = match self.sample {
+            Some((c0, p0)) if self.rx_size > 0 => {
+                consumed.saturating_sub(c0).saturating_sub(produced.saturating_sub(p0))
+            }
+            _ => 0,
+        };
+        self.lost_total += lost;
+        self.sample = Some((consumed, produced + lost));
+        lost
+    }
+
+    /// Counts a call's pushed and read frames (after [`Cyclic::inputs_lost`]).
+    pub fn count(&mut self, pushed: u8, read: usize) {
+        self.pushed_total += u64::from(pushed);
+        self.read_total += read as u64;
     }
 
     /// When the last exchange was, if any.
@@ -371,5 +417,24 @@ mod tests {
         let (mut cy, _) = cyclic();
         cy.outputs.copy_from_slice(&[1, 2, 3, 4]);
         assert_eq!(cy.push_bytes(2), &[1, 2, 3, 4, 1, 2, 3, 4]);
+    }
+
+    #[test]
+    fn input_frames_the_chip_dropped_are_counted_from_the_output_side() {
+        let (mut cy, _) = cyclic();
+        // First answer: a reference only.
+        assert_eq!(cy.inputs_lost(0, 0), 0);
+        cy.count(20, 0);
+        // 20 pushed, 12 still queued: 8 cycles; 8 input frames waiting.
+        assert_eq!(cy.inputs_lost(12, 8), 0);
+        cy.count(10, 8);
+        // 30 pushed, 2 queued: 20 more cycles, so 20 input frames made;
+        // 8 read, 5 waiting: 15 of them dropped.
+        assert_eq!(cy.inputs_lost(2, 5), 15);
+        cy.count(0, 5);
+        // The last 2 output frames consumed, 3 input frames made since
+        // (the RxFIFO ran dry for one cycle): never more than the output
+        // side shows.
+        assert_eq!(cy.inputs_lost(0, 3), 0);
     }
 }

@@ -13,12 +13,35 @@
 //! The queue is a wait-free single-producer ring of fixed-size records
 //! (`seq: u64` then the bytes) allocated by the producer's side; the engine
 //! only copies out of it.
+//!
+//! Cause and effect: once the chip's answer to a FIFO call says how many
+//! frames were queued ahead of the call's push, the engine knows the DC
+//! cycle each frame of that push plays in ([`FrameConsumer::played`]), and
+//! hands (`seq`, cycle) back through a second ring; the API pairs each with
+//! the input frame of that cycle.
 
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 
 /// Bytes before each frame's bytes in the ring.
 const SEQ_LEN: usize = 8;
+
+/// Streams the engine feeds at once (each on its own slaves). The engine
+/// holds room for this many from the start and never grows it.
+pub const MAX_STREAMS: usize = 8;
+
+/// Frames one FIFO call pushes at most (its `frames` parameter is a byte).
+const PUSH_MAX: usize = 255;
+
+/// A frame the chip played: the client's `seq` and the DC cycle it played
+/// in, numbered as input frames are (`InputSample.seq`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Played {
+    /// The client's number for the frame.
+    pub seq: u64,
+    /// The DC cycle it played in.
+    pub cycle: u64,
+}
 
 /// What the engine did with a stream, readable by its producer.
 #[derive(Debug, Default)]
@@ -73,6 +96,7 @@ impl std::error::Error for FrameError {}
 #[derive(Debug)]
 pub struct FrameProducer {
     ring: rtrb::Producer<u8>,
+    played: rtrb::Consumer<Played>,
     len: usize,
     counters: Arc<StreamCounters>,
 }
@@ -90,16 +114,32 @@ pub struct FrameConsumer {
     /// Bytes per frame.
     pub len: usize,
     counters: Arc<StreamCounters>,
+    /// (index in the push, seq) of the frames taken into the push on its
+    /// way, until its answer tells when they play.
+    pending: Vec<(u8, u64)>,
+    played: rtrb::Producer<Played>,
 }
 
 /// A stream of frames of `len` bytes for the output image's bytes
 /// `start..start + len`, queuing up to `capacity` frames.
 pub fn channel(start: usize, len: usize, capacity: usize) -> (FrameProducer, FrameConsumer) {
     let (p, c) = rtrb::RingBuffer::new(capacity.max(1) * (SEQ_LEN + len));
+    // Room for every queued frame and a full push more: the producer's
+    // side reads it at every report.
+    let (played_p, played_c) = rtrb::RingBuffer::new(capacity.max(1) + PUSH_MAX);
     let counters = Arc::new(StreamCounters::default());
     (
-        FrameProducer { ring: p, len, counters: Arc::clone(&counters) },
-        FrameConsumer { ring: c, on_dry: DryAction::Hold, dry: None, start, len, counters },
+        FrameProducer { ring: p, played: played_c, len, counters: Arc::clone(&counters) },
+        FrameConsumer {
+            ring: c,
+            on_dry: DryAction::Hold,
+            dry: None,
+            start,
+            len,
+            counters,
+            pending: Vec::with_capacity(PUSH_MAX),
+            played: played_p,
+        },
     )
 }
 
@@ -149,6 +189,11 @@ impl FrameProducer {
         &self.counters
     }
 
+    /// The next frame known to have played (in order), if any.
+    pub fn next_played(&mut self) -> Option<Played> {
+        self.played.pop().ok()
+    }
+
     /// No more frames will come: the queue plays out and the stream ends,
     /// without counting the end as a dry spell.
     pub fn close(&self) {
@@ -157,9 +202,16 @@ impl FrameProducer {
 }
 
 impl FrameConsumer {
-    /// Takes the next frame into `image` (its range); `None` when the
-    /// queue is empty (the image keeps the last frame: counted as dry).
-    pub fn next_into(&mut self, image: &mut [u8]) -> Option<u64> {
+    /// A new push starts: frames taken before whose answer never came
+    /// (the call failed) are not reported as played.
+    pub fn start_push(&mut self) {
+        self.pending.clear();
+    }
+
+    /// Takes the next frame into `image` (its range) as frame `index` of
+    /// the push on its way; `None` when the queue is empty (the image keeps
+    /// the last frame: counted as dry).
+    pub fn next_into(&mut self, image: &mut [u8], index: u8) -> Option<u64> {
         let Ok(chunk) = self.ring.read_chunk(SEQ_LEN + self.len) else {
             // Before the first frame, and after the client closed, an
             // empty queue is no shortage.
@@ -184,6 +236,9 @@ impl FrameConsumer {
         }
         chunk.commit_all();
         let seq = u64::from_le_bytes(seq);
+        if self.pending.len() < self.pending.capacity() {
+            self.pending.push((index, seq));
+        }
         self.counters.pushed.fetch_add(1, Relaxed);
         self.counters.last_seq.store(seq, Relaxed);
         Some(seq)
@@ -207,6 +262,16 @@ impl FrameConsumer {
         }
     }
 
+    /// The push's answer came: its first frame plays in DC cycle
+    /// `first_cycle`, each next one a cycle later. Frames the producer's
+    /// side has no room for are not reported (it reads at every report).
+    pub fn played(&mut self, first_cycle: u64) {
+        for &(index, seq) in &self.pending {
+            let _ = self.played.push(Played { seq, cycle: first_cycle + u64::from(index) });
+        }
+        self.pending.clear();
+    }
+
     /// Frames taken so far.
     pub fn pushed(&self) -> u64 {
         self.counters.pushed.load(Relaxed)
@@ -227,13 +292,13 @@ mod tests {
         assert_eq!(p.push(9, &[9; 3]), Err(FrameError::Full));
         assert_eq!(p.push(9, &[9; 2]), Err(FrameError::WrongLength { expected: 3, found: 2 }));
         let mut image = [0xEE; 6];
-        assert_eq!(c.next_into(&mut image), Some(0));
+        assert_eq!(c.next_into(&mut image, 0), Some(0));
         assert_eq!(image, [0xEE, 0xEE, 0, 0, 0, 0xEE]);
         assert_eq!(p.credits(), 1);
         for seq in 1..4 {
-            assert_eq!(c.next_into(&mut image), Some(seq));
+            assert_eq!(c.next_into(&mut image, 0), Some(seq));
         }
-        assert_eq!(c.next_into(&mut image), None, "dry: the image keeps the last frame");
+        assert_eq!(c.next_into(&mut image, 0), None, "dry: the image keeps the last frame");
         assert_eq!(image, [0xEE, 0xEE, 3, 3, 3, 0xEE]);
         let n = p.counters();
         assert_eq!((n.pushed.load(Relaxed), n.last_seq.load(Relaxed), n.dry.load(Relaxed)), (4, 3, 1));
@@ -248,7 +313,7 @@ mod tests {
     fn an_empty_queue_before_the_first_frame_is_not_dry() {
         let (_p, mut c) = channel(0, 1, 4);
         let mut image = [7u8];
-        assert_eq!(c.next_into(&mut image), None);
+        assert_eq!(c.next_into(&mut image, 0), None);
         assert!(!c.take_dry_start());
         assert_eq!(c.counters.dry.load(Relaxed), 0);
     }
@@ -261,17 +326,17 @@ mod tests {
         p.close();
         let mut image = [9u8; 3];
         assert!(!c.finished(), "a frame is still queued");
-        assert_eq!(c.next_into(&mut image), Some(1));
+        assert_eq!(c.next_into(&mut image, 0), Some(1));
         assert!(c.finished());
-        assert_eq!(c.next_into(&mut image), None);
+        assert_eq!(c.next_into(&mut image, 0), None);
         assert!(!c.take_dry_start());
         assert_eq!(p.counters().dry.load(Relaxed), 0);
         let (mut p, mut c) = channel(1, 2, 4);
         c.on_dry = DryAction::Zero;
         p.push(1, &[5, 5]).unwrap();
-        c.next_into(&mut image);
+        c.next_into(&mut image, 0);
         assert_eq!(image, [5, 5, 5]);
-        c.next_into(&mut image);
+        c.next_into(&mut image, 0);
         assert_eq!(image, [5, 0, 0], "zeroed when dry");
         assert!(c.take_dry_start());
     }
@@ -298,8 +363,33 @@ mod tests {
         let mut image = [0u8; 5];
         for seq in 0..100u64 {
             p.push(seq, &[seq as u8; 5]).unwrap();
-            assert_eq!(c.next_into(&mut image), Some(seq));
+            assert_eq!(c.next_into(&mut image, 0), Some(seq));
             assert_eq!(image, [seq as u8; 5]);
         }
+    }
+
+    #[test]
+    fn each_frame_of_a_push_is_told_with_the_cycle_it_plays_in() {
+        let (mut p, mut c) = channel(0, 1, 8);
+        for seq in 10..15u64 {
+            p.push(seq, &[seq as u8]).unwrap();
+        }
+        let mut image = [0u8; 1];
+        // A push whose answer never came: its frame (10) is not reported.
+        c.start_push();
+        c.next_into(&mut image, 0);
+        c.start_push();
+        // The next push carries stream frames at indexes 1 and 2; 7 frames
+        // were queued ahead of it and the newest cycle is 100: its first
+        // frame plays in 108, so they play in 109 and 110.
+        c.next_into(&mut image, 1);
+        c.next_into(&mut image, 2);
+        assert_eq!(p.next_played(), None, "not before the answer");
+        c.played(100 + 7 + 1);
+        assert_eq!(p.next_played(), Some(Played { seq: 11, cycle: 109 }));
+        assert_eq!(p.next_played(), Some(Played { seq: 12, cycle: 110 }));
+        assert_eq!(p.next_played(), None);
+        c.played(200);
+        assert_eq!(p.next_played(), None, "told once");
     }
 }

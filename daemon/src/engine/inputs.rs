@@ -55,6 +55,12 @@ impl InputPublisher {
         }
     }
 
+    /// `n` input frames the chip dropped before the next ones: numbered
+    /// as a gap before them.
+    pub fn lost(&mut self, n: u64) {
+        self.pending_gap = self.pending_gap.saturating_add(n);
+    }
+
     /// Publishes the input frames of `frame_size` bytes in an answer's
     /// data; returns how many frames were received (whether or not the ring
     /// had room for them).

@@ -102,8 +102,9 @@ pub struct Engine<L> {
     reconfigure: Receiver<(u64, Config)>,
     /// New per-cycle frame streams.
     frame_streams: Receiver<frames::FrameConsumer>,
-    /// The stream in force, if any.
-    frames: Option<frames::FrameConsumer>,
+    /// The streams in force (room for [`frames::MAX_STREAMS`] from the
+    /// start: attaching one never allocates).
+    frames: Vec<frames::FrameConsumer>,
     assembler: OutputAssembler,
     queue: FairQueue,
     active: Option<Active>,
@@ -181,7 +182,7 @@ impl<L: Link> Engine<L> {
             action: p.action,
             reconfigure: p.reconfigure,
             frame_streams: p.frame_streams,
-            frames: None,
+            frames: Vec::with_capacity(frames::MAX_STREAMS),
             assembler: OutputAssembler::default(),
             events,
             queue: FairQueue::default(),

@@ -233,11 +233,14 @@ impl<L: Link> Engine<L> {
                 WriterGoneAction::Zero => super::frames::DryAction::Zero,
                 _ => super::frames::DryAction::Hold,
             };
-            self.frames = Some(f);
+            if self.frames.len() < self.frames.capacity() {
+                self.frames.push(f);
+            } else {
+                // The API opens no more than MAX_STREAMS; never grow.
+                warn!("a frame stream beyond {} was refused", super::frames::MAX_STREAMS);
+            }
         }
-        if self.frames.as_ref().is_some_and(|f| f.finished()) {
-            self.frames = None;
-        }
+        self.frames.retain(|f| !f.finished());
         if self.writers.take_gone() {
             self.last_writer_gone(cyclic.as_deref_mut());
         }
@@ -424,13 +427,21 @@ impl<L: Link> Engine<L> {
         op.set(FifoOpFlags::READ, c.tx_size > 0);
         // The first frame pushed now plays after the ones queued before it.
         let ahead = c.estimate(now).max(0) as u32;
-        let outputs = c.push_frames(n, self.frames.as_mut());
+        let outputs = c.push_frames(n, &mut self.frames);
         let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
         let count = a.header.rx_fifo_count;
+        let waiting = a.header.tx_fifo_count;
         // Inputs out, their freshness noted and judged (a network without
-        // inputs counts the answer itself as the sign of life).
+        // inputs counts the answer itself as the sign of life). Input
+        // frames the chip dropped are numbered as a gap before them, so
+        // `seq` keeps counting DC cycles.
         let mut read = 0;
         if a.header.code == CommandCode::PdoDataFifoOp {
+            let lost = if c.tx_size > 0 { c.inputs_lost(count, waiting) } else { 0 };
+            if lost > 0 {
+                self.intake.inputs.lost(lost);
+                self.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
+            }
             read = self.intake.inputs.publish(a.data, c.tx_size, now);
             self.telemetry.input_frames.fetch_add(read as u64, Relaxed);
             if self.supervisor.fifo_answer(read, c.tx_size > 0, now) {
@@ -438,11 +449,12 @@ impl<L: Link> Engine<L> {
             }
         }
         // A full packet of inputs: more may be waiting.
+        c.count(n, read);
         let drained = read < self.port.data_size() / c.tx_size.max(1);
         c.answered(now, n, count, drained);
         self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
-        if let Some(pushed) = self.frames.as_mut().and_then(|f| f.take_dry_start().then(|| f.pushed())) {
-            self.frames_ran_dry(pushed);
+        if !self.frames.is_empty() {
+            self.frames_played(c.tx_size > 0, read, waiting, count);
         }
         if n > 0 {
             if let Some(written) = self.unplayed_write.take() {
@@ -532,6 +544,33 @@ impl<L: Link> Engine<L> {
             return Ok(true);
         }
         Ok(sent && progress != Progress::Waiting)
+    }
+
+    /// The answer to a push came: when each stream frame in it plays, and
+    /// which streams ran dry. The answer's counts are the chip's at the
+    /// packet before the call (two exchanges late, see `fifo_exchange`),
+    /// when every frame pushed and read before the call was in: `waiting`
+    /// input frames were queued after the last one read before this call
+    /// (this call then read `read`), so the newest DC cycle then was that
+    /// frame's plus `waiting`; `ahead` output frames were queued then, so
+    /// this push's first frame plays `ahead + 1` cycles after it (the
+    /// cycles between that packet and this one took frames off both FIFOs
+    /// alike). Exact unless the RxFIFO ran dry in between (the frames then
+    /// play later: an underrun the record shows). Without inputs there is
+    /// no cycle to number.
+    fn frames_played(&mut self, inputs: bool, read: usize, waiting: u8, ahead: u8) {
+        let before = self.intake.inputs.seq().saturating_sub(read as u64);
+        let first = before + u64::from(waiting) + u64::from(ahead) + 1;
+        for i in 0..self.frames.len() {
+            let f = &mut self.frames[i];
+            if inputs {
+                f.played(first);
+            }
+            if f.take_dry_start() {
+                let pushed = f.pushed();
+                self.frames_ran_dry(pushed);
+            }
+        }
     }
 
     /// A client's frame queue ran dry after `pushed` frames: said once per

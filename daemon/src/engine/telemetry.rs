@@ -112,6 +112,8 @@ pub struct Telemetry {
     pub output_latency: LatencyWindow,
     /// Writes that reached the wire later than the budget.
     pub output_latency_misses: AtomicU64,
+    /// Input frames the chip dropped (TxFIFO full).
+    pub inputs_dropped_by_chip: AtomicU64,
 }
 
 /// The latest [`LatencyWindow::LEN`] latencies, us, written by the engine
@@ -243,6 +245,8 @@ pub struct Snapshot {
     pub config_generation: u64,
     /// Client writes that reached the wire later than the budget.
     pub output_latency_misses: u64,
+    /// Input frames the chip dropped (TxFIFO full).
+    pub inputs_dropped_by_chip: u64,
 }
 
 impl Snapshot {
@@ -361,6 +365,7 @@ impl Telemetry {
             max_fifo_gap_us: self.max_fifo_gap_us.load(Relaxed),
             config_generation: self.config_generation.load(Relaxed),
             output_latency_misses: self.output_latency_misses.load(Relaxed),
+            inputs_dropped_by_chip: self.inputs_dropped_by_chip.load(Relaxed),
         }
     }
 }

@@ -92,7 +92,7 @@ pub async fn render(sources: &Sources) -> String {
         let _ = writeln!(out, "ecmxf_engine_phase{{phase=\"{name}\"}} {}", u8::from(p == s.phase));
     }
     // (name, type, help, value): one sample each.
-    let single: [(&str, &str, &str, String); 25] = [
+    let single: [(&str, &str, &str, String); 26] = [
         (
             "ecmxf_network_state",
             "gauge",
@@ -191,6 +191,12 @@ pub async fn render(sources: &Sources) -> String {
             "counter",
             "Client output writes that reached the wire later than the budget.",
             s.output_latency_misses.to_string(),
+        ),
+        (
+            "ecmxf_inputs_dropped_by_chip_total",
+            "counter",
+            "Input frames the chip dropped with its TxFIFO full (the host was away too long).",
+            s.inputs_dropped_by_chip.to_string(),
         ),
         (
             "ecmxf_config_generation",

@@ -23,35 +23,12 @@
 
 use std::time::{Duration, Instant};
 
-use ecmxf_e2e::{Daemon, percentile};
+use ecmxf_e2e::{DAEMON_THREADS, Daemon, cpu_seconds, percentile};
 use ecmxf_proto::v1 as pb;
 use ecmxfd::realtime::monotonic_ns;
 use pb::master_client::MasterClient;
 use pb::process_data_client::ProcessDataClient;
 use tokio_stream::StreamExt;
-
-/// CPU time of this process' threads with these names, seconds, from
-/// /proc/self/task/*/stat (utime + stime, in USER_HZ = 100 ticks per
-/// second on Linux).
-fn cpu_seconds(names: &[&str]) -> f64 {
-    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return 0.0 };
-    let mut ticks = 0u64;
-    for t in tasks.flatten() {
-        let comm = std::fs::read_to_string(t.path().join("comm")).unwrap_or_default();
-        if !names.contains(&comm.trim()) {
-            continue;
-        }
-        let stat = std::fs::read_to_string(t.path().join("stat")).unwrap_or_default();
-        // Fields after the ")" that ends the name: state is field 3, utime 14, stime 15.
-        let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
-        let f: Vec<&str> = rest.split_whitespace().collect();
-        let field = |n: usize| f.get(n - 3).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
-        ticks += field(14) + field(15);
-    }
-    ticks as f64 / 100.0
-}
-
-const DAEMON_THREADS: [&str; 3] = ["ecmxf-rt", "ecmxf-inputs", "ecmxfd-api"];
 
 struct Outcome {
     cpu_percent: f64,
