@@ -134,9 +134,10 @@ pub fn recorded(sim: &Simulator) -> Vec<PlayedFrame> {
         .find_map(|w| w.strip_prefix("frames="))
         .and_then(|n| n.parse().ok())
         .unwrap_or_else(|| panic!("{head}"));
-    // A page's size from one line's (the frames' size decides it).
+    // A page's size from the first line's (the frames' size decides it),
+    // with room for longer cycle numbers and " repeat".
     let line = sim.ctl("recorded 0 1").lines().nth(1).map_or(64, |l| l.len() + 1);
-    let page = (60_000 / line).max(1);
+    let page = (60_000 / (line + 16)).max(1);
     let mut played = Vec::with_capacity(frames);
     while played.len() < frames {
         let text = sim.ctl(&format!("recorded {} {}", played.len(), (frames - played.len()).min(page)));

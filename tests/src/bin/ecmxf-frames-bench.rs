@@ -76,6 +76,15 @@ fn main() {
             other => panic!("unknown argument {other}; use --secs N"),
         }
     }
+    // The simulator binary next to this one, as built from this tree (a
+    // stale one would lack the `record` command).
+    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
+    let mut build = std::process::Command::new(cargo);
+    build.args(["build", "-q", "-p", "ecmxf-sim"]).current_dir(ecmxf_e2e::repo());
+    if !cfg!(debug_assertions) {
+        build.arg("--release");
+    }
+    assert!(build.status().is_ok_and(|s| s.success()), "building ecmxf-sim failed");
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
     rt.block_on(measure(secs));
 }
