@@ -177,6 +177,11 @@ impl Simulator {
         child
     }
 
+    /// The daemon's `[link]` lines for this simulator.
+    pub fn link(&self) -> String {
+        format!("backend = \"sim-socket\"\nsocket = \"{}\"", self.socket.display())
+    }
+
     /// `ecmxf-sim ctl WORDS...`; its answer (panics if refused).
     pub fn ctl(&self, words: &str) -> String {
         let out = Command::new(&self.bin)
@@ -256,9 +261,14 @@ pub struct Daemon {
 /// "sim"`), the simulator-friendly real-time and cycle settings of
 /// `config/ecmxfd-sim.toml`, then `extra` (more sections).
 pub fn config(link: &str, extra: &str) -> String {
+    config_with_cycle(link, "", extra)
+}
+
+/// [`config`] with more `[cycle]` keys (e.g. `"sync0_us = 125\n"`).
+pub fn config_with_cycle(link: &str, cycle: &str, extra: &str) -> String {
     format!(
         "version = 1\n[link]\n{link}\n[chip]\nready_timeout_ms = 1000\n[realtime]\npriority = 0\nlock_memory = false\nspin_us = 0\n\
-         [cycle]\nfifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240\n{extra}"
+         [cycle]\n{cycle}fifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240\n{extra}"
     )
 }
 

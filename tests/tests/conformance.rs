@@ -66,8 +66,7 @@ fn start(dir: &Path, devices: &[&CatalogDevice]) -> Daemon {
         })
         .collect();
     let link = format!("backend = \"sim\"\nnetwork = {}", toml_path(&network));
-    let config = ecmxf_e2e::config(&link, &slaves);
-    Daemon::binary_with_config(&config.replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n"))
+    Daemon::binary_with_config(&ecmxf_e2e::config_with_cycle(&link, "sync0_us = 1000\n", &slaves))
 }
 
 /// Every read RPC, for the network and for each slave; an error per

@@ -16,8 +16,7 @@ fn a_drive_fault_arrives_as_an_emergency_event() {
     run(async {
         let dir = ecmxf_e2e::temp_dir("emcy");
         let sim = ecmxf_e2e::Simulator::serve(&dir, &[]);
-        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
-        let config = ecmxf_e2e::config(&link, ecmxf_e2e::TI_AXIS);
+        let config = ecmxf_e2e::config(&sim.link(), ecmxf_e2e::TI_AXIS);
         let mut d = Daemon::with_config(&config);
         let ch = d.connect().await;
         let mut diag = DiagnosticsClient::new(ch.clone());

@@ -328,13 +328,12 @@ async fn after_recovery(b: &Bench, what: &str, io_restarted: bool) {
 /// with the TI drive's first axis and `extra` sections; running, with the
 /// IO slave as it found it.
 async fn on_the_simulator(sim: &Simulator, extra: &str) -> (Daemon, Channel, pb::Slave) {
-    let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
     let extra = format!("{}{extra}", ecmxf_e2e::TI_AXIS);
     // The TxFIFO deep enough for 150 ms of inputs (the FIFO memory shared
     // with a shallower RxFIFO, still 48 ms of outputs at its low mark):
     // a loaded 2-core host that stalls the engine for tens of ms must not
     // make the chip drop inputs, which the bit-error rounds count as loss.
-    let config = ecmxf_e2e::config(&link, &extra).replace("[cycle]\n", "[cycle]\nsync0_us = 1000\n").replace(
+    let config = ecmxf_e2e::config_with_cycle(&sim.link(), "sync0_us = 1000\n", &extra).replace(
         "fifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240",
         "fifo_rx_depth = 128\nfifo_tx_depth = 160\nfifo_low = 48\nfifo_high = 96",
     );
@@ -635,8 +634,7 @@ fn sigterm_is_honoured_during_bring_up_and_recovery() {
     run(async {
         let dir = ecmxf_e2e::temp_dir("stop");
         let mut sim = Simulator::serve(&dir, &[]);
-        let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
-        let config = ecmxf_e2e::config(&link, "");
+        let config = ecmxf_e2e::config(&sim.link(), "");
 
         sim.ctl("int0 stuck low");
         let mut d = Daemon::binary_with_config(&config);

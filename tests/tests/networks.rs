@@ -26,8 +26,7 @@ fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
             );
             std::fs::write(&network, net).unwrap();
             let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
-            let config =
-                ecmxf_e2e::config(&link, "").replace("[cycle]\n", &format!("[cycle]\nsync0_us = {sync0_us}\n"));
+            let config = ecmxf_e2e::config_with_cycle(&link, &format!("sync0_us = {sync0_us}\n"), "");
             let mut d = Daemon::binary_with_config(&config);
             let ch = d.connect().await;
             let at = format!("at {sync0_us} us");
@@ -94,9 +93,7 @@ fn an_output_only_network_without_coe_runs_answers_and_its_outputs_reach_the_sla
                 format!("version = 1\n[[slave]]\nprofile = \"coupler\"\n[[slave]]\nsii = \"{}\"\n", dump.display());
             std::fs::write(&network, net).unwrap();
             let sim = ecmxf_e2e::Simulator::serve(&dir, &["--network", &network.display().to_string()]);
-            let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
-            let config =
-                ecmxf_e2e::config(&link, "").replace("[cycle]\n", &format!("[cycle]\nsync0_us = {sync0_us}\n"));
+            let config = ecmxf_e2e::config_with_cycle(&sim.link(), &format!("sync0_us = {sync0_us}\n"), "");
             let mut d = Daemon::binary_with_config(&config);
             let ch = d.connect().await;
             let at = format!("at {sync0_us} us");

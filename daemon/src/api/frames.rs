@@ -49,6 +49,13 @@ struct Claim {
     len: usize,
 }
 
+impl Claim {
+    /// Whether the claim shares a byte with `from..to`.
+    fn overlaps(&self, from: usize, to: usize) -> bool {
+        self.start < to && from < self.start + self.len
+    }
+}
+
 /// A range claimed while its stream is open.
 #[derive(Debug)]
 struct Claimed {
@@ -72,7 +79,7 @@ impl StreamClaims {
     fn claim(self: &Arc<Self>, start: usize, len: usize, slaves: &[u32]) -> Result<Claimed, Status> {
         static NEXT: AtomicU64 = AtomicU64::new(1);
         let mut claims = self.lock();
-        if claims.iter().any(|c| c.start < start + len && start < c.start + c.len) {
+        if claims.iter().any(|c| c.overlaps(start, start + len)) {
             return Err(Status::failed_precondition(format!(
                 "the outputs of slaves {slaves:?} are (partly) fed by another StreamFrames: one stream per set of slaves"
             )));
@@ -85,9 +92,9 @@ impl StreamClaims {
         Ok(Claimed { claims: Arc::clone(self), id })
     }
 
-    /// The first claimed range `start..start + len` overlaps, if any.
-    pub fn overlapping(&self, start: usize, len: usize) -> Option<(usize, usize)> {
-        self.lock().iter().find(|c| c.start < start + len && start < c.start + c.len).map(|c| (c.start, c.len))
+    /// The first claimed range that shares a byte with `from..to`, if any.
+    pub fn overlapping(&self, from: usize, to: usize) -> Option<(usize, usize)> {
+        self.lock().iter().find(|c| c.overlaps(from, to)).map(|c| (c.start, c.len))
     }
 }
 
@@ -164,6 +171,11 @@ fn report(p: &FrameProducer, received: u64, start: usize, len: usize, played: Ve
     }
 }
 
+/// A played frame as reported.
+fn told(p: Played, inputs: Vec<u8>) -> pb::PlayedFrame {
+    pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs }
+}
+
 /// Played frames on their way to a report: at once, or (pairing) once the
 /// input frame of their cycle arrived.
 #[derive(Debug)]
@@ -189,7 +201,7 @@ impl Pairing {
             if self.pair {
                 self.waiting.push_back(p);
             } else {
-                self.ready.push(pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs: Vec::new() });
+                self.ready.push(told(p, Vec::new()));
             }
         }
     }
@@ -203,14 +215,13 @@ impl Pairing {
             }
             self.waiting.pop_front();
             let inputs = if p.cycle == frame.seq { frame.data.clone() } else { Vec::new() };
-            self.ready.push(pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs });
+            self.ready.push(told(p, inputs));
         }
     }
 
     /// The rest, without inputs (the stream ends).
     fn flush(&mut self) {
-        let rest = self.waiting.drain(..).map(|p| pb::PlayedFrame { seq: p.seq, cycle: p.cycle, inputs: Vec::new() });
-        self.ready.extend(rest);
+        self.ready.extend(self.waiting.drain(..).map(|p| told(p, Vec::new())));
     }
 }
 

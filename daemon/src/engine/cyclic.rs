@@ -104,9 +104,8 @@ pub struct Cyclic {
     /// Frames pushed and input frames read in this run so far.
     pushed_total: u64,
     read_total: u64,
-    lost_total: u64,
-    /// (frames consumed, input frames produced) as of the last answer's
-    /// counts: see [`Cyclic::inputs_lost`].
+    /// (output frames consumed, input frames read or waiting) as of the
+    /// last answer's counts: see [`Cyclic::inputs_lost`].
     sample: Option<(u64, u64)>,
 }
 
@@ -132,7 +131,6 @@ impl Cyclic {
             started: now,
             pushed_total: 0,
             read_total: 0,
-            lost_total: 0,
             sample: None,
         }
     }
@@ -222,11 +220,14 @@ impl Cyclic {
 
     /// Records a FIFO call at `now` that pushed `pushed` frames, whose
     /// answer reported `count` frames queued just before the push, and that
-    /// read every input frame waiting (`drained`) or a full packet of them.
-    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8, drained: bool) {
+    /// read `read` input frames: every one waiting (`drained`) or a full
+    /// packet of them.
+    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8, read: usize, drained: bool) {
         self.last_push = (now, pushed);
         self.reported = count;
         self.drained = drained;
+        self.pushed_total += u64::from(pushed);
+        self.read_total += read as u64;
     }
 
     /// Input frames the chip dropped (its TxFIFO full: the oldest go)
@@ -235,30 +236,19 @@ impl Cyclic {
     /// was in): `ahead` output frames and `waiting` input frames queued.
     /// Each DC cycle consumes one output frame and produces one input
     /// frame, so the cycles between two answers are the output frames
-    /// consumed in between, and the input frames produced are as many: any
-    /// not read nor waiting were dropped. Exact while the RxFIFO did not run
-    /// dry in between (fewer frames consumed than cycles: then it counts
-    /// low, never high). Call before [`Cyclic::answered`]'s bookkeeping of
-    /// this call ([`Cyclic::count`]).
+    /// consumed in between, and the input frames produced are as many:
+    /// those neither read nor waiting since were dropped. Exact while the
+    /// RxFIFO did not run dry in between (fewer frames consumed than
+    /// cycles: then it counts low, never high; a network without outputs
+    /// consumes none and counts none). Call before [`Cyclic::answered`]
+    /// records this call.
     pub fn inputs_lost(&mut self, ahead: u8, waiting: u8) -> u64 {
         let consumed = self.pushed_total.saturating_sub(u64::from(ahead));
-        // Dropped frames were produced too.
-        let produced = self.read_total + u64::from(waiting) + self.lost_total;
-        let lost = match self.sample {
-            Some((c0, p0)) if self.rx_size > 0 => {
-                consumed.saturating_sub(c0).saturating_sub(produced.saturating_sub(p0))
-            }
-            _ => 0,
-        };
-        self.lost_total += lost;
-        self.sample = Some((consumed, produced + lost));
+        let seen = self.read_total + u64::from(waiting);
+        let lost =
+            self.sample.map_or(0, |(c0, s0)| consumed.saturating_sub(c0).saturating_sub(seen.saturating_sub(s0)));
+        self.sample = Some((consumed, seen));
         lost
-    }
-
-    /// Counts a call's pushed and read frames (after [`Cyclic::inputs_lost`]).
-    pub fn count(&mut self, pushed: u8, read: usize) {
-        self.pushed_total += u64::from(pushed);
-        self.read_total += read as u64;
     }
 
     /// When the last exchange was, if any.
@@ -289,8 +279,8 @@ mod tests {
     fn estimate_counts_pushes_and_consumption_since_the_report() {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
-        cy.answered(t0, 5, 3, true);
-        cy.answered(t0 + Duration::from_micros(100), 10, 12, true);
+        cy.answered(t0, 5, 3, 0, true);
+        cy.answered(t0 + Duration::from_micros(100), 10, 12, 0, true);
         // 12 queued before this push, 10 pushed, 7 cycles gone 0.9 ms later;
         // the earlier push is in the 12 already.
         assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 10 - 7);
@@ -303,11 +293,11 @@ mod tests {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
         // Target 14, packet room 4: refill when the level reaches 10.
-        cy.answered(t0, 0, 14, true);
+        cy.answered(t0, 0, 14, 0, true);
         let at = cy.next_exchange(t0, 4, 100);
         assert_eq!(at.duration_since(t0), Duration::from_micros(125 * 4));
         // Far below target: now.
-        cy.answered(t0, 0, 2, true);
+        cy.answered(t0, 0, 2, 0, true);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0);
     }
 
@@ -351,10 +341,10 @@ mod tests {
         };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 240, true);
+        cy.answered(t0, 0, 240, 0, true);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
         assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "3 input frames per read");
-        cy.answered(t0, 0, 240, false);
+        cy.answered(t0, 0, 240, 0, false);
         assert_eq!(cy.next_exchange(t0, 4, 3), t0, "a full packet read: more may wait, now");
     }
 
@@ -371,7 +361,7 @@ mod tests {
         };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 0, true);
+        cy.answered(t0, 0, 0, 0, true);
         assert!(!cy.outputs_low(t0), "an empty RxFIFO is no shortage without outputs");
         assert_eq!(cy.next_exchange(t0, 0, 9), t0 + Duration::from_millis(9), "inputs decide");
         // Counted from the last exchange, not from whenever it is asked.
@@ -379,7 +369,7 @@ mod tests {
         assert!(cy.next_exchange(later, 0, 472) <= later, "the cap has passed: due");
         let plan = Plan { rx_size: 4, ..plan };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
-        cy.answered(t0, 0, 0, true);
+        cy.answered(t0, 0, 0, 0, true);
         assert!(cy.outputs_low(t0));
     }
 
@@ -404,7 +394,7 @@ mod tests {
         // between target and floor, so it refills at the floor.
         let mut cy = Cyclic::new(plan(Some(2000)), 1024, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 15, true);
+        cy.answered(t0, 0, 15, 0, true);
         assert_eq!(cy.frames_to_push(t0, 19), 0);
         assert_eq!(cy.next_exchange(t0, 19, 1000), t0 + us(125 * 4), "the cap: half of 15 - 7 cycles");
         assert!(!cy.outputs_low(t0 + us(125 * 5)));
@@ -423,15 +413,16 @@ mod tests {
     fn input_frames_the_chip_dropped_are_counted_from_the_output_side() {
         let (mut cy, _) = cyclic();
         // First answer: a reference only.
+        let t0 = Instant::now();
         assert_eq!(cy.inputs_lost(0, 0), 0);
-        cy.count(20, 0);
+        cy.answered(t0, 20, 0, 0, true);
         // 20 pushed, 12 still queued: 8 cycles; 8 input frames waiting.
         assert_eq!(cy.inputs_lost(12, 8), 0);
-        cy.count(10, 8);
+        cy.answered(t0, 10, 12, 8, true);
         // 30 pushed, 2 queued: 20 more cycles, so 20 input frames made;
         // 8 read, 5 waiting: 15 of them dropped.
         assert_eq!(cy.inputs_lost(2, 5), 15);
-        cy.count(0, 5);
+        cy.answered(t0, 0, 2, 5, true);
         // The last 2 output frames consumed, 3 input frames made since
         // (the RxFIFO ran dry for one cycle): never more than the output
         // side shows.

@@ -449,9 +449,8 @@ impl<L: Link> Engine<L> {
             }
         }
         // A full packet of inputs: more may be waiting.
-        c.count(n, read);
         let drained = read < self.port.data_size() / c.tx_size.max(1);
-        c.answered(now, n, count, drained);
+        c.answered(now, n, count, read, drained);
         self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
         if !self.frames.is_empty() {
             self.frames_played(c.tx_size > 0, read, waiting, count);

@@ -24,8 +24,7 @@ use pb::process_data_client::ProcessDataClient;
 async fn measure(secs: u64) {
     let dir = ecmxf_e2e::temp_dir("frames-bench");
     let sim = ecmxf_e2e::Simulator::serve(&dir, &[]);
-    let link = format!("backend = \"sim-socket\"\nsocket = \"{}\"", sim.socket.display());
-    let config = ecmxf_e2e::config(&link, "").replace("[cycle]\n", "[cycle]\nsync0_us = 125\n");
+    let config = ecmxf_e2e::config_with_cycle(&sim.link(), "sync0_us = 125\n", "");
     let mut d = Daemon::with_config(&config);
     let ch = d.connect().await;
     let mut pd = ProcessDataClient::new(ch.clone());

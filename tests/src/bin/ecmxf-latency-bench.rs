@@ -40,7 +40,7 @@ struct Outcome {
 
 async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
     let extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
-    let config = ecmxf_e2e::config("backend = \"sim\"", "").replace("[cycle]\n", &format!("[cycle]\n{extra}"));
+    let config = ecmxf_e2e::config_with_cycle("backend = \"sim\"", &extra, "");
     let mut d = Daemon::with_config(&config);
     let ch = d.connect().await;
     let mut pd = ProcessDataClient::new(ch.clone());
