@@ -24,6 +24,18 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     let fds = protox::compile(FILES, ["."])?;
     let out = PathBuf::from(std::env::var("OUT_DIR")?);
     std::fs::write(out.join("ecmxf_descriptor.bin"), fds.encode_to_vec())?;
-    tonic_prost_build::configure().compile_fds(fds)?;
+    // Messages and clients with tonic's prost codec.
+    tonic_prost_build::configure().build_server(false).compile_fds(fds.clone())?;
+    // Servers on their own pass: same messages (extern), but a codec that
+    // answers a request body that does not decode INVALID_ARGUMENT (the
+    // caller's fault) instead of tonic's INTERNAL (src/codec.rs).
+    let server = out.join("server");
+    std::fs::create_dir_all(&server)?;
+    tonic_prost_build::configure()
+        .build_client(false)
+        .extern_path(".ecmxf.v1", "crate::v1")
+        .codec_path("crate::codec::RequestCodec")
+        .out_dir(&server)
+        .compile_fds(fds)?;
     Ok(())
 }

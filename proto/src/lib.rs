@@ -8,13 +8,40 @@
 /// The `ecmxf.v1` package: messages, `*_client` and `*_server` modules.
 pub mod v1 {
     tonic::include_proto!("ecmxf.v1");
+    include!(concat!(env!("OUT_DIR"), "/server/ecmxf.v1.rs"));
 
     /// The encoded `FileDescriptorSet` of every file, for gRPC reflection.
     pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/ecmxf_descriptor.bin"));
 }
 
 #[warn(clippy::all)]
+pub mod codec;
+#[warn(clippy::all)]
 pub mod value;
+
+/// gRPC's canonical name for a code ("PERMISSION_DENIED"): the reason of
+/// the daemon's generic error details and `ecmxfctl --json`'s error kind.
+pub fn code_name(c: tonic::Code) -> &'static str {
+    match c {
+        tonic::Code::Ok => "OK",
+        tonic::Code::Cancelled => "CANCELLED",
+        tonic::Code::Unknown => "UNKNOWN",
+        tonic::Code::InvalidArgument => "INVALID_ARGUMENT",
+        tonic::Code::DeadlineExceeded => "DEADLINE_EXCEEDED",
+        tonic::Code::NotFound => "NOT_FOUND",
+        tonic::Code::AlreadyExists => "ALREADY_EXISTS",
+        tonic::Code::PermissionDenied => "PERMISSION_DENIED",
+        tonic::Code::ResourceExhausted => "RESOURCE_EXHAUSTED",
+        tonic::Code::FailedPrecondition => "FAILED_PRECONDITION",
+        tonic::Code::Aborted => "ABORTED",
+        tonic::Code::OutOfRange => "OUT_OF_RANGE",
+        tonic::Code::Unimplemented => "UNIMPLEMENTED",
+        tonic::Code::Internal => "INTERNAL",
+        tonic::Code::Unavailable => "UNAVAILABLE",
+        tonic::Code::DataLoss => "DATA_LOSS",
+        tonic::Code::Unauthenticated => "UNAUTHENTICATED",
+    }
+}
 
 /// Where `ecmxfd` listens and `ecmxfctl` connects when not told otherwise:
 /// `$ECMXF_SOCKET` if set; for root `/run/ecmxfd/ecmxfd.sock` (the systemd

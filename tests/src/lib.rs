@@ -553,3 +553,40 @@ pub fn cpu_seconds(names: &[&str]) -> f64 {
     }
     ticks as f64 / 100.0
 }
+
+/// Checks the details every daemon error carries and returns their
+/// `ErrorInfo` reason: a `google.rpc.Status` whose code and message are
+/// the status's own (grpc-go, grpcurl and buf take the status from there,
+/// not from `grpc-status`), in the domain "ecmxf".
+pub fn full_status(e: &tonic::Status) -> String {
+    use prost::Message;
+    use tonic_types::StatusExt;
+    let details = tonic_types::pb::Status::decode(e.details())
+        .unwrap_or_else(|why| panic!("details of {e:?} are not a google.rpc.Status: {why}"));
+    assert_eq!(details.code, e.code() as i32, "the details' code: {e:?}");
+    assert_eq!(details.message, e.message(), "the details' message: {e:?}");
+    let info = e.get_details_error_info().unwrap_or_else(|| panic!("no ErrorInfo in {e:?}"));
+    assert_eq!(info.domain, "ecmxf", "{info:?}");
+    info.reason
+}
+
+/// `buf` (the Buf CLI, written in Go: its `buf curl` is a gRPC client
+/// built on connect-go, which like grpc-go reads the status from the error
+/// details): `$ECMXF_BUF`, else the copy `.ci/run` installs from the npm
+/// registry into `target/buf`. `None` (and a note) without one, unless
+/// `ECMXF_REQUIRE_BUF` is set (CI).
+pub fn buf_binary() -> Option<PathBuf> {
+    let buf = std::env::var_os("ECMXF_BUF")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| repo().join("target/buf/node_modules/.bin/buf"));
+    if buf.exists() {
+        return Some(buf);
+    }
+    assert!(
+        std::env::var_os("ECMXF_REQUIRE_BUF").is_none(),
+        "ECMXF_REQUIRE_BUF is set but {} does not exist (bash .ci/run installs it)",
+        buf.display()
+    );
+    eprintln!("skipped: no buf at {} (npm install --prefix target/buf @bufbuild/buf)", buf.display());
+    None
+}

@@ -610,6 +610,8 @@ fn streamed_frames_reach_the_slave_once_each_in_order() {
         };
         assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
         assert!(e.message().contains("frames.data"), "{}", e.message());
+        // Ended inside the stream: the status travels in the trailers.
+        assert_eq!(ecmxf_e2e::full_status(&e), "BAD_ARGUMENT");
         drop(sim);
     });
 }

@@ -12,6 +12,7 @@ fn denied<T: std::fmt::Debug>(what: &str, r: Result<T, Status>, needs: &str) {
     let e = r.expect_err(what);
     assert_eq!(e.code(), Code::PermissionDenied, "{what}: {e:?}");
     assert!(e.message().contains(needs), "{what}: {}", e.message());
+    assert_eq!(ecmxf_e2e::full_status(&e), "PERMISSION_DENIED", "{what}");
 }
 
 #[test]

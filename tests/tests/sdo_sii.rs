@@ -3,7 +3,7 @@
 
 use std::time::Duration;
 
-use ecmxf_e2e::{Daemon, run};
+use ecmxf_e2e::{Daemon, full_status, run};
 use ecmxf_proto::v1 as pb;
 use pb::sdo_client::SdoClient;
 use pb::sii_client::SiiClient;
@@ -66,8 +66,10 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
         let e = sdo.upload(upload(1, 0x2FFF, 0, pb::DataType::Unspecified)).await.unwrap_err();
         assert_eq!(e.code(), Code::Aborted, "{e:?}");
         assert!(e.message().contains("0x2fff:00"), "{}", e.message());
-        let details = String::from_utf8_lossy(e.details()).into_owned();
-        assert!(details.contains("0x06020000") && details.contains("does not exist"), "{details}");
+        assert_eq!(full_status(&e), "SDO_ABORT");
+        let info = tonic_types::StatusExt::get_details_error_info(&e).unwrap();
+        assert_eq!(info.metadata["abort_code"], "0x06020000");
+        assert!(info.metadata["meaning"].contains("does not exist"), "{info:?}");
         // Read-only object.
         let e = sdo.download(download(1, 0x1018, 1, pb::DataType::Unspecified, Kind::Unsigned(1))).await.unwrap_err();
         assert_eq!(e.code(), Code::Aborted, "{e:?}");
@@ -90,6 +92,9 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
             let e = sdo.download(req).await.unwrap_err();
             assert_eq!(e.code(), Code::InvalidArgument, "{field}: {e:?}");
             assert!(e.message().contains(field), "{field}: {}", e.message());
+            assert_eq!(full_status(&e), "BAD_ARGUMENT");
+            let bad = tonic_types::StatusExt::get_details_bad_request(&e).expect("BadRequest");
+            assert_eq!(bad.field_violations[0].field, field, "{e:?}");
         }
         let e = sdo.upload(upload(1, 0x6060, 0, pb::DataType::Unsigned64)).await.unwrap_err();
         assert_eq!(e.code(), Code::InvalidArgument, "1 byte is not a u64: {e:?}");
@@ -119,6 +124,66 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
         }
         let e = sdo.list_objects(pb::ListObjectsRequest { slave: 7 }).await.unwrap_err();
         assert_eq!(e.code(), Code::InvalidArgument);
+    });
+}
+
+/// What a client nobody here wrote sees: a malformed request body is the
+/// caller's fault (INVALID_ARGUMENT naming the message, not INTERNAL), an
+/// unknown method UNIMPLEMENTED, each with full details; and a Go client
+/// (`buf curl`, connect-go: it takes the status from the details, as
+/// grpc-go and grpcurl do) shows ABORTED with the abort code for a missing
+/// object and INVALID_ARGUMENT for slave 99.
+#[test]
+fn errors_read_the_same_from_any_client() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+
+        /// `SdoUploadRequest.slave` (field 1, a uint32) sent as a string.
+        #[derive(Clone, PartialEq, prost::Message)]
+        struct Malformed {
+            #[prost(string, tag = "1")]
+            slave: String,
+        }
+        let raw = |path: &'static str| {
+            let mut grpc = tonic::client::Grpc::new(ch.clone());
+            async move {
+                grpc.ready().await.unwrap();
+                let codec = tonic_prost::ProstCodec::<Malformed, pb::SdoUploadResponse>::default();
+                let path = tonic::codegen::http::uri::PathAndQuery::from_static(path);
+                grpc.unary(tonic::Request::new(Malformed { slave: "one".into() }), path, codec).await.unwrap_err()
+            }
+        };
+        let e = raw("/ecmxf.v1.Sdo/Upload").await;
+        assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+        assert!(e.message().contains("not a valid ecmxf.v1.SdoUploadRequest"), "{}", e.message());
+        assert_eq!(full_status(&e), "INVALID_ARGUMENT");
+        let e = raw("/ecmxf.v1.Sdo/NoSuchMethod").await;
+        assert_eq!(e.code(), Code::Unimplemented, "{e:?}");
+        assert_eq!(full_status(&e), "UNIMPLEMENTED");
+
+        let Some(buf) = ecmxf_e2e::buf_binary() else { return };
+        let curl = |body: &str| {
+            let out = std::process::Command::new(&buf)
+                .args(["curl", "--protocol", "grpc", "--http2-prior-knowledge", "--unix-socket"])
+                .arg(&d.socket)
+                .args(["-d", body, "http://localhost/ecmxf.v1.Sdo/Upload"])
+                .output()
+                .expect("run buf curl");
+            let text = String::from_utf8_lossy(&out.stdout).into_owned();
+            let err = String::from_utf8_lossy(&out.stderr).into_owned();
+            assert!(!out.status.success(), "an error: {text}{err}");
+            serde_json::from_str::<serde_json::Value>(&err)
+                .unwrap_or_else(|e| panic!("buf curl's error is JSON ({e}):\n{text}{err}"))
+        };
+        let missing = curl(r#"{"slave": 1, "index": 12287, "subindex": 0}"#);
+        assert_eq!(missing["code"], "aborted", "{missing}");
+        let message = missing["message"].as_str().unwrap();
+        assert!(message.contains("0x06020000") && message.contains("0x2fff:00"), "{missing}");
+        assert_eq!(missing["details"][0]["type"], "google.rpc.ErrorInfo", "{missing}");
+        let bad = curl(r#"{"slave": 99, "index": 4120, "subindex": 1}"#);
+        assert_eq!(bad["code"], "invalid_argument", "{bad}");
+        assert!(bad["message"].as_str().unwrap().contains("slave 99"), "{bad}");
     });
 }
 

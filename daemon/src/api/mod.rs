@@ -21,6 +21,7 @@ pub mod auth;
 pub mod cia402;
 pub mod convert;
 pub mod diagnostics;
+pub mod error_details;
 pub mod frames;
 pub mod image;
 pub mod leases;

@@ -22,6 +22,7 @@ use super::Context;
 use super::admin::{FoeService, RegistersService};
 use super::cia402::Cia402Service;
 use super::diagnostics::DiagnosticsService;
+use super::error_details::ErrorDetailsLayer;
 use super::master::{MasterService, SlavesService, StateService};
 use super::pdo::ProcessDataService;
 use super::peripherals::PeripheralsService;
@@ -236,7 +237,7 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
     });
 
     let mut stop = shutdown.clone();
-    let unix = Server::builder().add_routes(routes.clone()).serve_with_incoming_shutdown(
+    let unix = Server::builder().layer(ErrorDetailsLayer).add_routes(routes.clone()).serve_with_incoming_shutdown(
         UnixListenerStream::new(listener),
         async move {
             let _ = stop.changed().await;
@@ -246,6 +247,7 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
         let tcp = Server::builder()
             .tls_config(tls(&config)?)
             .map_err(|e| ServeError::Tls(e.to_string()))?
+            .layer(ErrorDetailsLayer)
             .add_routes(routes)
             .serve_with_shutdown(addr, async move {
                 let _ = shutdown.changed().await;

@@ -2,76 +2,66 @@
 //! listed (no catch-all), so a new engine error cannot reach clients
 //! unmapped.
 
+use std::collections::HashMap;
+
 use tonic::{Code, Status};
+use tonic_types::{ErrorDetails, StatusExt};
 
 use crate::engine::error::EngineError;
 
-/// The gRPC status for an engine error.
+/// The `google.rpc.ErrorInfo` domain of every error the daemon answers.
+pub const DOMAIN: &str = "ecmxf";
+
+/// The gRPC status for an engine error: its details are a full
+/// `google.rpc.Status` (the same code and message, which grpc-go and
+/// grpcurl take from there) with an `ErrorInfo` whose reason names the
+/// kind of error and whose metadata carries its facts (the SDO abort code,
+/// the argument at fault), so clients in any language read them without
+/// parsing the message.
 pub fn to_status(e: EngineError) -> Status {
     let message = e.to_string();
-    match e {
-        EngineError::BadArgument { field, .. } => {
-            Status::with_details(Code::InvalidArgument, message, error_info("BAD_ARGUMENT", &[("field", field)]))
+    let info = |reason: &str, metadata: &[(&str, &str)]| {
+        let metadata: HashMap<String, String> =
+            metadata.iter().map(|(k, v)| ((*k).to_owned(), (*v).to_owned())).collect();
+        ErrorDetails::with_error_info(reason, DOMAIN, metadata)
+    };
+    let (code, details) = match &e {
+        EngineError::BadArgument { field, reason } => {
+            let mut d = info("BAD_ARGUMENT", &[("field", field)]);
+            d.add_bad_request_violation(*field, reason.as_str());
+            (Code::InvalidArgument, d)
         }
-        EngineError::WrongState(_) => Status::failed_precondition(message),
+        EngineError::WrongState(_) => (Code::FailedPrecondition, info("WRONG_STATE", &[])),
         EngineError::SdoAbort { slave, index, subindex, code } => {
             let meaning = code.meaning().unwrap_or("unknown abort code");
             let abort = format!("{:#010x}", code.0);
             let slave = slave.to_string();
             let object = format!("{index:#06x}:{subindex:02x}");
-            let details = error_info(
-                "SDO_ABORT",
-                &[("abort_code", &abort), ("meaning", meaning), ("slave", &slave), ("object", &object)],
-            );
-            Status::with_details(Code::Aborted, message, details)
+            let metadata =
+                [("abort_code", abort.as_str()), ("meaning", meaning), ("slave", &slave), ("object", &object)];
+            (Code::Aborted, info("SDO_ABORT", &metadata))
         }
-        EngineError::Failed(_) => Status::internal(message),
-        EngineError::Refused(_) => Status::failed_precondition(message),
-        EngineError::Timeout => Status::deadline_exceeded(message),
-        EngineError::QueueFull => Status::resource_exhausted(message),
-        EngineError::Unavailable(_) => Status::unavailable(message),
-        EngineError::BadDeviceData(_) => Status::failed_precondition(message),
-    }
+        EngineError::Failed(_) => (Code::Internal, info("CHIP_FAILED", &[])),
+        EngineError::Refused(_) => (Code::FailedPrecondition, info("REFUSED", &[])),
+        EngineError::Timeout => (Code::DeadlineExceeded, info("TIMEOUT", &[])),
+        EngineError::QueueFull => (Code::ResourceExhausted, info("QUEUE_FULL", &[])),
+        EngineError::Unavailable(_) => (Code::Unavailable, info("NOT_RUNNING", &[])),
+        EngineError::BadDeviceData(_) => (Code::FailedPrecondition, info("BAD_DEVICE_DATA", &[])),
+    };
+    Status::with_error_details(code, message, details)
 }
 
-/// A `google.rpc.ErrorInfo` (domain "ecmxf") encoded for status details,
-/// so clients in any language read the reason and fields without parsing
-/// the message.
-fn error_info(reason: &str, metadata: &[(&str, &str)]) -> bytes::Bytes {
-    use prost::Message;
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct ErrorInfo {
-        #[prost(string, tag = "1")]
-        reason: String,
-        #[prost(string, tag = "2")]
-        domain: String,
-        #[prost(map = "string, string", tag = "3")]
-        metadata: std::collections::HashMap<String, String>,
+/// `status` with full details if it has none (reason: the code's
+/// canonical name): for statuses made outside [`to_status`] — by the
+/// services' own checks, the authentication interceptor, or tonic itself
+/// (an unknown method, a request that does not decode). Applied to every
+/// answer by [`super::error_details`].
+pub fn with_details(status: &Status) -> Option<Status> {
+    if status.code() == Code::Ok || !status.details().is_empty() {
+        return None;
     }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct Any {
-        #[prost(string, tag = "1")]
-        type_url: String,
-        #[prost(bytes = "vec", tag = "2")]
-        value: Vec<u8>,
-    }
-    #[derive(Clone, PartialEq, prost::Message)]
-    struct RpcStatus {
-        #[prost(int32, tag = "1")]
-        code: i32,
-        #[prost(string, tag = "2")]
-        message: String,
-        #[prost(message, repeated, tag = "3")]
-        details: Vec<Any>,
-    }
-    let info = ErrorInfo {
-        reason: reason.into(),
-        domain: "ecmxf".into(),
-        metadata: metadata.iter().map(|(k, v)| ((*k).into(), (*v).into())).collect(),
-    };
-    let any = Any { type_url: "type.googleapis.com/google.rpc.ErrorInfo".into(), value: info.encode_to_vec() };
-    // The details of a gRPC status are a serialized google.rpc.Status.
-    RpcStatus { code: 0, message: String::new(), details: vec![any] }.encode_to_vec().into()
+    let details = ErrorDetails::with_error_info(ecmxf_proto::code_name(status.code()), DOMAIN, HashMap::new());
+    Some(Status::with_error_details(status.code(), status.message(), details))
 }
 
 impl From<EngineError> for Status {
@@ -112,12 +102,44 @@ mod tests {
         }
     }
 
+    /// The details decode as a google.rpc.Status equal to the status
+    /// itself (what grpc-go reads), plus the ErrorInfo.
+    fn full(s: &Status) -> tonic_types::pb::Status {
+        use prost::Message;
+        let details = tonic_types::pb::Status::decode(s.details()).expect("details are a google.rpc.Status");
+        assert_eq!(details.code, s.code() as i32, "{s:?}");
+        assert_eq!(details.message, s.message(), "{s:?}");
+        details
+    }
+
     #[test]
     fn sdo_abort_details_carry_code_and_meaning() {
         let s =
             to_status(EngineError::SdoAbort { slave: 2, index: 0x1234, subindex: 5, code: SdoAbortCode(0x0602_0000) });
-        let d = String::from_utf8_lossy(s.details()).into_owned();
-        assert!(d.contains("0x06020000") && d.contains("does not exist"), "{d}");
+        full(&s);
+        let info = s.get_details_error_info().expect("ErrorInfo");
+        assert_eq!((info.reason.as_str(), info.domain.as_str()), ("SDO_ABORT", DOMAIN));
+        assert_eq!(info.metadata["abort_code"], "0x06020000");
+        assert!(info.metadata["meaning"].contains("does not exist"), "{info:?}");
+        assert_eq!(info.metadata["object"], "0x1234:05");
         assert!(s.message().contains("0x1234:05"), "{}", s.message());
+    }
+
+    #[test]
+    fn every_error_carries_a_full_status() {
+        let e = to_status(EngineError::BadArgument { field: "slave", reason: "no slave 99".into() });
+        full(&e);
+        let bad = e.get_details_bad_request().expect("BadRequest");
+        assert_eq!(bad.field_violations[0].field, "slave");
+        assert_eq!(bad.field_violations[0].description, "no slave 99");
+        for e in [EngineError::Timeout, EngineError::QueueFull, EngineError::Failed("x".into())] {
+            full(&to_status(e));
+        }
+        let plain = Status::permission_denied("uid 5 has no access");
+        let s = with_details(&plain).expect("completed");
+        full(&s);
+        assert_eq!(s.get_details_error_info().unwrap().reason, "PERMISSION_DENIED");
+        assert!(with_details(&s).is_none(), "details already there are kept");
+        assert!(with_details(&Status::ok("")).is_none());
     }
 }
