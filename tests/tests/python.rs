@@ -1,4 +1,5 @@
-//! The Python end-to-end test (`tests/python/test_api.py`): grpcio stubs
+//! The Python end-to-end tests. `tests/python/test_package.py`: the `ecmxf`
+//! package (clients/python) as users install it. `tests/python/test_api.py`: grpcio stubs
 //! generated from proto/, the real daemon, a scan, an SDO read and write, a
 //! CiA402 axis enabled, one second of streamed inputs, two seconds of
 //! per-cycle frames (StreamFrames) checked through the IO slave's loopback.
@@ -10,28 +11,52 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-#[test]
-fn python_client_scans_reads_writes_enables_and_streams() {
+/// The venv's Python with `module` importable, or `None` (and a note)
+/// where there is none, unless `ECMXF_REQUIRE_PYTHON` is set (CI).
+fn python_with(module: &str, install: &str) -> Option<PathBuf> {
     let python = std::env::var_os("ECMXF_PYTHON")
         .map(PathBuf::from)
         .unwrap_or_else(|| ecmxf_e2e::repo().join("target/py-venv/bin/python"));
-    if !python.exists() {
+    let found = python.exists()
+        && Command::new(&python).args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success());
+    if !found {
         assert!(
             std::env::var_os("ECMXF_REQUIRE_PYTHON").is_none(),
-            "ECMXF_REQUIRE_PYTHON is set but {} does not exist (bash .ci/run creates it)",
+            "ECMXF_REQUIRE_PYTHON is set but {} cannot import {module} ({install}; bash .ci/run does)",
             python.display()
         );
-        eprintln!("skipped: no Python venv at {} (bash .ci/run creates it)", python.display());
-        return;
+        eprintln!("skipped: {} cannot import {module} ({install}; bash .ci/run does)", python.display());
+        return None;
     }
+    Some(python)
+}
+
+fn run_python(python: &PathBuf, script: &str, tests: usize) {
     let _turn = ecmxf_e2e::SERIAL.lock().unwrap_or_else(|e| e.into_inner());
-    let out = Command::new(&python)
-        .arg(ecmxf_e2e::repo().join("tests/python/test_api.py"))
+    let out = Command::new(python)
+        .arg(ecmxf_e2e::repo().join(script))
         .env("ECMXFD", ecmxf_e2e::daemon_binary())
         .output()
         .expect("run python");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     println!("{text}");
-    assert!(out.status.success(), "the Python test failed:\n{text}");
-    assert!(text.contains("Ran 5 tests") && text.contains("OK"), "{text}");
+    assert!(out.status.success(), "{script} failed:\n{text}");
+    assert!(text.contains(&format!("Ran {tests} tests")) && text.contains("OK"), "{text}");
+}
+
+#[test]
+fn python_client_scans_reads_writes_enables_and_streams() {
+    let install = "python3 -m venv target/py-venv; target/py-venv/bin/pip install -r tests/python/requirements.txt";
+    if let Some(python) = python_with("grpc_tools", install) {
+        run_python(&python, "tests/python/test_api.py", 5);
+    }
+}
+
+/// The `ecmxf` package (clients/python), installed as a user installs it,
+/// against `ecmxfd --sim`: the README's five-line script and the typed API.
+#[test]
+fn python_package_reads_slaves_sdo_and_inputs_from_the_simulator() {
+    if let Some(python) = python_with("ecmxf", "target/py-venv/bin/pip install ./clients/python") {
+        run_python(&python, "tests/python/test_package.py", 5);
+    }
 }
