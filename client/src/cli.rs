@@ -36,14 +36,18 @@ pub struct Cli {
 /// Where the daemon is and who we are.
 #[derive(Debug, Args)]
 pub struct ConnectArgs {
-    /// The daemon's Unix socket [default: your own daemon's
-    /// ($XDG_RUNTIME_DIR/ecmxfd.sock or /tmp/ecmxfd-UID.sock; root:
+    /// The daemon's Unix socket [default: $ECMXF_SOCKET, else your own
+    /// daemon's ($XDG_RUNTIME_DIR/ecmxfd.sock or /tmp/ecmxfd-UID.sock; root:
     /// /run/ecmxfd/ecmxfd.sock) if it exists, else the system service's
     /// /run/ecmxfd/ecmxfd.sock].
-    #[arg(long, global = true, env = "ECMXF_SOCKET", value_name = "PATH")]
+    // The environment variables of --socket, --connect and --ca are read by
+    // the methods below, not by clap: clap shows an argument given by its
+    // variable in usage lines as if it had been typed.
+    #[arg(long, global = true, value_name = "PATH")]
     pub socket: Option<PathBuf>,
-    /// Connect over TCP with TLS instead: host:port or https://host:port.
-    #[arg(long, global = true, env = "ECMXF_CONNECT", value_name = "URL", conflicts_with = "socket")]
+    /// Connect over TCP with TLS instead: host:port or https://host:port
+    /// [default: $ECMXF_CONNECT].
+    #[arg(long, global = true, value_name = "URL", conflicts_with = "socket")]
     pub connect: Option<String>,
     /// Bearer token ([[api.token]] in the daemon's configuration).
     #[arg(long, global = true, env = "ECMXF_TOKEN", hide_env_values = true, value_name = "TOKEN")]
@@ -52,8 +56,8 @@ pub struct ConnectArgs {
     #[arg(long, global = true, value_name = "FILE", conflicts_with = "token")]
     pub token_file: Option<PathBuf>,
     /// CA certificate (PEM) that signed the daemon's TLS certificate
-    /// [default: the system's roots].
-    #[arg(long, global = true, env = "ECMXF_CA", value_name = "FILE")]
+    /// [default: $ECMXF_CA, else the system's roots].
+    #[arg(long, global = true, value_name = "FILE")]
     pub ca: Option<PathBuf>,
     /// Client certificate (PEM) for mutual TLS.
     #[arg(long, global = true, requires = "key", value_name = "FILE")]
@@ -64,6 +68,28 @@ pub struct ConnectArgs {
     /// Server name to verify in the daemon's certificate [default: the host of --connect].
     #[arg(long, global = true, value_name = "NAME")]
     pub tls_domain: Option<String>,
+}
+
+impl ConnectArgs {
+    /// TCP: `--connect`, else `$ECMXF_CONNECT` unless `--socket` was given.
+    pub fn tcp(&self) -> Option<String> {
+        self.connect.clone().or_else(|| if self.socket.is_some() { None } else { env_value("ECMXF_CONNECT") })
+    }
+
+    /// The Unix socket: `--socket`, else as [`ecmxf_proto::client_socket_path`]
+    /// finds it (`$ECMXF_SOCKET` first).
+    pub fn socket_path(&self) -> PathBuf {
+        self.socket.clone().unwrap_or_else(ecmxf_proto::client_socket_path)
+    }
+
+    /// `--ca`, else `$ECMXF_CA`.
+    pub fn ca_file(&self) -> Option<PathBuf> {
+        self.ca.clone().or_else(|| env_value("ECMXF_CA").map(PathBuf::from))
+    }
+}
+
+fn env_value(name: &str) -> Option<String> {
+    std::env::var(name).ok().filter(|v| !v.is_empty())
 }
 
 /// A slave by ring position (0-based).
@@ -196,10 +222,10 @@ pub enum Command {
 pub struct Upload {
     #[command(flatten)]
     pub slave: Position,
-    /// Object index, e.g. 0x6041.
+    /// Object index, e.g. 0x6041 (or index:subindex, e.g. 0x1018:01).
     #[arg(value_parser = values::parse_index)]
     pub index: u32,
-    /// Subindex [default: 0].
+    /// Subindex.
     #[arg(value_parser = values::parse_subindex, default_value = "0")]
     pub subindex: u32,
     /// Decode as this type [default: the type the object dictionary says].
@@ -214,8 +240,10 @@ pub struct Upload {
 pub struct Download {
     #[command(flatten)]
     pub slave: Position,
+    /// Object index, e.g. 0x6060 (or index:subindex, e.g. 0x6060:00).
     #[arg(value_parser = values::parse_index)]
     pub index: u32,
+    /// Subindex.
     #[arg(value_parser = values::parse_subindex)]
     pub subindex: u32,
     /// The value: decimal or 0x hex; text for strings; hex bytes for
@@ -580,6 +608,60 @@ fn parse_size(s: &str) -> Result<(u16, u16), String> {
     }
 }
 
+/// The command line with an object given as `index:subindex` (`0x1018:01`,
+/// as the daemon names objects) split into the two arguments `upload` and
+/// `download` take. Only the first positional argument after those
+/// commands is looked at; the subindex after the colon is hex when the
+/// index is (`0x6000:0a`), else decimal.
+pub fn split_object_address(args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
+    // Options that take a value in the next argument.
+    const GLOBAL: [&str; 9] =
+        ["--socket", "--connect", "--token", "--token-file", "--ca", "--cert", "--key", "--tls-domain", "--timeout"];
+    const SDO: [&str; 4] = ["-p", "--position", "-d", "--type"];
+    let mut out = Vec::with_capacity(args.len() + 1);
+    let mut it = args.into_iter();
+    out.extend(it.next()); // the program
+    let (mut command, mut skip_value) = (None::<String>, false);
+    for a in it.by_ref() {
+        let text = a.to_string_lossy().into_owned();
+        out.push(a);
+        if std::mem::take(&mut skip_value) {
+            continue;
+        }
+        if text == "--" {
+            break;
+        }
+        let takes_value = |list: &[&str]| list.contains(&text.as_str());
+        match &command {
+            None if takes_value(&GLOBAL) => skip_value = true,
+            None if !text.starts_with('-') => {
+                if text != "upload" && text != "download" {
+                    break;
+                }
+                command = Some(text);
+            }
+            None => {}
+            Some(_) if takes_value(&GLOBAL) || takes_value(&SDO) => skip_value = true,
+            Some(_) if text.starts_with('-') => {}
+            Some(_) => {
+                if let Some((index, sub)) = text.split_once(':') {
+                    let hex = index.starts_with("0x") || index.starts_with("0X");
+                    if !index.is_empty() && !sub.is_empty() {
+                        out.pop();
+                        out.push(index.into());
+                        out.push(
+                            if hex && !sub.starts_with("0x") { format!("0x{sub}") } else { sub.to_owned() }.into(),
+                        );
+                    }
+                }
+                break;
+            }
+        }
+    }
+    out.extend(it);
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -602,5 +684,29 @@ mod tests {
         assert_eq!(parse_line_level("3=1").unwrap(), (3, true));
         assert!(parse_line_level("3").unwrap_err().contains("LINE=LEVEL"));
         assert_eq!(parse_size("80x24").unwrap(), (80, 24));
+    }
+
+    fn split(line: &str) -> String {
+        let args = line.split(' ').map(std::ffi::OsString::from).collect();
+        let out: Vec<String> = split_object_address(args).iter().map(|a| a.to_string_lossy().into_owned()).collect();
+        out.join(" ")
+    }
+
+    #[test]
+    fn an_object_as_index_colon_subindex_is_two_arguments() {
+        assert_eq!(split("ecmxfctl upload -p 1 0x1018:01"), "ecmxfctl upload -p 1 0x1018 0x01");
+        assert_eq!(
+            split("ecmxfctl --socket /a:b upload 0x6000:0a -p 2"),
+            "ecmxfctl --socket /a:b upload 0x6000 0x0a -p 2"
+        );
+        assert_eq!(split("ecmxfctl download -p 1 4120:2 7"), "ecmxfctl download -p 1 4120 2 7");
+        assert_eq!(
+            split("ecmxfctl --json download --type string -p 1 0x2000:00 a:b"),
+            "ecmxfctl --json download --type string -p 1 0x2000 0x00 a:b"
+        );
+        // Only those commands, only their first positional argument.
+        assert_eq!(split("ecmxfctl download -p 1 0x2000 0 a:b"), "ecmxfctl download -p 1 0x2000 0 a:b");
+        assert_eq!(split("ecmxfctl reg read -p 0 0x130:2"), "ecmxfctl reg read -p 0 0x130:2");
+        assert_eq!(split("ecmxfctl upload -- 0x1018:01"), "ecmxfctl upload -- 0x1018:01");
     }
 }

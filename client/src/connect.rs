@@ -92,10 +92,10 @@ impl Api {
 /// Connects as the arguments say.
 pub async fn connect(args: &ConnectArgs, timeout: Duration) -> Result<Api, CliError> {
     let token = token(args)?;
-    let (channel, target) = match &args.connect {
+    let (channel, target) = match &args.tcp() {
         Some(url) => tcp(args, url).await?,
         None => {
-            let path = args.socket.clone().unwrap_or_else(ecmxf_proto::client_socket_path);
+            let path = args.socket_path();
             (unix(&path).await?, path.display().to_string())
         }
     };
@@ -155,7 +155,7 @@ async fn tcp(args: &ConnectArgs, url: &str) -> Result<(Channel, String), CliErro
         .map_err(|e| CliError::Usage(format!("--connect {url}: not a URL: {e}")))?
         .connect_timeout(Duration::from_secs(5));
     let mut tls = ClientTlsConfig::new();
-    tls = match &args.ca {
+    tls = match &args.ca_file() {
         Some(ca) => tls.ca_certificate(Certificate::from_pem(read(ca)?)),
         None => tls.with_enabled_roots(),
     };

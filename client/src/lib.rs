@@ -63,6 +63,18 @@ impl ErrorReport {
             },
         }
     }
+
+    /// The report for a command line clap refused: `message` (what was
+    /// wrong) and the usage line as the hint.
+    pub fn usage(message: String, usage: Option<&str>) -> Self {
+        let e = CliError::Usage(message);
+        let mut r = Self::of(&e);
+        r.error.hint = Some(match usage {
+            Some(u) => format!("{u} (more: --help)"),
+            None => "see --help".into(),
+        });
+        r
+    }
 }
 
 /// Runs a parsed command line.

@@ -4,11 +4,16 @@
 use std::process::ExitCode;
 
 use clap::Parser;
-use ecmxfctl::cli::Cli;
+use clap::error::ErrorKind;
+use ecmxfctl::cli::{Cli, split_object_address};
 use ecmxfctl::error::CliError;
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
+    let args = split_object_address(std::env::args_os().collect());
+    let cli = match Cli::try_parse_from(&args) {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(&e, &args),
+    };
     let json = cli.json;
     let rt = match tokio::runtime::Builder::new_current_thread().enable_all().build() {
         Ok(rt) => rt,
@@ -37,4 +42,22 @@ fn main() -> ExitCode {
             ExitCode::from(e.exit_code())
         }
     }
+}
+
+/// A command line clap refused: with `--json` the JSON error object
+/// (kind USAGE, exit code 2) that scripts parse, as for every other error;
+/// else clap's own text. Help and version requests print as clap does.
+fn usage_error(e: &clap::Error, args: &[std::ffi::OsString]) -> ExitCode {
+    let json = args.iter().skip(1).take_while(|a| *a != "--").any(|a| a == "--json");
+    if !json || matches!(e.kind(), ErrorKind::DisplayHelp | ErrorKind::DisplayVersion) {
+        e.exit();
+    }
+    let text = e.render().to_string();
+    // clap's text: "error: what\n\nUsage: ...\n\nFor more information, try '--help'."
+    let mut parts = text.split("\n\n").map(str::trim);
+    let message = parts.next().unwrap_or_default().trim_start_matches("error: ").replace("\n ", "");
+    let usage = parts.find(|p| p.starts_with("Usage: "));
+    let report = ecmxfctl::ErrorReport::usage(message, usage);
+    eprintln!("{}", serde_json::to_string(&report).unwrap_or_default());
+    ExitCode::from(ecmxfctl::error::exit::USAGE)
 }

@@ -264,6 +264,27 @@ fn errors_say_what_went_wrong_with_the_documented_exit_code() {
     // clap's own usage errors.
     ecmxf_e2e::ctl(&["upload", "-p", "1", "0x10000"]).fails(2);
     ecmxf_e2e::ctl(&["states", "1", "2", "3"]).fails(2);
+    // ... as the JSON error object under --json (kind USAGE, the usage line
+    // as the hint), like every other error.
+    let c = ecmxf_e2e::ctl(&["--json", "upload"]);
+    c.fails(2);
+    let e: serde_json::Value = serde_json::from_str(c.stderr.trim())
+        .unwrap_or_else(|why| panic!("a usage error under --json is JSON ({why}):\n{}", c.stderr));
+    assert_schema("error", &e);
+    assert_eq!((e["error"]["kind"].as_str(), e["error"]["exit_code"].as_u64()), (Some("USAGE"), Some(2)), "{e}");
+    let message = e["error"]["message"].as_str().unwrap();
+    assert!(message.contains("--position <POS>") && message.contains("<INDEX>"), "{e}");
+    assert!(e["error"]["hint"].as_str().unwrap().starts_with("Usage: ecmxfctl upload"), "{e}");
+    // $ECMXF_SOCKET set: its option is not shown as if typed.
+    let out = std::process::Command::new(ecmxf_e2e::ctl_binary())
+        .args(["upload"])
+        .env("ECMXF_SOCKET", &missing)
+        .output()
+        .unwrap();
+    let usage = String::from_utf8_lossy(&out.stderr);
+    assert!(usage.contains("Usage: ecmxfctl upload") && !usage.contains("--socket"), "{usage}");
+    let help = ecmxf_e2e::ctl(&["upload", "--help"]).ok().to_owned();
+    assert_eq!(help.matches("[default: 0]").count(), 1, "{help}");
 
     run(async {
         let token = "observer-token".to_string();
@@ -282,6 +303,13 @@ fn errors_say_what_went_wrong_with_the_documented_exit_code() {
         assert_schema("error", &e);
         assert_eq!(e["error"]["kind"], "ABORTED");
         assert_eq!(e["error"]["details"]["abort_code"], "0x06020000");
+
+        // An object as the daemon names it, index:subindex.
+        let both = d.ctl(&["upload", "-p", "1", "0x1018", "1"]).ok().to_owned();
+        assert_eq!(d.ctl(&["upload", "-p", "1", "0x1018:01"]).ok(), both);
+        assert_eq!(d.ctl(&["upload", "0x1018:1", "-p", "1"]).ok(), both);
+        d.ctl(&["download", "-p", "1", "0x605A:00", "3"]).ok();
+        assert!(d.ctl(&["upload", "-p", "1", "0x605A:0"]).ok().contains('3'));
 
         // Arguments the daemon refuses: exit 2, naming the argument.
         let err = d.ctl(&["upload", "-p", "99", "0x6041"]).fails(2).to_owned();

@@ -232,12 +232,20 @@ impl Report for SiiDecodeReport {
     }
 }
 
+/// How long reading `words` may take at least: a word costs about 0.9 ms
+/// on the chip (a full 4096-word EEPROM: 3.6 s, more than the default
+/// `--timeout`), so twice that plus a second; a longer --timeout wins.
+fn read_budget(words: u32) -> Duration {
+    Duration::from_secs(1) + Duration::from_micros(1800) * words
+}
+
 /// Runs a `sii` subcommand and prints its result.
 pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> {
     match cmd {
         SiiCommand::Read { slave, word, count } => {
             let slave = slave.position;
-            let r = api.sii().read(api.req(pb::SiiReadRequest { slave, word: *word, count: *count })).await;
+            let req = api.req_for(pb::SiiReadRequest { slave, word: *word, count: *count }, read_budget(*count));
+            let r = api.sii().read(req).await;
             let data = r.map_err(CliError::rpc(format!("read SII of slave {slave}")))?.into_inner().data;
             out.report(&SiiDataReport { slave, word: *word, data: Hex::of(&data), file: None, bytes: data })?;
         }

@@ -152,7 +152,10 @@ pub async fn bounded<T, E: Into<Status>>(
         None => work.await.map_err(Into::into),
         Some(d) => match tokio::time::timeout(d, work).await {
             Ok(r) => r.map_err(Into::into),
-            Err(_) => Err(Status::deadline_exceeded(format!("the call's deadline ({d:?} left) passed"))),
+            Err(_) => Err(Status::deadline_exceeded(format!(
+                "no result after {d:.1?}, all the time the caller's deadline allowed (its grpc-timeout, less a margin \
+                 to answer before it ends); give the call a longer deadline"
+            ))),
         },
     }
 }
