@@ -614,14 +614,15 @@ fn parse_size(s: &str) -> Result<(u16, u16), String> {
 /// commands is looked at; the subindex after the colon is hex when the
 /// index is (`0x6000:0a`), else decimal.
 pub fn split_object_address(args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsString> {
-    // Options that take a value in the next argument.
-    const GLOBAL: [&str; 9] =
-        ["--socket", "--connect", "--token", "--token-file", "--ca", "--cert", "--key", "--tls-domain", "--timeout"];
-    const SDO: [&str; 4] = ["-p", "--position", "-d", "--type"];
+    let cli = <Cli as clap::CommandFactory>::command();
+    // Options whose value is the next argument: the global ones, then
+    // those of the command once it is known.
+    let mut takes_value = value_options(&cli);
+    let mut sdo_command = false;
     let mut out = Vec::with_capacity(args.len() + 1);
     let mut it = args.into_iter();
     out.extend(it.next()); // the program
-    let (mut command, mut skip_value) = (None::<String>, false);
+    let mut skip_value = false;
     for a in it.by_ref() {
         let text = a.to_string_lossy().into_owned();
         out.push(a);
@@ -631,35 +632,40 @@ pub fn split_object_address(args: Vec<std::ffi::OsString>) -> Vec<std::ffi::OsSt
         if text == "--" {
             break;
         }
-        let takes_value = |list: &[&str]| list.contains(&text.as_str());
-        match &command {
-            None if takes_value(&GLOBAL) => skip_value = true,
-            None if !text.starts_with('-') => {
-                if text != "upload" && text != "download" {
-                    break;
-                }
-                command = Some(text);
-            }
-            None => {}
-            Some(_) if takes_value(&GLOBAL) || takes_value(&SDO) => skip_value = true,
-            Some(_) if text.starts_with('-') => {}
-            Some(_) => {
-                if let Some((index, sub)) = text.split_once(':') {
-                    let hex = index.starts_with("0x") || index.starts_with("0X");
-                    if !index.is_empty() && !sub.is_empty() {
-                        out.pop();
-                        out.push(index.into());
-                        out.push(
-                            if hex && !sub.starts_with("0x") { format!("0x{sub}") } else { sub.to_owned() }.into(),
-                        );
-                    }
-                }
-                break;
-            }
+        if takes_value.contains(&text) {
+            skip_value = true;
+            continue;
         }
+        if text.starts_with('-') {
+            continue;
+        }
+        if !sdo_command {
+            match cli.find_subcommand(&text).filter(|_| text == "upload" || text == "download") {
+                Some(command) => takes_value.extend(value_options(command)),
+                None => break,
+            }
+            sdo_command = true;
+            continue;
+        }
+        if let Some((index, sub)) = text.split_once(':').filter(|(i, s)| !i.is_empty() && !s.is_empty()) {
+            let hex = index.starts_with("0x") || index.starts_with("0X");
+            out.pop();
+            out.push(index.into());
+            out.push(if hex && !sub.starts_with("0x") { format!("0x{sub}") } else { sub.to_owned() }.into());
+        }
+        break;
     }
     out.extend(it);
     out
+}
+
+/// `--name` and `-n` of `command`'s options that take a value.
+fn value_options(command: &clap::Command) -> Vec<String> {
+    command
+        .get_arguments()
+        .filter(|a| !a.is_positional() && a.get_action().takes_values())
+        .flat_map(|a| a.get_long().map(|l| format!("--{l}")).into_iter().chain(a.get_short().map(|c| format!("-{c}"))))
+        .collect()
 }
 
 #[cfg(test)]

@@ -570,23 +570,40 @@ pub fn full_status(e: &tonic::Status) -> String {
     info.reason
 }
 
+/// A program `.ci/run` installs from a registry: `$var`, else `default`
+/// (relative to the repository), if it exists and `usable` says so. `None`
+/// (and a note saying `install`) without one, unless `$require` is set
+/// (CI), where it is missing is a failure.
+pub fn installed_tool(
+    var: &str,
+    default: &str,
+    usable: impl Fn(&Path) -> bool,
+    require: &str,
+    install: &str,
+) -> Option<PathBuf> {
+    let tool = std::env::var_os(var).map(PathBuf::from).unwrap_or_else(|| repo().join(default));
+    if tool.exists() && usable(&tool) {
+        return Some(tool);
+    }
+    assert!(
+        std::env::var_os(require).is_none(),
+        "{require} is set but {} is missing or unusable ({install}; bash .ci/run does)",
+        tool.display()
+    );
+    eprintln!("skipped: {} is missing or unusable ({install}; bash .ci/run does)", tool.display());
+    None
+}
+
 /// `buf` (the Buf CLI, written in Go: its `buf curl` is a gRPC client
 /// built on connect-go, which like grpc-go reads the status from the error
 /// details): `$ECMXF_BUF`, else the copy `.ci/run` installs from the npm
-/// registry into `target/buf`. `None` (and a note) without one, unless
-/// `ECMXF_REQUIRE_BUF` is set (CI).
+/// registry into `target/buf`; required where `ECMXF_REQUIRE_BUF` is set.
 pub fn buf_binary() -> Option<PathBuf> {
-    let buf = std::env::var_os("ECMXF_BUF")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| repo().join("target/buf/node_modules/.bin/buf"));
-    if buf.exists() {
-        return Some(buf);
-    }
-    assert!(
-        std::env::var_os("ECMXF_REQUIRE_BUF").is_none(),
-        "ECMXF_REQUIRE_BUF is set but {} does not exist (bash .ci/run installs it)",
-        buf.display()
-    );
-    eprintln!("skipped: no buf at {} (npm install --prefix target/buf @bufbuild/buf)", buf.display());
-    None
+    installed_tool(
+        "ECMXF_BUF",
+        "target/buf/node_modules/.bin/buf",
+        |_| true,
+        "ECMXF_REQUIRE_BUF",
+        "npm install --prefix target/buf @bufbuild/buf",
+    )
 }

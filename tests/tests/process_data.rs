@@ -592,22 +592,25 @@ fn streamed_frames_reach_the_slave_once_each_in_order() {
         tokio::time::sleep(Duration::from_millis(50)).await;
 
         // Frames without credit, and of the wrong size, end a stream by name.
-        let (tx, rx) = tokio::sync::mpsc::channel(4);
+        // The error that ends a stream opened with `first`, whether it
+        // comes as the answer or inside the stream.
+        let ended = |first: pb::FrameBatch| {
+            let mut pd = pd.clone();
+            async move {
+                let (tx, rx) = tokio::sync::mpsc::channel(4);
+                tx.send(first).await.unwrap();
+                match pd.stream_frames(tokio_stream::wrappers::ReceiverStream::new(rx)).await {
+                    Err(e) => e,
+                    Ok(s) => s.into_inner().filter_map(|r| r.err()).next().await.expect("an error"),
+                }
+            }
+        };
         let mut b = batch((0..600).map(frame).collect());
         b.queue_frames = 16;
-        tx.send(b).await.unwrap();
-        let e = match pd.stream_frames(tokio_stream::wrappers::ReceiverStream::new(rx)).await {
-            Err(e) => e,
-            Ok(s) => s.into_inner().filter_map(|r| r.err()).next().await.expect("an error"),
-        };
+        let e = ended(b).await;
         assert_eq!(e.code(), Code::ResourceExhausted, "{e:?}");
         assert!(e.message().contains("credit"), "{}", e.message());
-        let (tx, rx) = tokio::sync::mpsc::channel(4);
-        tx.send(batch(vec![pb::OutputFrame { seq: 7, data: vec![1, 2] }])).await.unwrap();
-        let e = match pd.stream_frames(tokio_stream::wrappers::ReceiverStream::new(rx)).await {
-            Err(e) => e,
-            Ok(s) => s.into_inner().filter_map(|r| r.err()).next().await.expect("an error"),
-        };
+        let e = ended(batch(vec![pb::OutputFrame { seq: 7, data: vec![1, 2] }])).await;
         assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
         assert!(e.message().contains("frames.data"), "{}", e.message());
         // Ended inside the stream: the status travels in the trailers.

@@ -11,24 +11,13 @@
 use std::path::PathBuf;
 use std::process::Command;
 
-/// The venv's Python with `module` importable, or `None` (and a note)
-/// where there is none, unless `ECMXF_REQUIRE_PYTHON` is set (CI).
+/// The venv's Python (`target/py-venv`, or `$ECMXF_PYTHON`) with `module`
+/// importable; required where `ECMXF_REQUIRE_PYTHON` is set (CI).
 fn python_with(module: &str, install: &str) -> Option<PathBuf> {
-    let python = std::env::var_os("ECMXF_PYTHON")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| ecmxf_e2e::repo().join("target/py-venv/bin/python"));
-    let found = python.exists()
-        && Command::new(&python).args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success());
-    if !found {
-        assert!(
-            std::env::var_os("ECMXF_REQUIRE_PYTHON").is_none(),
-            "ECMXF_REQUIRE_PYTHON is set but {} cannot import {module} ({install}; bash .ci/run does)",
-            python.display()
-        );
-        eprintln!("skipped: {} cannot import {module} ({install}; bash .ci/run does)", python.display());
-        return None;
-    }
-    Some(python)
+    let imports = |python: &std::path::Path| {
+        Command::new(python).args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success())
+    };
+    ecmxf_e2e::installed_tool("ECMXF_PYTHON", "target/py-venv/bin/python", imports, "ECMXF_REQUIRE_PYTHON", install)
 }
 
 fn run_python(python: &PathBuf, script: &str, tests: usize) {

@@ -500,7 +500,7 @@ def connect(
     if address:
         read = lambda p: Path(p).read_bytes() if p else None  # noqa: E731
         creds = grpc.ssl_channel_credentials(read(ca or os.environ.get("ECMXF_CA")), read(key), read(cert))
-        target = address.removeprefix("https://") if hasattr(str, "removeprefix") else address
+        target = address.removeprefix("https://")
         channel = grpc.secure_channel(target, creds, options=_MESSAGE_LIMIT)
         where = address
     else:
