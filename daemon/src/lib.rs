@@ -13,6 +13,8 @@
 //! - [`config`]: the configuration file.
 //! - [`metrics`]: the Prometheus endpoint.
 //! - [`service`]: life under systemd: sd_notify, watchdog, logging, reload.
+//! - [`probe`]: `ecmxfd probe`, first contact with a new board, step by
+//!   step with the likely cause and fix of each failure.
 //! - [`lifecycle`]: the daemon as a whole: [`run`]`(config, shutdown)`
 //!   starts all of the above and stops it safely; the binary is thin.
 #![forbid(unsafe_code)]
@@ -27,6 +29,7 @@ pub mod master;
 pub mod metrics;
 pub mod outputs;
 pub mod port;
+pub mod probe;
 pub mod realtime;
 pub mod service;
 

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
 
-use clap::Parser;
+use clap::{Parser, Subcommand};
 use ecmxfd::config::{Config, LinkConfig};
 use ecmxfd::service::{Logging, Notifier};
 use ecmxfd::{DaemonError, Options};
@@ -18,17 +18,19 @@ use tracing::{error, info, warn};
 #[derive(Parser, Debug)]
 #[command(name = "ecmxfd", version, about = "Daemon that owns a NEXTW ECM-XF EtherCAT master chip")]
 struct Cli {
+    #[command(subcommand)]
+    command: Option<Command>,
     /// Configuration file (TOML).
-    #[arg(long, short, value_name = "FILE", conflicts_with = "sim")]
+    #[arg(long, short, value_name = "FILE", conflicts_with = "sim", global = true)]
     config: Option<PathBuf>,
     /// Check a configuration file, print each mistake with its key and line, and exit.
     #[arg(long, value_name = "FILE")]
     check_config: Option<PathBuf>,
     /// Run on the in-process simulator (the demo network unless --network).
-    #[arg(long)]
+    #[arg(long, global = true)]
     sim: bool,
     /// Network file for --sim (see config/demo-network.toml).
-    #[arg(long, value_name = "FILE", requires = "sim")]
+    #[arg(long, value_name = "FILE", requires = "sim", global = true)]
     network: Option<PathBuf>,
     /// Log filter when RUST_LOG is not set, e.g. "info" or "ecmxfd=debug"
     /// [default: log.level of the configuration, "info"].
@@ -42,6 +44,24 @@ struct Cli {
     /// Print the engine status every this many seconds (0: never).
     #[arg(long, default_value_t = 5)]
     status_every: u64,
+}
+
+#[derive(Subcommand, Debug)]
+enum Command {
+    /// Check a new board step by step, with the likely cause and fix of a failure
+    ///
+    /// Runs the link steps of bring-up one at a time against the chip of
+    /// --config (or --sim): device opens, INT0 toggles, packet boundary,
+    /// check word switch, firmware, slave count, state read. Prints a line
+    /// per step, and the likely cause and fix under a failure; exits 1 when
+    /// a step fails. Stop the daemon first: the probe re-initialises the
+    /// network (slaves end in PRE-OP).
+    Probe {
+        /// Probe even though a daemon answers on the configuration's API
+        /// socket (its exchange with the chip will be disturbed).
+        #[arg(long)]
+        force: bool,
+    },
 }
 
 /// Turns SIGINT/SIGTERM into the daemon's shutdown and SIGHUP into a
@@ -91,6 +111,27 @@ async fn serve(
     }
 }
 
+/// `ecmxfd probe`: 0 when every step passed, 1 when one failed, 2 when it
+/// could not run.
+fn probe(config: &Config, path: Option<&std::path::Path>, force: bool) -> ExitCode {
+    if !force && let Some(why) = ecmxfd::probe::daemon_in_the_way(config) {
+        eprintln!("ecmxfd probe: {why}");
+        return ExitCode::from(2);
+    }
+    let source = path.map_or("--sim".to_string(), |p| p.display().to_string());
+    println!("ecmxfd probe ({source})");
+    match ecmxfd::probe::run(config, &mut std::io::stdout()) {
+        Ok(true) => ExitCode::SUCCESS,
+        Ok(false) => ExitCode::from(1),
+        // The reader went away (`| head`): nothing left to tell.
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => ExitCode::from(2),
+        Err(e) => {
+            eprintln!("ecmxfd probe: {e}");
+            ExitCode::from(2)
+        }
+    }
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(path) = &cli.check_config {
@@ -137,6 +178,9 @@ fn main() -> ExitCode {
     };
     if let Some(socket) = cli.socket {
         config.api.socket = Some(socket);
+    }
+    if let Some(Command::Probe { force }) = cli.command {
+        return probe(&config, cli.config.as_deref(), force);
     }
     if let Some(level) = &cli.log {
         if let Err(e) = tracing_subscriber::EnvFilter::builder().parse(level) {

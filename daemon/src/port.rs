@@ -430,16 +430,11 @@ impl<L: Link> Port<L> {
     pub fn synchronize(&mut self) -> Result<(), PortError> {
         let mut stream: Vec<u8> = Vec::with_capacity(3 * (DATA_MAX + OVERHEAD));
         let mut starts: Vec<usize> = Vec::new();
-        let mut byte = [0u8; 1];
         while starts.len() < 2 {
             if stream.len() > 3 * (DATA_MAX + OVERHEAD) {
                 return Err(PortError::Unsynchronized);
             }
-            if !self.wait_ready()? {
-                return Err(PortError::NotReady(self.ready_timeout));
-            }
-            self.transfer(&[0], &mut byte)?;
-            stream.push(byte[0]);
+            stream.push(self.clock_byte()?);
             // The wire crate's boundary rule, on the newest 8 bytes.
             let tail = stream.len().saturating_sub(8);
             if let Some(start) = find_packet_start(&stream[tail..]) {
@@ -470,6 +465,20 @@ impl<L: Link> Port<L> {
             }
         }
         Err(PortError::Unsynchronized)
+    }
+
+    /// Clocks one zero byte after INT0 said ready and returns the byte the
+    /// chip sent: the unit [`Port::synchronize`] reads an unknown stream
+    /// in, and what `ecmxfd probe` looks at when no boundary turns up. A
+    /// byte that completes a packet makes the chip process it (a packet of
+    /// zeros is refused as bad), so INT0 goes busy once per packet length.
+    pub fn clock_byte(&mut self) -> Result<u8, PortError> {
+        if !self.wait_ready()? {
+            return Err(PortError::NotReady(self.ready_timeout));
+        }
+        let mut byte = [0u8; 1];
+        self.transfer(&[0], &mut byte)?;
+        Ok(byte[0])
     }
 
     /// Size of the data section a fresh chip uses.

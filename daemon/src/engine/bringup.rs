@@ -180,6 +180,81 @@ fn pdo_config(slave: u8, assign: u16, pdos: &[crate::config::PdoConfig]) -> Resu
     PdoConfig::new(slave, assign, &refs).map_err(|e| step("PDO mapping", format!("slave {slave}: {e}")))
 }
 
+/// Clears the chip's latched errors, initialises the network with the
+/// configured DC timing (command 1, ECAT_INIT: slaves to PRE-OP) and returns
+/// how many slaves answered.
+pub fn init_network<L: Link>(port: &mut Port<L>, config: &Config) -> Result<u8, BringUpError> {
+    const SLOW: Duration = Duration::from_secs(5);
+    // Errors latched by whatever ran before (a failed command of an earlier
+    // run) would read as this command's.
+    port.pending_control |= ControlFlags::CLEAR_ALL_ERRORS;
+    port.call(&InfoUpdate)?;
+    let c = &config.cycle;
+    let dc = DcTiming {
+        assign_activate: c.dc_assign_activate,
+        sync0_ns: if c.dc_assign_activate != 0 { c.sync0_us * 1000 } else { 0 },
+        sync1_ns: 0,
+        shift_ns: c.shift_ns,
+    };
+    blocking(port, &EcatInit { special_slaves: false, master_shift: false, disable_lrw: false, dc }, SLOW)
+        .map_err(|e| step("ECAT_INIT", format!("{e} (are slaves connected and powered?)")))?;
+    Ok(port.call(&SlaveCountGet)?.header.return_value)
+}
+
+/// Reads the identity (vendor, product, revision, name) of the first
+/// `count` slaves in ring order.
+pub fn identify<L: Link>(port: &mut Port<L>, count: u8) -> Result<Vec<SlaveSummary>, PortError> {
+    let mut slaves = Vec::new();
+    for i in 0..count {
+        let s = SlaveSummary {
+            vendor_id: number(port, i, SlaveInfoCode::VendorId)?,
+            product_code: number(port, i, SlaveInfoCode::ProductCode)?,
+            revision: number(port, i, SlaveInfoCode::Revision)?,
+            name: String::from_utf8_lossy(port.call(&SlaveInfoGet { slave: i, item: SlaveInfoCode::Name })?.data)
+                .trim_end_matches('\0')
+                .to_string(),
+            ..SlaveSummary::default()
+        };
+        slaves.push(s);
+    }
+    Ok(slaves)
+}
+
+/// Compares the slaves found with the `[[slave]]` entries (none: any
+/// network is accepted; an entry's absent ids match anything).
+pub fn check_identity(config: &Config, slaves: &[SlaveSummary]) -> Result<(), BringUpError> {
+    if !config.slaves.is_empty() && config.slaves.len() != slaves.len() {
+        return Err(BringUpError::Identity {
+            position: slaves.len().min(config.slaves.len()),
+            expected: format!("a network of {} slaves", config.slaves.len()),
+            found: format!("a network of {} slaves", slaves.len()),
+        });
+    }
+    for (i, (want, got)) in config.slaves.iter().zip(slaves).enumerate() {
+        let differs = want.vendor_id.is_some_and(|v| v != got.vendor_id)
+            || want.product_code.is_some_and(|p| p != got.product_code)
+            || want.revision.is_some_and(|r| r != got.revision);
+        if differs {
+            let show = |v: Option<u32>| v.map_or("any".to_string(), |v| format!("{v:#010x}"));
+            return Err(BringUpError::Identity {
+                position: i,
+                expected: format!(
+                    "{}vendor {} product {} revision {}",
+                    want.name.as_ref().map(|n| format!("{n:?}: ")).unwrap_or_default(),
+                    show(want.vendor_id),
+                    show(want.product_code),
+                    show(want.revision)
+                ),
+                found: format!(
+                    "{:?}: vendor {:#010x} product {:#010x} revision {:#010x}",
+                    got.name, got.vendor_id, got.product_code, got.revision
+                ),
+            });
+        }
+    }
+    Ok(())
+}
+
 /// Brings the network up as `config` says. `held` are the outputs clients
 /// wrote before a recovery (none at the first bring-up): the RxFIFO is
 /// prefilled with them, slave by slave, so the slaves enter OP with what
@@ -207,64 +282,12 @@ pub fn bring_up<L: Link>(
     polarity.set(IntPolarity::INT1_ACTIVE_HIGH, config.chip.int1_active_high);
     port.call(&IntSetEnable(IntConfig { polarity, ..IntConfig::default() }))?;
     port.link_mut().set_polarity(config.chip.int0_active_high, config.chip.int1_active_high);
-    port.pending_control |= ControlFlags::CLEAR_ALL_ERRORS;
-    port.call(&InfoUpdate)?;
 
-    // 1. Init network with DC.
+    // 1. Init network with DC; identity check.
+    let count = init_network(port, config)?;
+    let mut slaves = identify(port, count)?;
+    check_identity(config, &slaves)?;
     let c = &config.cycle;
-    let dc = DcTiming {
-        assign_activate: c.dc_assign_activate,
-        sync0_ns: if c.dc_assign_activate != 0 { c.sync0_us * 1000 } else { 0 },
-        sync1_ns: 0,
-        shift_ns: c.shift_ns,
-    };
-    blocking(port, &EcatInit { special_slaves: false, master_shift: false, disable_lrw: false, dc }, SLOW)
-        .map_err(|e| step("ECAT_INIT", format!("{e} (are slaves connected and powered?)")))?;
-    let count = port.call(&SlaveCountGet)?.header.return_value;
-
-    // Identity check.
-    let mut slaves = Vec::new();
-    for i in 0..count {
-        let s = SlaveSummary {
-            vendor_id: number(port, i, SlaveInfoCode::VendorId)?,
-            product_code: number(port, i, SlaveInfoCode::ProductCode)?,
-            revision: number(port, i, SlaveInfoCode::Revision)?,
-            name: String::from_utf8_lossy(port.call(&SlaveInfoGet { slave: i, item: SlaveInfoCode::Name })?.data)
-                .trim_end_matches('\0')
-                .to_string(),
-            ..SlaveSummary::default()
-        };
-        slaves.push(s);
-    }
-    if !config.slaves.is_empty() && config.slaves.len() != slaves.len() {
-        return Err(BringUpError::Identity {
-            position: slaves.len().min(config.slaves.len()),
-            expected: format!("a network of {} slaves", config.slaves.len()),
-            found: format!("a network of {} slaves", slaves.len()),
-        });
-    }
-    for (i, (want, got)) in config.slaves.iter().zip(&slaves).enumerate() {
-        let differs = want.vendor_id.is_some_and(|v| v != got.vendor_id)
-            || want.product_code.is_some_and(|p| p != got.product_code)
-            || want.revision.is_some_and(|r| r != got.revision);
-        if differs {
-            let show = |v: Option<u32>| v.map_or("any".to_string(), |v| format!("{v:#010x}"));
-            return Err(BringUpError::Identity {
-                position: i,
-                expected: format!(
-                    "{}vendor {} product {} revision {}",
-                    want.name.as_ref().map(|n| format!("{n:?}: ")).unwrap_or_default(),
-                    show(want.vendor_id),
-                    show(want.product_code),
-                    show(want.revision)
-                ),
-                found: format!(
-                    "{:?}: vendor {:#010x} product {:#010x} revision {:#010x}",
-                    got.name, got.vendor_id, got.product_code, got.revision
-                ),
-            });
-        }
-    }
     if c.wkc_error_limit != 255 {
         port.call(&WkcErrorLimitSet(WkcErrorLimit(c.wkc_error_limit.max(1))))?;
     }

@@ -47,6 +47,10 @@ pub struct HardwareLink {
     last_transfer: Instant,
     /// Kernel timestamp (CLOCK_MONOTONIC, ns) of the last INT0 edge seen.
     pub last_int0_edge_ns: u64,
+    /// INT0 edges seen: events read, or the kernel's `line_seqno` of the
+    /// newest when larger (it counts events that overflowed the queue; uAPI
+    /// v1 leaves it 0).
+    int0_edge_count: u64,
 }
 
 fn gpio_err(what: String, e: gpiocdev::Error) -> LinkError {
@@ -92,6 +96,7 @@ impl HardwareLink {
             int1_active_high: false,
             last_transfer: Instant::now(),
             last_int0_edge_ns: 0,
+            int0_edge_count: 0,
         })
     }
 
@@ -135,6 +140,7 @@ impl Link for HardwareLink {
             if edge {
                 let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
                 self.last_int0_edge_ns = ev.timestamp_ns;
+                self.int0_edge_count = (self.int0_edge_count + 1).max(u64::from(ev.line_seqno));
             }
         }
     }
@@ -144,6 +150,19 @@ impl Link for HardwareLink {
             Some(req) => Ok(Self::level(req, self.config.int1_line.unwrap_or(0), "INT1")? == self.int1_active_high),
             None => Ok(false),
         }
+    }
+
+    /// Reads the edge events queued since the last wait (a chip that is
+    /// done before the host looks leaves both edges of a packet queued).
+    fn int0_edges(&mut self) -> Result<Option<u64>, LinkError> {
+        let Some(req) = &self.int0 else { return Ok(None) };
+        let line = self.config.int0_line.unwrap_or(0);
+        while req.has_edge_event().map_err(|e| gpio_err(format!("poll INT0 line {line}"), e))? {
+            let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
+            self.last_int0_edge_ns = ev.timestamp_ns;
+            self.int0_edge_count = (self.int0_edge_count + 1).max(u64::from(ev.line_seqno));
+        }
+        Ok(Some(self.int0_edge_count))
     }
 
     fn set_polarity(&mut self, int0_active_high: bool, int1_active_high: bool) {

@@ -92,8 +92,40 @@ pub trait Link: Send {
         Ok(())
     }
 
+    /// How many times INT0 changed level since the link was opened, for
+    /// links that see the line; `None` when INT0 is not wired. A chip that
+    /// works drops INT0 once per packet and raises it when done (v049
+    /// ECM-XF中斷): `ecmxfd probe` tells such a line from one stuck at its
+    /// ready level with it, which waiting alone cannot.
+    fn int0_edges(&mut self) -> Result<Option<u64>, LinkError> {
+        Ok(None)
+    }
+
     /// A description for logs.
     fn describe(&self) -> String;
+}
+
+/// Counts INT0 level changes for links that observe the level at moments
+/// (before and after transfers) rather than receive edge events.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct LevelChanges {
+    ready: Option<bool>,
+    changes: u64,
+}
+
+impl LevelChanges {
+    /// Notes whether the chip was ready when last looked at.
+    pub(crate) fn saw(&mut self, ready: bool) {
+        if self.ready.is_some_and(|r| r != ready) {
+            self.changes += 1;
+        }
+        self.ready = Some(ready);
+    }
+
+    /// Changes seen so far.
+    pub(crate) fn count(&self) -> u64 {
+        self.changes
+    }
 }
 
 impl<L: Link + ?Sized> Link for Box<L> {
@@ -111,6 +143,9 @@ impl<L: Link + ?Sized> Link for Box<L> {
     }
     fn reopen(&mut self) -> Result<(), LinkError> {
         (**self).reopen()
+    }
+    fn int0_edges(&mut self) -> Result<Option<u64>, LinkError> {
+        (**self).int0_edges()
     }
     fn describe(&self) -> String {
         (**self).describe()

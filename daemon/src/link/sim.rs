@@ -14,6 +14,7 @@ use super::{Link, LinkError};
 #[derive(Debug)]
 pub struct SimLink {
     shared: Arc<Shared>,
+    int0: super::LevelChanges,
 }
 
 #[derive(Debug)]
@@ -58,14 +59,17 @@ impl SimLink {
     /// A link to `chip`, and a handle to it.
     pub fn new(chip: Chip) -> (Self, SimHandle) {
         let shared = Arc::new(Shared { chip: Mutex::new(chip), epoch: Instant::now() });
-        (Self { shared: Arc::clone(&shared) }, SimHandle { shared })
+        (Self { shared: Arc::clone(&shared), int0: super::LevelChanges::default() }, SimHandle { shared })
     }
 }
 
 impl Link for SimLink {
     fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
         let now = self.shared.now_ns();
-        self.shared.chip().transfer(now, tx, rx);
+        let mut chip = self.shared.chip();
+        chip.transfer(now, tx, rx);
+        let after = self.shared.now_ns().max(chip.now_ns);
+        self.int0.saw(chip.ready(after) && chip.faults.int0_stuck.is_none());
         Ok(())
     }
 
@@ -77,6 +81,8 @@ impl Link for SimLink {
                 let now = self.shared.now_ns();
                 c.advance_to(now);
                 if c.ready(now) && c.faults.int0_stuck.is_none() {
+                    drop(c);
+                    self.int0.saw(true);
                     return Ok(true);
                 }
                 if c.faults.int0_stuck.is_some() {
@@ -106,6 +112,10 @@ impl Link for SimLink {
         let mut c = self.shared.chip();
         c.advance_to(now);
         Ok(c.int1_active())
+    }
+
+    fn int0_edges(&mut self) -> Result<Option<u64>, LinkError> {
+        Ok(Some(self.int0.count()))
     }
 
     fn describe(&self) -> String {

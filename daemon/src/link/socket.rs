@@ -17,6 +17,9 @@ pub struct SocketLink {
     path: PathBuf,
     /// The INT0 wait to do before the next transfer.
     pending_wait: Option<Duration>,
+    /// INT0's active level (command 58; high after power-up).
+    int0_active_high: bool,
+    int0: super::LevelChanges,
 }
 
 impl SocketLink {
@@ -24,7 +27,13 @@ impl SocketLink {
     pub fn connect(path: &Path) -> Result<Self, LinkError> {
         let client = SocketClient::connect(path)
             .map_err(|e| LinkError::io(format!("connect to simulator at {}", path.display()), e))?;
-        Ok(Self { client, path: path.into(), pending_wait: None })
+        Ok(Self {
+            client,
+            path: path.into(),
+            pending_wait: None,
+            int0_active_high: true,
+            int0: super::LevelChanges::default(),
+        })
     }
 
     fn err(&self, what: &str, e: std::io::Error) -> LinkError {
@@ -40,13 +49,28 @@ impl Link for SocketLink {
     fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
         let result = match self.pending_wait.take() {
             Some(timeout) => match self.client.transfer_when_ready(timeout, tx, rx) {
-                Ok(Some(_)) => Ok(()),
+                Ok(Some(lines)) => {
+                    // The server waited for ready, then clocked.
+                    self.int0.saw(true);
+                    Ok(lines)
+                }
                 Ok(None) => return Err(LinkError::NotReady),
                 Err(e) => Err(e),
             },
-            None => self.client.transfer(tx, rx).map(|_| ()),
+            None => self.client.transfer(tx, rx),
         };
-        result.map_err(|e| self.err("transfer", e))
+        let lines = result.map_err(|e| self.err("transfer", e))?;
+        let high = lines & ecmxf_sim::server::LINE_INT0 != 0;
+        self.int0.saw(high == self.int0_active_high);
+        Ok(())
+    }
+
+    fn set_polarity(&mut self, int0_active_high: bool, _int1_active_high: bool) {
+        self.int0_active_high = int0_active_high;
+    }
+
+    fn int0_edges(&mut self) -> Result<Option<u64>, LinkError> {
+        Ok(Some(self.int0.count()))
     }
 
     /// Defers the wait to the server, which does it just before clocking
@@ -69,6 +93,7 @@ impl Link for SocketLink {
         self.client = SocketClient::connect(&self.path)
             .map_err(|e| LinkError::io(format!("reconnect to simulator at {}", self.path.display()), e))?;
         self.pending_wait = None;
+        self.int0 = super::LevelChanges::default();
         Ok(())
     }
 
