@@ -376,6 +376,8 @@ impl<'c, L: Link> Probe<'c, L> {
             }
             Err(e) => return self.port_failure("reading INT0's edges", &PortError::Link(e)),
         };
+        // The first byte may have been the first of the largest packet: its
+        // last completes it, and the byte after waits for ready again.
         for _ in 0..=(DATA_MAX + OVERHEAD) {
             if let Err(e) = self.port.clock_byte() {
                 return match e {
@@ -891,6 +893,20 @@ mod tests {
             assert!(texts[3].contains("version 36 (0x24)"), "{texts:?}");
             assert!(texts[4].contains(r#"3 slaves: 0 "CORE", 1 "TI CiA402 3-axis", 2 "8io""#), "{texts:?}");
             assert!(texts[5].contains("network PREOP; slaves: 0 PREOP, 1 PREOP, 2 PREOP"), "{texts:?}");
+        }
+
+        #[test]
+        fn int0_is_seen_toggling_on_a_chip_left_at_the_largest_packet() {
+            let config = Config::simulator();
+            let (link, _chip) = chip();
+            let mut probe = Probe::new(link, &config);
+            up_to(&mut probe, 3);
+            probe.port_mut().resize(DATA_MAX).unwrap();
+            // An earlier run left the chip at 1440-byte packets, at a
+            // packet boundary: the most bytes step 2 can need.
+            let mut probe = Probe::new(probe.port.into_link(), &config);
+            assert!(matches!(probe.int0(), Verdict::Ok(_)));
+            assert!(matches!(probe.boundary(), Verdict::Ok(t) if t.starts_with("1440-byte packets")));
         }
 
         /// Step `n` on a chip where steps 2 to `n - 1` passed, and then
