@@ -41,6 +41,9 @@ use crate::port::{Port, PortError};
 pub const STEPS: [&str; 7] =
     ["device opens", "INT0 toggles", "packet boundary", "check word switch", "firmware", "slave count", "state read"];
 
+/// The fix when only the error itself can tell.
+const NAMED: &str = "the message on the step's line names the call that failed and the system's reason";
+
 /// Status exchanges made in step 4 to see whether answers arrive intact.
 pub const EXCHANGES: u32 = 200;
 
@@ -232,10 +235,10 @@ fn device_failure(config: &Config, e: &StartError) -> Verdict {
                     "lower link.spi_hz; the controller's driver must support SPI mode 0".to_string(),
                 )
             } else {
-                ("the operating system refused the device".to_string(), "see the error above".to_string())
+                ("the operating system refused the device".to_string(), NAMED.to_string())
             }
         }
-        (StartError::Link(_), _) => ("the link could not be opened".to_string(), "see the error above".to_string()),
+        (StartError::Link(_), _) => ("the link could not be opened".to_string(), NAMED.to_string()),
     };
     fail(what, cause, fix)
 }
@@ -312,7 +315,7 @@ impl<'c, L: Link> Probe<'c, L> {
                 "the simulator went away".to_string(),
                 "start it again (`ecmxf-sim serve`) and run the probe again".to_string(),
             ),
-            _ => ("the link failed".to_string(), "see the error above".to_string()),
+            _ => ("the link failed".to_string(), NAMED.to_string()),
         };
         fail(format!("{doing}: {e}"), cause, fix)
     }
@@ -419,7 +422,10 @@ impl<'c, L: Link> Probe<'c, L> {
                     chip.display()
                 ),
             ),
-            _ => ("the link reports INT0 that never moves".into(), "see the error above".into()),
+            _ => (
+                "the simulated chip never went busy after a packet, which a working simulator always does".into(),
+                "report it with this output: it is a bug of the simulator or of its link".into(),
+            ),
         };
         fail(
             format!("no INT0 edge in {} clocked bytes (a packet is at most that long)", DATA_MAX + OVERHEAD),
