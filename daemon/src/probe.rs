@@ -962,7 +962,7 @@ mod tests {
             let mut config = Config::simulator();
             config.slaves = vec![Default::default(); 2];
             let f = failed(after_fault(&config, "status", 6));
-            assert!(f.what.contains("the configuration expects a network of 2 slaves"), "{f:?}");
+            assert!(f.what.contains("3 slaves answer, the configuration lists 2 ([[slave]] entries)"), "{f:?}");
         }
 
         #[test]

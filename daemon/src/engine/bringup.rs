@@ -41,6 +41,14 @@ pub enum BringUpError {
         /// What happened.
         detail: String,
     },
+    /// The network has another number of slaves than the `[[slave]]`
+    /// entries.
+    Count {
+        /// Slaves found.
+        found: usize,
+        /// Entries configured.
+        expected: usize,
+    },
     /// The network differs from the configured one.
     Identity {
         /// Slave position.
@@ -57,6 +65,9 @@ impl fmt::Display for BringUpError {
         match self {
             Self::Port(e) => write!(f, "{e}"),
             Self::Step { step, detail } => write!(f, "{step}: {detail}"),
+            Self::Count { found, expected } => {
+                write!(f, "{found} slaves answer, the configuration lists {expected} ([[slave]] entries)")
+            }
             Self::Identity { position, expected, found } => {
                 write!(f, "slave {position} is {found}, the configuration expects {expected}")
             }
@@ -224,11 +235,7 @@ pub fn identify<L: Link>(port: &mut Port<L>, count: u8) -> Result<Vec<SlaveSumma
 /// network is accepted; an entry's absent ids match anything).
 pub fn check_identity(config: &Config, slaves: &[SlaveSummary]) -> Result<(), BringUpError> {
     if !config.slaves.is_empty() && config.slaves.len() != slaves.len() {
-        return Err(BringUpError::Identity {
-            position: slaves.len().min(config.slaves.len()),
-            expected: format!("a network of {} slaves", config.slaves.len()),
-            found: format!("a network of {} slaves", slaves.len()),
-        });
+        return Err(BringUpError::Count { found: slaves.len(), expected: config.slaves.len() });
     }
     for (i, (want, got)) in config.slaves.iter().zip(slaves).enumerate() {
         let differs = want.vendor_id.is_some_and(|v| v != got.vendor_id)
