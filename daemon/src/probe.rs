@@ -28,7 +28,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_wire::framing::OVERHEAD;
 use ecmxf_wire::payload::control::{FwVersionGet, InfoUpdate};
-use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode, SlaveInfoGet};
+use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::{CheckType, DATA_MAX, EcatState, al_status_text};
 
 use crate::config::{Config, LinkConfig};
@@ -274,11 +274,6 @@ impl<'c, L: Link> Probe<'c, L> {
         let mut port = Port::new(link);
         port.set_ready_timeout(config.ready_timeout().max(READY_TIMEOUT));
         Self { port, config, board: Board::of(config) }
-    }
-
-    /// The port, for tests that look further.
-    pub fn port_mut(&mut self) -> &mut Port<L> {
-        &mut self.port
     }
 
     /// Runs steps 2 to 7 in order, handing each verdict to `report` with
@@ -603,18 +598,12 @@ impl<'c, L: Link> Probe<'c, L> {
         let mut states = Vec::new();
         let mut faults = Vec::new();
         for slave in 0..count {
-            let state = match self.port.call(&SlaveInfoGet { slave, item: SlaveInfoCode::State }) {
-                Ok(a) => match SlaveInfo::decode(SlaveInfoCode::State, a.data) {
-                    Ok(SlaveInfo::State(s)) => s,
-                    _ => EcatState::None,
-                },
+            let state = match bringup::number(&mut self.port, slave, SlaveInfoCode::State) {
+                Ok(v) => EcatState::from_u8(v as u8),
                 Err(e) => return self.port_failure(&format!("reading slave {slave}'s state"), &e),
             };
-            let code = match self.port.call(&SlaveInfoGet { slave, item: SlaveInfoCode::AlStatus }) {
-                Ok(a) => match SlaveInfo::decode(SlaveInfoCode::AlStatus, a.data) {
-                    Ok(SlaveInfo::AlStatus(c)) => c,
-                    _ => 0,
-                },
+            let code = match bringup::number(&mut self.port, slave, SlaveInfoCode::AlStatus) {
+                Ok(v) => v as u16,
                 Err(e) => return self.port_failure(&format!("reading slave {slave}'s AL status"), &e),
             };
             let shown = shown_state(state);
@@ -907,7 +896,7 @@ mod tests {
             let (link, _chip) = chip();
             let mut probe = Probe::new(link, &config);
             up_to(&mut probe, 3);
-            probe.port_mut().resize(DATA_MAX).unwrap();
+            probe.port.resize(DATA_MAX).unwrap();
             // An earlier run left the chip at 1440-byte packets, at a
             // packet boundary: the most bytes step 2 can need.
             let mut probe = Probe::new(probe.port.into_link(), &config);

@@ -136,15 +136,7 @@ async fn number(m: &Master, slave: u8, item: SlaveInfoCode) -> Result<u64, Statu
     let raw = m.slave_info(slave, item).await.map_err(to_status)?;
     let decoded =
         SlaveInfo::decode(item, &raw).map_err(|e| Status::internal(format!("slave {slave} {item:?}: {e}")))?;
-    Ok(match decoded {
-        SlaveInfo::VendorId(v) | SlaveInfo::ProductCode(v) | SlaveInfo::Revision(v) | SlaveInfo::DcCycle(v) => v.into(),
-        SlaveInfo::ConfiguredAddress(v) | SlaveInfo::Alias(v) | SlaveInfo::AlStatus(v) => v.into(),
-        SlaveInfo::OutputBytes(v) | SlaveInfo::InputBytes(v) => v.into(),
-        SlaveInfo::HasDc(v) | SlaveInfo::DcActive(v) => v.into(),
-        SlaveInfo::DcShift(v) => u64::from(v as u32),
-        SlaveInfo::State(s) => s.to_u8().into(),
-        SlaveInfo::Name(_) => 0,
-    })
+    Ok(decoded.number().map_or(0, u64::from))
 }
 
 /// What differs between a found slave and its expectation ("" if nothing).

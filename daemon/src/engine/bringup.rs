@@ -165,13 +165,11 @@ pub fn blocking<'a, L: Link, R: Request<'a>>(
     }
 }
 
-fn number<L: Link>(port: &mut Port<L>, slave: u8, item: SlaveInfoCode) -> Result<u32, PortError> {
+/// One numeric item of a slave (command 21; [`SlaveInfo::number`]); 0 when
+/// the answer does not decode.
+pub fn number<L: Link>(port: &mut Port<L>, slave: u8, item: SlaveInfoCode) -> Result<u32, PortError> {
     let a = port.call(&SlaveInfoGet { slave, item })?;
-    Ok(match SlaveInfo::decode(item, a.data) {
-        Ok(SlaveInfo::VendorId(v) | SlaveInfo::ProductCode(v) | SlaveInfo::Revision(v)) => v,
-        Ok(SlaveInfo::OutputBytes(v) | SlaveInfo::InputBytes(v)) => v.into(),
-        _ => 0,
-    })
+    Ok(SlaveInfo::decode(item, a.data).ok().and_then(|i| i.number()).unwrap_or(0))
 }
 
 fn pdo_config(slave: u8, assign: u16, pdos: &[crate::config::PdoConfig]) -> Result<PdoConfig, BringUpError> {

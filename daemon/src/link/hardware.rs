@@ -53,6 +53,14 @@ pub struct HardwareLink {
     int0_edge_count: u64,
 }
 
+/// Reads one queued INT0 edge event into the link's record of edges.
+fn read_int0_edge(req: &Request, line: u32, last_ns: &mut u64, count: &mut u64) -> Result<(), LinkError> {
+    let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
+    *last_ns = ev.timestamp_ns;
+    *count = (*count + 1).max(u64::from(ev.line_seqno));
+    Ok(())
+}
+
 fn gpio_err(what: String, e: gpiocdev::Error) -> LinkError {
     LinkError::io(what, std::io::Error::other(e.to_string()))
 }
@@ -138,9 +146,7 @@ impl Link for HardwareLink {
             let edge =
                 req.wait_edge_event(deadline - now).map_err(|e| gpio_err(format!("wait for INT0 line {line}"), e))?;
             if edge {
-                let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
-                self.last_int0_edge_ns = ev.timestamp_ns;
-                self.int0_edge_count = (self.int0_edge_count + 1).max(u64::from(ev.line_seqno));
+                read_int0_edge(req, line, &mut self.last_int0_edge_ns, &mut self.int0_edge_count)?;
             }
         }
     }
@@ -158,9 +164,7 @@ impl Link for HardwareLink {
         let Some(req) = &self.int0 else { return Ok(None) };
         let line = self.config.int0_line.unwrap_or(0);
         while req.has_edge_event().map_err(|e| gpio_err(format!("poll INT0 line {line}"), e))? {
-            let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
-            self.last_int0_edge_ns = ev.timestamp_ns;
-            self.int0_edge_count = (self.int0_edge_count + 1).max(u64::from(ev.line_seqno));
+            read_int0_edge(req, line, &mut self.last_int0_edge_ns, &mut self.int0_edge_count)?;
         }
         Ok(Some(self.int0_edge_count))
     }

@@ -145,6 +145,22 @@ fn le_int(field: &'static str, data: &[u8]) -> Result<u32, PayloadError> {
 }
 
 impl<'a> SlaveInfo<'a> {
+    /// The item as one number, as the chip holds it: ids, sizes, addresses,
+    /// the state byte, flags as 0/1, the DC shift as its 32 bits; `None`
+    /// for the name. Callers that only show or compare a value need no
+    /// match over every item.
+    pub fn number(&self) -> Option<u32> {
+        Some(match *self {
+            Self::VendorId(v) | Self::ProductCode(v) | Self::Revision(v) | Self::DcCycle(v) => v,
+            Self::ConfiguredAddress(v) | Self::Alias(v) | Self::AlStatus(v) => v.into(),
+            Self::OutputBytes(v) | Self::InputBytes(v) => v.into(),
+            Self::HasDc(v) | Self::DcActive(v) => v.into(),
+            Self::DcShift(v) => v as u32,
+            Self::State(s) => s.to_u8().into(),
+            Self::Name(_) => return None,
+        })
+    }
+
     /// The code this item answers.
     pub fn code(&self) -> SlaveInfoCode {
         match self {
@@ -253,6 +269,10 @@ mod tests {
             let mut data = [0u8; 112];
             let f = item.encode(&mut data).unwrap();
             prop_assert_eq!(SlaveInfo::decode(code, &data[..f.data_len as usize]).unwrap(), item);
+            if code != SlaveInfoCode::Name {
+                let bytes = item.number().unwrap().to_le_bytes();
+                prop_assert_eq!(SlaveInfo::decode(code, &bytes).unwrap(), item);
+            }
             request_round_trip(&SlaveInfoGet { slave, item: code });
         }
 
