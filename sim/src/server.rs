@@ -57,18 +57,26 @@ fn write_msg(w: &mut impl Write, kind: u8, flags: u8, payload: &[u8]) -> io::Res
     w.write_all(payload)
 }
 
-/// How long a reader polls before it blocks: a blocked thread's wake-up can
-/// take milliseconds on a busy or virtual machine, and a chip answers in
-/// microseconds.
-const SPIN: Duration = Duration::from_millis(2);
+/// How long the server polls for the next message before it blocks: a
+/// blocked thread's wake-up can take milliseconds on a busy or virtual
+/// machine, and the chip it stands for answers in microseconds. The
+/// simulator spends its own CPU on that, never the host's: the client side
+/// ([`SocketClient`]) blocks in `read`, as a host blocks in the spidev
+/// ioctl while the kernel clocks the bytes, so the daemon's CPU time
+/// measured against the socket simulator is its own work (issue 26: the
+/// client's spinning was most of the daemon's idle CPU).
+const SERVER_SPIN: Duration = Duration::from_millis(2);
 
 /// Fills `buf` from the stream, polling (non-blocking, yielding) for up to
-/// [`SPIN`] before blocking.
-fn read_spinning(stream: &mut UnixStream, buf: &mut [u8]) -> io::Result<()> {
+/// `spin` before blocking.
+fn read_spinning(stream: &mut UnixStream, buf: &mut [u8], spin: Duration) -> io::Result<()> {
+    if spin.is_zero() {
+        return stream.read_exact(buf);
+    }
     let mut got = 0;
     let start = Instant::now();
     stream.set_nonblocking(true)?;
-    while got < buf.len() && start.elapsed() < SPIN {
+    while got < buf.len() && start.elapsed() < spin {
         match stream.read(&mut buf[got..]) {
             Ok(0) => {
                 stream.set_nonblocking(false)?;
@@ -87,9 +95,9 @@ fn read_spinning(stream: &mut UnixStream, buf: &mut [u8]) -> io::Result<()> {
     stream.read_exact(&mut buf[got..])
 }
 
-fn read_msg(r: &mut UnixStream) -> io::Result<(u8, u8, Vec<u8>)> {
+fn read_msg(r: &mut UnixStream, spin: Duration) -> io::Result<(u8, u8, Vec<u8>)> {
     let mut h = [0u8; 8];
-    read_spinning(r, &mut h)?;
+    read_spinning(r, &mut h, spin)?;
     let len = u32::from_le_bytes([h[4], h[5], h[6], h[7]]) as usize;
     if len > MAX_PAYLOAD {
         return Err(io::Error::new(
@@ -98,7 +106,7 @@ fn read_msg(r: &mut UnixStream) -> io::Result<(u8, u8, Vec<u8>)> {
         ));
     }
     let mut payload = vec![0u8; len];
-    read_spinning(r, &mut payload)?;
+    read_spinning(r, &mut payload, spin)?;
     Ok((h[0], h[1], payload))
 }
 
@@ -182,7 +190,7 @@ impl Server {
     /// Serves one connection.
     pub fn handle(&self, mut stream: UnixStream) -> io::Result<()> {
         loop {
-            let (kind, _flags, payload) = match read_msg(&mut stream) {
+            let (kind, _flags, payload) = match read_msg(&mut stream, SERVER_SPIN) {
                 Ok(m) => m,
                 Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => return Ok(()),
                 Err(e) => {
@@ -297,7 +305,7 @@ impl SocketClient {
 
     fn request(&mut self, kind: u8, payload: &[u8]) -> io::Result<(u8, Vec<u8>)> {
         write_msg(&mut self.stream, kind, 0, payload)?;
-        let (k, flags, p) = read_msg(&mut self.stream)?;
+        let (k, flags, p) = read_msg(&mut self.stream, Duration::ZERO)?;
         if k != kind {
             return Err(unexpected(k, &p));
         }
