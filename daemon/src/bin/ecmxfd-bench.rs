@@ -7,7 +7,13 @@
 //!    with cyclic data running at 125 us;
 //! 3. RxFIFO level seen in the headers (min/max) and the longest gap between
 //!    FIFO exchanges;
-//! 4. the daemon process's CPU time per second of wall time.
+//! 4. the daemon process's CPU time per second of wall time;
+//! 5. the link's idle rate and the SPI exchanges each SDO adds above it,
+//!    from the simulator's own packet counter.
+//!
+//! What runs where: the simulator is its own process (`ecmxf-sim serve`);
+//! the engine, its async runtime and the SDO callers run in this one, so
+//! the CPU figure is the daemon's work plus the callers'. Nothing is built.
 //!
 //! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS]`
 #![forbid(unsafe_code)]
@@ -130,8 +136,24 @@ fn main() -> Result<(), String> {
             }
         })
     };
+    // The simulator's own count of packets clocked: what the link carried,
+    // whichever side of the daemon sent it.
+    let mut ctl = ecmxf_sim::server::SocketClient::connect(&sim.socket).map_err(|e| e.to_string())?;
+    let mut packets = move || -> Result<u64, String> {
+        let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
+        text.split_whitespace()
+            .find_map(|w| w.strip_prefix("packets="))
+            .and_then(|n| n.parse().ok())
+            .ok_or_else(|| format!("no packet count in {text:?}"))
+    };
+    // Idle rate first: cyclic data only.
+    let (p0, t0) = (packets()?, Instant::now());
+    std::thread::sleep(Duration::from_secs(3));
+    let idle_rate = (packets()? - p0) as f64 / t0.elapsed().as_secs_f64();
     let cpu0 = cpu_seconds();
     let wall0 = Instant::now();
+    let (p1, t1) = (packets()?, Instant::now());
+    let mut single_window = (0u64, Duration::ZERO);
     let (single, loaded, exchanges) = rt.block_on(async {
         let mut single = Vec::new();
         let end = Instant::now() + Duration::from_secs(secs / 2);
@@ -140,6 +162,7 @@ fn main() -> Result<(), String> {
             master.sdo_read(1, 0x1018, 1, false, None).await.map_err(|e| e.to_string())?;
             single.push(t.elapsed());
         }
+        single_window = (packets()? - p1, t1.elapsed());
         let ex0 = master.status().exchanges;
         let t0 = Instant::now();
         let end = Instant::now() + Duration::from_secs(secs - secs / 2);
@@ -170,6 +193,14 @@ fn main() -> Result<(), String> {
     let _ = sampler.join();
     let s = master.status();
     let (lmin, lmax) = *levels.lock().unwrap_or_else(|e| e.into_inner());
+    let (window_packets, window) = single_window;
+    let above_idle = window_packets as f64 - idle_rate * window.as_secs_f64();
+    println!("idle exchanges         : {idle_rate:.0}/s (simulator's packet count, cyclic data only, 3 s)");
+    println!(
+        "SPI exchanges per SDO  : {:.2} above the idle rate ({} SDO reads one at a time)",
+        above_idle / single.len().max(1) as f64,
+        single.len()
+    );
     println!("SDO read, one at a time: {}", percentiles(single));
     println!("SDO read, 16 tasks     : {}", percentiles(loaded));
     println!("engine exchange rate   : {exchanges:.0}/s under SDO load with cyclic data");

@@ -95,9 +95,12 @@ pub struct Cyclic {
     levels: Levels,
     /// (time, frames pushed) of the last FIFO call.
     last_push: (Instant, u8),
-    /// Whether the last FIFO call read every input frame waiting (fewer
-    /// than a packet's worth came back), so the TxFIFO was empty then.
-    drained: bool,
+    /// Input frames the last FIFO call left in the TxFIFO: the answer's
+    /// count (the level before the call's read) less the frames it read.
+    /// A read that fills a packet with nothing left behind is no reason to
+    /// exchange again at once (issue 26: a one-frame-per-packet network
+    /// made four exchanges a cycle that way).
+    backlog: u8,
     /// Level reported just before that push.
     reported: u8,
     started: Instant,
@@ -126,7 +129,7 @@ impl Cyclic {
             push_buf: Vec::with_capacity(data_size),
             levels: plan.levels(),
             last_push: (now, 0),
-            drained: true,
+            backlog: 0,
             reported: 0,
             started: now,
             pushed_total: 0,
@@ -173,8 +176,8 @@ impl Cyclic {
 
     /// When the next exchange should happen: when the level has fallen one
     /// packet (`rx_room` frames) below the target, so one exchange brings it
-    /// back; when `tx_room` input frames have queued since the last
-    /// exchange drained the TxFIFO (at once if it could not drain it); and
+    /// back; when `tx_room` input frames are waiting, counting those the
+    /// last exchange left behind (at once if that is a packet's worth); and
     /// never later than half the gap between target and floor, so an
     /// estimate that is off (the lag is the chip's, not a law) is corrected
     /// soon. A small target refills before the floor, a packet at a time
@@ -188,10 +191,9 @@ impl Cyclic {
         // Counted from the last exchange (one input frame per cycle since
         // it); the level is an estimate for `now` itself.
         let since = self.last_push.0;
-        let by_inputs = match (self.tx_size, self.drained) {
-            (0, _) => since + MAX_EXCHANGE_INTERVAL,
-            (_, true) => since + self.cycle * (tx_room.max(1) as u32),
-            (_, false) => now,
+        let by_inputs = match self.tx_size {
+            0 => since + MAX_EXCHANGE_INTERVAL,
+            _ => since + self.cycle * (tx_room.max(1).saturating_sub(usize::from(self.backlog)) as u32),
         };
         let cap = since + (self.cycle * self.levels.cap_cycles).min(MAX_EXCHANGE_INTERVAL);
         now.checked_add(by_level).unwrap_or(cap).min(by_inputs).min(cap)
@@ -219,13 +221,13 @@ impl Cyclic {
     }
 
     /// Records a FIFO call at `now` that pushed `pushed` frames, whose
-    /// answer reported `count` frames queued just before the push, and that
-    /// read `read` input frames: every one waiting (`drained`) or a full
-    /// packet of them.
-    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8, read: usize, drained: bool) {
+    /// answer reported `count` output frames queued just before the push
+    /// and `waiting` input frames queued before its read, and that read
+    /// `read` input frames.
+    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8, waiting: u8, read: usize) {
         self.last_push = (now, pushed);
         self.reported = count;
-        self.drained = drained;
+        self.backlog = usize::from(waiting).saturating_sub(read).min(usize::from(u8::MAX)) as u8;
         self.pushed_total += u64::from(pushed);
         self.read_total += read as u64;
     }
@@ -279,8 +281,8 @@ mod tests {
     fn estimate_counts_pushes_and_consumption_since_the_report() {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
-        cy.answered(t0, 5, 3, 0, true);
-        cy.answered(t0 + Duration::from_micros(100), 10, 12, 0, true);
+        cy.answered(t0, 5, 3, 0, 0);
+        cy.answered(t0 + Duration::from_micros(100), 10, 12, 0, 0);
         // 12 queued before this push, 10 pushed, 7 cycles gone 0.9 ms later;
         // the earlier push is in the 12 already.
         assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 10 - 7);
@@ -293,11 +295,11 @@ mod tests {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
         // Target 14, packet room 4: refill when the level reaches 10.
-        cy.answered(t0, 0, 14, 0, true);
+        cy.answered(t0, 0, 14, 0, 0);
         let at = cy.next_exchange(t0, 4, 100);
         assert_eq!(at.duration_since(t0), Duration::from_micros(125 * 4));
         // Far below target: now.
-        cy.answered(t0, 0, 2, 0, true);
+        cy.answered(t0, 0, 2, 0, 0);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0);
     }
 
@@ -341,11 +343,19 @@ mod tests {
         };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 240, 0, true);
+        cy.answered(t0, 0, 240, 0, 0);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
         assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "3 input frames per read");
-        cy.answered(t0, 0, 240, 0, false);
-        assert_eq!(cy.next_exchange(t0, 4, 3), t0, "a full packet read: more may wait, now");
+        cy.answered(t0, 0, 240, 3, 3);
+        assert_eq!(
+            cy.next_exchange(t0, 4, 3),
+            t0 + Duration::from_millis(3),
+            "a full packet read, none left: no hurry"
+        );
+        cy.answered(t0, 0, 240, 4, 3);
+        assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(2), "one left behind: a cycle sooner");
+        cy.answered(t0, 0, 240, 9, 3);
+        assert_eq!(cy.next_exchange(t0, 4, 3), t0, "a packet's worth left behind: now");
     }
 
     #[test]
@@ -361,7 +371,7 @@ mod tests {
         };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 0, 0, true);
+        cy.answered(t0, 0, 0, 0, 0);
         assert!(!cy.outputs_low(t0), "an empty RxFIFO is no shortage without outputs");
         assert_eq!(cy.next_exchange(t0, 0, 9), t0 + Duration::from_millis(9), "inputs decide");
         // Counted from the last exchange, not from whenever it is asked.
@@ -369,7 +379,7 @@ mod tests {
         assert!(cy.next_exchange(later, 0, 472) <= later, "the cap has passed: due");
         let plan = Plan { rx_size: 4, ..plan };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
-        cy.answered(t0, 0, 0, 0, true);
+        cy.answered(t0, 0, 0, 0, 0);
         assert!(cy.outputs_low(t0));
     }
 
@@ -394,7 +404,7 @@ mod tests {
         // between target and floor, so it refills at the floor.
         let mut cy = Cyclic::new(plan(Some(2000)), 1024, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 15, 0, true);
+        cy.answered(t0, 0, 15, 0, 0);
         assert_eq!(cy.frames_to_push(t0, 19), 0);
         assert_eq!(cy.next_exchange(t0, 19, 1000), t0 + us(125 * 4), "the cap: half of 15 - 7 cycles");
         assert!(!cy.outputs_low(t0 + us(125 * 5)));
@@ -415,14 +425,14 @@ mod tests {
         // First answer: a reference only.
         let t0 = Instant::now();
         assert_eq!(cy.inputs_lost(0, 0), 0);
-        cy.answered(t0, 20, 0, 0, true);
+        cy.answered(t0, 20, 0, 0, 0);
         // 20 pushed, 12 still queued: 8 cycles; 8 input frames waiting.
         assert_eq!(cy.inputs_lost(12, 8), 0);
-        cy.answered(t0, 10, 12, 8, true);
+        cy.answered(t0, 10, 12, 8, 8);
         // 30 pushed, 2 queued: 20 more cycles, so 20 input frames made;
         // 8 read, 5 waiting: 15 of them dropped.
         assert_eq!(cy.inputs_lost(2, 5), 15);
-        cy.answered(t0, 0, 2, 5, true);
+        cy.answered(t0, 0, 2, 5, 5);
         // The last 2 output frames consumed, 3 input frames made since
         // (the RxFIFO ran dry for one cycle): never more than the output
         // side shows.

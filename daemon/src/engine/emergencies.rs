@@ -24,6 +24,10 @@ use crate::port::{Port, PortError};
 /// this plus one exchange (the goal: 10 ms).
 pub const POLL: Duration = Duration::from_millis(4);
 
+/// With cyclic data a question waits for a FIFO exchange to ride along
+/// with, but never longer than this since the last one.
+pub const POLL_LONGEST: Duration = Duration::from_millis(6);
+
 /// How long an asked question may wait for an exchange to bring its answer
 /// before the engine makes one for it (idle slot, slow cycle).
 pub const ANSWER_WAIT: Duration = Duration::from_millis(1);

@@ -33,9 +33,6 @@ use crate::config::WriterGoneAction;
 use crate::link::Link;
 use crate::port::PortError;
 
-/// How often a transaction waiting for the chip polls its status.
-const POLL: Duration = Duration::from_micros(100);
-
 /// How long the loop idles at most when nothing is due (no cyclic
 /// exchange, no transaction).
 const IDLE: Duration = Duration::from_millis(50);
@@ -81,8 +78,6 @@ impl Intake {
 /// When the loop last did its periodic things.
 #[derive(Clone, Copy, Debug)]
 struct Clocks {
-    /// The last status poll of a waiting transaction.
-    transaction_poll: Instant,
     /// The last emergency question.
     emergency_poll: Instant,
     /// The blocking slot had its step since the last FIFO exchange.
@@ -158,7 +153,7 @@ impl<L: Link> Engine<L> {
         let mut cyclic = cyclic;
         let now = Instant::now();
         self.start_run(cyclic.as_deref(), slaves, now);
-        let mut clocks = Clocks { transaction_poll: now, emergency_poll: now, slot_waited: false, slot_skipped: 0 };
+        let mut clocks = Clocks { emergency_poll: now, slot_waited: false, slot_skipped: 0 };
         let exit = loop {
             if let Err(exit) = self.turn(&mut cyclic, &mut clocks) {
                 break exit;
@@ -204,7 +199,7 @@ impl<L: Link> Engine<L> {
             _ => {
                 clocks.slot_waited = true;
                 clocks.slot_skipped = 0;
-                self.transaction_step(cyclic.as_deref_mut(), clocks, now)?
+                self.transaction_step(clocks, now)?
             }
         };
         self.check_emergencies()?;
@@ -271,19 +266,20 @@ impl<L: Link> Engine<L> {
     /// Keeps the emergency question going: an answer no exchange has
     /// brought yet is fetched with a status exchange; a new question is
     /// asked every `emergencies::POLL` while the slot is idle (during a
-    /// transaction, its status polls do it: see `transaction_step`) and no
-    /// FIFO exchange is due.
+    /// transaction, it stands in for one of its polls: see
+    /// `transaction_step`).
     fn ask_emergencies(&mut self, cyclic: Option<&Cyclic>, clocks: &mut Clocks, now: Instant) -> Result<(), Exit> {
         let since = now.saturating_duration_since(clocks.emergency_poll);
         if self.emergencies.asked() && self.active.is_none() && since >= emergencies::ANSWER_WAIT {
             self.port.send_once(&InfoUpdate)?;
             self.check_emergencies()?;
         }
-        if self.active.is_none()
-            && self.queue.is_empty()
-            && since >= emergencies::POLL
-            && !cyclic.is_some_and(|c| self.fifo_due(c, now))
-        {
+        // With cyclic data the question goes out just before a FIFO
+        // exchange, whose first packet brings its answer: one exchange per
+        // question, none to fetch it (unless no FIFO exchange came for
+        // `emergencies::POLL_LONGEST`).
+        let rides = cyclic.is_none_or(|c| self.fifo_due(c, now)) || since >= emergencies::POLL_LONGEST;
+        if self.active.is_none() && self.queue.is_empty() && since >= emergencies::POLL && rides {
             self.poll_emergencies(&mut clocks.emergency_poll, now)?;
         }
         Ok(())
@@ -331,9 +327,15 @@ impl<L: Link> Engine<L> {
             Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room(c)),
             None => now + IDLE,
         };
+        // With cyclic data the question waits for a FIFO exchange (see
+        // `ask_emergencies`): the FIFO's wake time covers it.
+        let ask_every = if cyclic.is_some() { emergencies::POLL_LONGEST } else { emergencies::POLL };
         let emergency =
-            clocks.emergency_poll + if self.emergencies.asked() { emergencies::ANSWER_WAIT } else { emergencies::POLL };
-        let until = if self.active.is_some() { now + POLL } else { wake.min(emergency) };
+            clocks.emergency_poll + if self.emergencies.asked() { emergencies::ANSWER_WAIT } else { ask_every };
+        let until = match &self.active {
+            Some(a) => wake.min(a.next_poll()),
+            None => wake.min(emergency),
+        };
         match self.idle_until(until) {
             Some(Command::Job(j)) => self.queue.push(j),
             Some(Command::Stop) => return Err(self.safe_stop(cyclic.as_deref_mut())),
@@ -448,9 +450,7 @@ impl<L: Link> Engine<L> {
                 self.telemetry.newest_input_ns.store(self.intake.ns(now), Relaxed);
             }
         }
-        // A full packet of inputs: more may be waiting.
-        let drained = read < self.port.data_size() / c.tx_size.max(1);
-        c.answered(now, n, count, read, drained);
+        c.answered(now, n, count, waiting, read);
         self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
         if !self.frames.is_empty() {
             self.frames_played(c.tx_size > 0, read, waiting, count);
@@ -497,12 +497,7 @@ impl<L: Link> Engine<L> {
     /// One step of the transaction on the blocking slot (taking the next
     /// job when the slot is free). True when it sent something worth not
     /// idling for.
-    fn transaction_step(
-        &mut self,
-        cyclic: Option<&mut Cyclic>,
-        clocks: &mut Clocks,
-        now: Instant,
-    ) -> Result<bool, PortError> {
+    fn transaction_step(&mut self, clocks: &mut Clocks, now: Instant) -> Result<bool, PortError> {
         if self.active.is_none() {
             while let Some(j) = self.queue.pop() {
                 if let SlotRequest::SetState { state, .. } = &j.request {
@@ -518,30 +513,23 @@ impl<L: Link> Engine<L> {
             return Ok(false);
         };
         let exchanges = self.port.stats().exchanges;
+        if active.waiting()
+            && active.next_poll() <= now
+            && now.saturating_duration_since(clocks.emergency_poll) >= emergencies::POLL
+        {
+            // A poll is due and so is the emergency question: it is the
+            // poll (its answer refreshes the busy bit like any other), so
+            // emergencies are seen under a steady load of transactions.
+            self.active = Some(active);
+            self.poll_emergencies(&mut clocks.emergency_poll, now)?;
+            return Ok(true);
+        }
         let (rest, progress) = active.step(&mut self.port, now)?;
         self.active = rest;
         if progress == Progress::Done {
             self.telemetry.transactions.fetch_add(1, Relaxed);
         }
         let sent = self.port.stats().exchanges != exchanges;
-        if progress == Progress::Waiting && now.saturating_duration_since(clocks.transaction_poll) >= POLL {
-            // The busy bit only changes in answers: fetch one now. An
-            // emergency read that is due is the poll; else, with cyclic
-            // data running, a FIFO exchange (it reads inputs and tops up
-            // outputs anyway).
-            if now.saturating_duration_since(clocks.emergency_poll) >= emergencies::POLL {
-                self.poll_emergencies(&mut clocks.emergency_poll, now)?;
-            } else {
-                match cyclic {
-                    Some(c) => self.fifo_exchange(c, now)?,
-                    None => {
-                        self.port.call(&InfoUpdate)?;
-                    }
-                }
-            }
-            clocks.transaction_poll = now;
-            return Ok(true);
-        }
         Ok(sent && progress != Progress::Waiting)
     }
 

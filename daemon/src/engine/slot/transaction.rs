@@ -4,6 +4,21 @@
 //! bit3, the SDO abort code with command 69). One at a time, taken from the
 //! fair queue (`fair.rs`). Multi-step FoE transfers live in `foe.rs`.
 //!
+//! Polls cost one exchange each and say as much as they can: where the
+//! result is read with a repeatable GET (SDO_GET, EEPROM_GET: a non-blocking
+//! read of the chip's result buffer, v049 11/39), the GET itself is the
+//! poll, sent once ([`Port::send_once`]); its answer, brought by whatever
+//! exchange comes next, carries the busy bit *and* the result. The chip
+//! builds an answer when it processes the packet (v049 圖二: the answer to
+//! a packet comes out with the next one), so a GET whose own answer says
+//! "not busy" ran after the operation ended and its data is the result; a
+//! GET answered "busy" is ignored, one lost to a bit error is sent again.
+//! The operation is therefore seen to end within one exchange of the chip
+//! finishing it, without a second exchange to fetch the result. Others poll
+//! with INFO_UPDATE, sent once. Polls go back to back while the operation
+//! is young and every quarter of its age later (at most [`MAX_POLL`]), so
+//! a slow slave's operation does not fill the link with polls.
+//!
 //! Cancel-safety: a caller that stops waiting is answered with a timeout at
 //! once, but the operation it started still runs to its end (or is
 //! abandoned with ASYNC_CMD_RESET when it overstays), and its result is never
@@ -14,7 +29,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::cia402::{Cia402GetStatusword, Cia402StateGet};
-use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset};
+use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset, InfoUpdate};
 use ecmxf_wire::payload::ecat_init::StateUpdate;
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
 use ecmxf_wire::payload::emergency::CoeEmergencyGet;
@@ -26,7 +41,7 @@ use ecmxf_wire::payload::sdo::{
 };
 use ecmxf_wire::payload::slave_info::SlaveInfoGet;
 use ecmxf_wire::payload::state::{StateCheck, StateGet};
-use ecmxf_wire::{Reply, ReplyFields};
+use ecmxf_wire::{CommandCode, Reply, ReplyFields};
 
 use super::request::{Immediate, Job, SlotRequest, TransferProgress};
 use crate::engine::error::{EngineError, WrongState};
@@ -41,6 +56,8 @@ mod foe;
 const GRACE: Duration = Duration::from_secs(2);
 /// SDO timeout given to the chip, us.
 const SDO_TIMEOUT_US: u32 = 1_000_000;
+/// The longest time between two polls of a waiting operation.
+pub const MAX_POLL: Duration = Duration::from_millis(2);
 
 #[derive(Debug, PartialEq, Eq)]
 enum Step {
@@ -79,6 +96,10 @@ pub struct Active {
     /// buffer, with room for any answer (see `request::reply_capacity`), so
     /// this thread copies instead of allocating.
     buffer: Vec<u8>,
+    /// When the blocking command of the current step went out.
+    since: Instant,
+    /// When the last poll went out, and the exchange count right after it.
+    polled: Option<(Instant, u64)>,
 }
 
 /// The reply made of `parts`, in the caller's `buffer` (taken: an empty
@@ -126,6 +147,8 @@ impl Active {
             cursor: 0,
             total: 0,
             buffer: job.buffer,
+            since: Instant::now(),
+            polled: None,
         })
     }
 
@@ -289,7 +312,58 @@ impl Active {
             return Ok((None, self.finish(Err(EngineError::Refused(what)))));
         }
         self.step = next;
+        self.since = Instant::now();
+        self.polled = None;
         Ok((Some(self), Progress::Sent))
+    }
+
+    /// Whether its blocking command went out and it waits for the chip.
+    pub fn waiting(&self) -> bool {
+        self.step != Step::Start
+    }
+
+    /// When the next poll is due: back to back while the operation is
+    /// young, every quarter of its age later, at most every [`MAX_POLL`].
+    pub fn next_poll(&self) -> Instant {
+        match self.polled {
+            None => self.since,
+            Some((at, _)) => at + (at.saturating_duration_since(self.since) / 4).min(MAX_POLL),
+        }
+    }
+
+    /// The repeatable GET that reads this step's result, if there is one:
+    /// it is the poll (see the module doc).
+    fn fetch_code(&self) -> Option<CommandCode> {
+        match (&self.request, &self.step) {
+            (SlotRequest::SdoRead { .. }, Step::Wait) => Some(CommandCode::SdoGet),
+            (SlotRequest::EepromRead { .. }, Step::Wait) | (SlotRequest::EepromWrite { .. }, Step::Verify) => {
+                Some(CommandCode::EepromGet)
+            }
+            _ => None,
+        }
+    }
+
+    /// Sends one poll: the result's GET where there is one, else
+    /// INFO_UPDATE; either answer refreshes the busy bit.
+    fn poll<L: Link>(&mut self, port: &mut Port<L>, now: Instant) -> Result<(), PortError> {
+        match self.fetch_code() {
+            Some(CommandCode::SdoGet) => port.send_once(&SdoGet)?,
+            Some(CommandCode::EepromGet) => port.send_once(&EepromGet)?,
+            _ => port.send_once(&InfoUpdate)?,
+        }
+        self.polled = Some((now, port.stats().exchanges));
+        Ok(())
+    }
+
+    /// The answer to one of this step's GET polls, when an exchange since
+    /// the poll brought it and the chip ran the GET after the operation
+    /// ended (its own header says not busy): header and data.
+    fn fetched<'p, L: Link>(&self, port: &'p Port<L>) -> Option<Answer<'p>> {
+        let code = self.fetch_code()?;
+        let (_, after) = self.polled?;
+        let a = port.previous()?;
+        let fresh = port.stats().exchanges > after;
+        (fresh && a.header.code == code && !a.header.is_nop() && !a.header.blocking_busy()).then_some(a)
     }
 
     /// The request in words, for errors.
@@ -311,13 +385,20 @@ impl Active {
     }
 
     fn wait<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
-        let status = *port.status();
+        // The GET poll that ran after the end is the newest word on the
+        // operation; else the newest header.
+        let fetched = self.fetched(port).map(|a| a.header);
+        let status = fetched.unwrap_or(*port.status());
         if status.blocking_busy() {
             if self.orphaned() && now >= self.deadline + GRACE {
                 // Overstayed: abandon it so the slot is free.
                 port.call(&AsyncCmdReset(AsyncReset::ABANDON_PREVIOUS | AsyncReset::CLEAR_BUSY))?;
                 port.pending_control |= ControlFlags::CLEAR_BLOCKING_ERROR;
                 return Ok((None, Progress::Done));
+            }
+            if now >= self.next_poll() {
+                self.poll(port, now)?;
+                return Ok((Some(self), Progress::Sent));
             }
             return Ok((Some(self), Progress::Waiting));
         }
@@ -347,10 +428,13 @@ impl Active {
                 let code = SdoAbortReply::decode(&fields(&a), a.data).map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
-            (SlotRequest::SdoRead { .. }, false) => {
-                let a = port.call(&SdoGet)?;
-                Ok(fill(&mut self.buffer, &[a.data]))
-            }
+            (SlotRequest::SdoRead { .. }, false) => match fetched.and(self.fetched(port)) {
+                Some(a) => Ok(fill(&mut self.buffer, &[a.data])),
+                None => {
+                    let a = port.call(&SdoGet)?;
+                    Ok(fill(&mut self.buffer, &[a.data]))
+                }
+            },
             (SlotRequest::SdoWrite { .. }, false) => Ok(Vec::new()),
             (SlotRequest::EepromRead { slave, word } | SlotRequest::EepromWrite { slave, word, .. }, true) => {
                 Err(EngineError::Failed(format!("EEPROM word {word:#06x} of slave {slave}")))
@@ -363,11 +447,15 @@ impl Active {
                     timeout_us: 100_000,
                 })?;
                 self.step = Step::Verify;
+                (self.since, self.polled) = (now, None);
                 return Ok((Some(self), Progress::Sent));
             }
             (SlotRequest::EepromRead { slave, word }, false)
             | (SlotRequest::EepromWrite { slave, word, .. }, false) => {
-                let a = port.call(&EepromGet)?;
+                let a = match fetched.and(self.fetched(port)) {
+                    Some(a) => a,
+                    None => port.call(&EepromGet)?,
+                };
                 let reply = EepromReply::decode(&fields(&a), a.data).ok();
                 match reply {
                     Some(r) if r.error == 0 && r.data.len() >= 2 => match &self.request {
