@@ -117,6 +117,22 @@ fn main() -> Result<(), String> {
         }
         std::thread::sleep(Duration::from_millis(20));
     }
+    // The simulator's own count of packets clocked: what the link carried,
+    // whichever side of the daemon sent it.
+    let mut ctl = ecmxf_sim::server::SocketClient::connect(&sim.socket).map_err(|e| e.to_string())?;
+    let mut packets = move || -> Result<u64, String> {
+        let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
+        text.split_whitespace()
+            .find_map(|w| w.strip_prefix("packets="))
+            .and_then(|n| n.parse().ok())
+            .ok_or_else(|| format!("no packet count in {text:?}"))
+    };
+    // Idle first, before the async runtime and the level sampler exist:
+    // cyclic data only, nothing else in this process.
+    let (p0, t0, c0) = (packets()?, Instant::now(), cpu_seconds());
+    std::thread::sleep(Duration::from_secs(3));
+    let idle_cpu = (cpu_seconds() - c0) / t0.elapsed().as_secs_f64();
+    let idle_rate = (packets()? - p0) as f64 / t0.elapsed().as_secs_f64();
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -136,23 +152,9 @@ fn main() -> Result<(), String> {
             }
         })
     };
-    // The simulator's own count of packets clocked: what the link carried,
-    // whichever side of the daemon sent it.
-    let mut ctl = ecmxf_sim::server::SocketClient::connect(&sim.socket).map_err(|e| e.to_string())?;
-    let mut packets = move || -> Result<u64, String> {
-        let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix("packets="))
-            .and_then(|n| n.parse().ok())
-            .ok_or_else(|| format!("no packet count in {text:?}"))
-    };
-    // Idle rate first: cyclic data only.
-    let (p0, t0, c0) = (packets()?, Instant::now(), cpu_seconds());
-    std::thread::sleep(Duration::from_secs(3));
-    let idle_cpu = (cpu_seconds() - c0) / t0.elapsed().as_secs_f64();
-    let idle_rate = (packets()? - p0) as f64 / t0.elapsed().as_secs_f64();
     let cpu0 = cpu_seconds();
     let wall0 = Instant::now();
+    let inputs0 = master.status().input_frames;
     let (p1, t1) = (packets()?, Instant::now());
     let mut single_window = (0u64, Duration::ZERO);
     let (single, loaded, exchanges) = rt.block_on(async {
@@ -217,8 +219,8 @@ fn main() -> Result<(), String> {
         s.fifo_alarms
     );
     println!(
-        "input frames           : {} ({} cycles of 125 us expected in {:.1} s)",
-        s.input_frames,
+        "input frames           : {} in the SDO windows ({} cycles of 125 us in {:.1} s)",
+        s.input_frames - inputs0,
         (wall0.elapsed().as_secs_f64() * 8000.0) as u64,
         wall0.elapsed().as_secs_f64()
     );

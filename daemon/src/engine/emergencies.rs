@@ -9,7 +9,10 @@
 //! and happened every 500 ms (emergencies arrived 279-431 ms late, with no
 //! time). Here the question costs one exchange: it is sent once
 //! ([`Port::send_once`]) and its answer read from whatever exchange comes
-//! next; a lost answer is simply asked again.
+//! next; a lost answer is simply asked again. With cyclic data the question
+//! waits (from [`POLL`] up to [`POLL_LONGEST`]) for a FIFO exchange to go
+//! just after it, so that exchange brings the answer and none is made to
+//! fetch it; during a transaction it stands in for one of its polls.
 
 use std::time::Duration;
 
@@ -20,8 +23,8 @@ use ecmxf_wire::CommandCode;
 use crate::link::Link;
 use crate::port::{Port, PortError};
 
-/// How often the newest record is read: an emergency reaches clients within
-/// this plus one exchange (the goal: 10 ms).
+/// How often the newest record is read, at the soonest: an emergency reaches
+/// clients within [`POLL_LONGEST`] plus one exchange (the goal: 10 ms).
 pub const POLL: Duration = Duration::from_millis(4);
 
 /// With cyclic data a question waits for a FIFO exchange to ride along

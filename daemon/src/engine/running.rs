@@ -503,7 +503,7 @@ impl<L: Link> Engine<L> {
                 if let SlotRequest::SetState { state, .. } = &j.request {
                     self.held_below_target = state.to_u8() < self.config.cycle.target().to_u8();
                 }
-                if let Some(a) = Active::new(j) {
+                if let Some(a) = Active::new(j, now) {
                     self.active = Some(a);
                     break;
                 }

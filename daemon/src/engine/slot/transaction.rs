@@ -121,6 +121,25 @@ fn fields(a: &Answer<'_>) -> ReplyFields {
     ReplyFields { value: a.header.return_value, data_len: a.header.data_len }
 }
 
+/// A repeatable GET that reads a blocking operation's result and polls
+/// its busy bit at once.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Fetch {
+    /// SDO_GET (v049 11).
+    Sdo,
+    /// EEPROM_GET (v049 39).
+    Eeprom,
+}
+
+impl Fetch {
+    fn code(self) -> CommandCode {
+        match self {
+            Self::Sdo => CommandCode::SdoGet,
+            Self::Eeprom => CommandCode::EepromGet,
+        }
+    }
+}
+
 /// What a step did.
 #[derive(Debug, PartialEq, Eq)]
 pub enum Progress {
@@ -134,7 +153,7 @@ pub enum Progress {
 
 impl Active {
     /// Takes a job into the slot; a job whose caller already left is dropped.
-    pub fn new(job: Job) -> Option<Self> {
+    pub fn new(job: Job, now: Instant) -> Option<Self> {
         if job.reply.is_closed() {
             return None;
         }
@@ -147,7 +166,7 @@ impl Active {
             cursor: 0,
             total: 0,
             buffer: job.buffer,
-            since: Instant::now(),
+            since: now,
             polled: None,
         })
     }
@@ -257,7 +276,7 @@ impl Active {
                     name: name.as_bytes(),
                 };
                 let refused = refused(&port.call(&FoeRequest::Upload(transfer))?);
-                return self.started(port, refused, Step::FoeUpload);
+                return self.started(port, refused, Step::FoeUpload, now);
             }
             SlotRequest::Immediate(command) => {
                 let a = match command {
@@ -294,7 +313,7 @@ impl Active {
                 return Ok((None, self.finish(Ok(data))));
             }
         });
-        self.started(port, answer, Step::Wait)
+        self.started(port, answer, Step::Wait, now)
     }
 
     /// After a blocking command went out: refused (its answer has the command
@@ -305,6 +324,7 @@ impl Active {
         port: &mut Port<L>,
         refused: bool,
         next: Step,
+        now: Instant,
     ) -> Result<(Option<Self>, Progress), PortError> {
         if refused {
             port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
@@ -312,8 +332,7 @@ impl Active {
             return Ok((None, self.finish(Err(EngineError::Refused(what)))));
         }
         self.step = next;
-        self.since = Instant::now();
-        self.polled = None;
+        (self.since, self.polled) = (now, None);
         Ok((Some(self), Progress::Sent))
     }
 
@@ -333,11 +352,11 @@ impl Active {
 
     /// The repeatable GET that reads this step's result, if there is one:
     /// it is the poll (see the module doc).
-    fn fetch_code(&self) -> Option<CommandCode> {
+    fn fetch(&self) -> Option<Fetch> {
         match (&self.request, &self.step) {
-            (SlotRequest::SdoRead { .. }, Step::Wait) => Some(CommandCode::SdoGet),
+            (SlotRequest::SdoRead { .. }, Step::Wait) => Some(Fetch::Sdo),
             (SlotRequest::EepromRead { .. }, Step::Wait) | (SlotRequest::EepromWrite { .. }, Step::Verify) => {
-                Some(CommandCode::EepromGet)
+                Some(Fetch::Eeprom)
             }
             _ => None,
         }
@@ -346,10 +365,10 @@ impl Active {
     /// Sends one poll: the result's GET where there is one, else
     /// INFO_UPDATE; either answer refreshes the busy bit.
     fn poll<L: Link>(&mut self, port: &mut Port<L>, now: Instant) -> Result<(), PortError> {
-        match self.fetch_code() {
-            Some(CommandCode::SdoGet) => port.send_once(&SdoGet)?,
-            Some(CommandCode::EepromGet) => port.send_once(&EepromGet)?,
-            _ => port.send_once(&InfoUpdate)?,
+        match self.fetch() {
+            Some(Fetch::Sdo) => port.send_once(&SdoGet)?,
+            Some(Fetch::Eeprom) => port.send_once(&EepromGet)?,
+            None => port.send_once(&InfoUpdate)?,
         }
         self.polled = Some((now, port.stats().exchanges));
         Ok(())
@@ -359,7 +378,7 @@ impl Active {
     /// the poll brought it and the chip ran the GET after the operation
     /// ended (its own header says not busy): header and data.
     fn fetched<'p, L: Link>(&self, port: &'p Port<L>) -> Option<Answer<'p>> {
-        let code = self.fetch_code()?;
+        let code = self.fetch()?.code();
         let (_, after) = self.polled?;
         let a = port.previous()?;
         let fresh = port.stats().exchanges > after;
@@ -387,8 +406,7 @@ impl Active {
     fn wait<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
         // The GET poll that ran after the end is the newest word on the
         // operation; else the newest header.
-        let fetched = self.fetched(port).map(|a| a.header);
-        let status = fetched.unwrap_or(*port.status());
+        let status = self.fetched(port).map_or(*port.status(), |a| a.header);
         if status.blocking_busy() {
             if self.orphaned() && now >= self.deadline + GRACE {
                 // Overstayed: abandon it so the slot is free.
@@ -428,7 +446,7 @@ impl Active {
                 let code = SdoAbortReply::decode(&fields(&a), a.data).map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
-            (SlotRequest::SdoRead { .. }, false) => match fetched.and(self.fetched(port)) {
+            (SlotRequest::SdoRead { .. }, false) => match self.fetched(port) {
                 Some(a) => Ok(fill(&mut self.buffer, &[a.data])),
                 None => {
                     let a = port.call(&SdoGet)?;
@@ -452,7 +470,7 @@ impl Active {
             }
             (SlotRequest::EepromRead { slave, word }, false)
             | (SlotRequest::EepromWrite { slave, word, .. }, false) => {
-                let a = match fetched.and(self.fetched(port)) {
+                let a = match self.fetched(port) {
                     Some(a) => a,
                     None => port.call(&EepromGet)?,
                 };

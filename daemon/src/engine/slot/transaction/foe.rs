@@ -33,7 +33,7 @@ impl Active {
         if at < data.len() {
             let end = (at + chunk).min(data.len());
             let refused = refused(&port.call(&FoeRequest::WriteFlash { offset: self.cursor, data: &data[at..end] })?);
-            return self.started(port, refused, Step::FoeStage);
+            return self.started(port, refused, Step::FoeStage, now);
         }
         let transfer = FoeTransfer {
             slave: *slave,
@@ -44,18 +44,22 @@ impl Active {
             name: name.as_bytes(),
         };
         let refused = refused(&port.call(&FoeRequest::Download(transfer))?);
-        self.started(port, refused, Step::FoeSend)
+        self.started(port, refused, Step::FoeSend, now)
     }
 
     /// FoE read: reads the next chunk of staged flash, or finishes.
-    pub(super) fn foe_fetch_next<L: Link>(mut self, port: &mut Port<L>) -> Result<(Option<Self>, Progress), PortError> {
+    pub(super) fn foe_fetch_next<L: Link>(
+        mut self,
+        port: &mut Port<L>,
+        now: Instant,
+    ) -> Result<(Option<Self>, Progress), PortError> {
         if self.cursor >= self.total {
             let file = std::mem::take(&mut self.buffer);
             return Ok((None, self.finish(Ok(file))));
         }
         let length = (self.total - self.cursor).min(foe_chunk(port.data_size()) as u32) as u16;
         let refused = refused(&port.call(&FoeRequest::ReadFlash { offset: self.cursor, length })?);
-        self.started(port, refused, Step::FoeFetch)
+        self.started(port, refused, Step::FoeFetch, now)
     }
 
     /// Continues a multi-step transfer once the chip finished a step.
@@ -92,7 +96,7 @@ impl Active {
                 self.buffer.clear();
                 self.buffer.reserve(stored as usize);
                 self.report();
-                self.foe_fetch_next(port)
+                self.foe_fetch_next(port, now)
             }
             Step::FoeFetch => {
                 let want = ((self.total - self.cursor) as usize).min(foe_chunk(port.data_size()));
@@ -105,7 +109,7 @@ impl Active {
                 self.buffer.extend_from_slice(&got[..want]);
                 self.cursor += want as u32;
                 self.report();
-                self.foe_fetch_next(port)
+                self.foe_fetch_next(port, now)
             }
             _ => Ok((None, Progress::Done)),
         }
