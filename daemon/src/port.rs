@@ -13,8 +13,11 @@
 //!   matters goes this way.
 //! - **Once** ([`Port::send_once`]): send, and look at the answer when the
 //!   next exchange brings it ([`Port::previous`]); a lost one is asked
-//!   again later. Only for questions that cost nothing to repeat. Cyclic
-//!   FIFO data goes guarded: a lost answer would lose its input frames.
+//!   again later. Only for what costs nothing to repeat: questions, polls,
+//!   and the start of a read (`engine::slot::transaction`). Cyclic FIFO
+//!   data goes guarded: its reads are destructive (v049 PDO_DATA_FIFO_OP
+//!   takes the input frames out of the TxFIFO), so a lost answer would
+//!   lose its input frames.
 //!
 //! A packet the chip was not ready for comes back with the "not ready" check
 //! word and was not taken: it is resent as is.
@@ -136,6 +139,8 @@ pub struct Port<L> {
     abort: Option<Arc<AtomicBool>>,
     max_attempts: u32,
     status: ResponseHeader,
+    /// The exchange that brought `status`.
+    status_exchange: u64,
     stats: PortStats,
 }
 
@@ -157,6 +162,7 @@ impl<L: Link> Port<L> {
             abort: None,
             max_attempts: 16,
             status: ResponseHeader::default(),
+            status_exchange: 0,
             stats: PortStats::default(),
         }
     }
@@ -240,6 +246,13 @@ impl<L: Link> Port<L> {
         &self.status
     }
 
+    /// The exchange (as counted by [`PortStats::exchanges`]) that brought
+    /// [`Port::status`]: a header brought after the exchange of packet `n`
+    /// was built by the chip after it processed `n`.
+    pub fn status_exchange(&self) -> u64 {
+        self.status_exchange
+    }
+
     /// Check type in force.
     pub fn check(&self) -> CheckType {
         self.check
@@ -281,6 +294,7 @@ impl<L: Link> Port<L> {
         Ok(match decode_response(&self.rx, decode_as) {
             Ok(p) => {
                 self.status = p.header;
+                self.status_exchange = self.stats.exchanges;
                 Received::Answer(p.header)
             }
             Err(DecodeError::ChipNotReady) => {
@@ -358,9 +372,10 @@ impl<L: Link> Port<L> {
     /// Sends `req` once, without waiting for its answer: that arrives with
     /// the next exchange and is then [`Port::previous`] (a corrupt one is
     /// simply absent). For questions worth asking again rather than
-    /// waiting for (the emergency watch); whatever answered the packet
-    /// before is dropped.
-    pub fn send_once<'a, R: Request<'a>>(&mut self, req: &R) -> Result<(), PortError> {
+    /// waiting for (the emergency watch, polls, a read's start); whatever
+    /// answered the packet before is dropped. Returns the packet's index,
+    /// which its answer echoes.
+    pub fn send_once<'a, R: Request<'a>>(&mut self, req: &R) -> Result<u8, PortError> {
         let index = self.fresh_index();
         self.encode(req, index, self.check)?;
         loop {
@@ -370,7 +385,7 @@ impl<L: Link> Port<L> {
                 Received::Corrupt(_) => self.keep_prev(None),
             }
             self.last_sent = Some((index, R::CODE));
-            return Ok(());
+            return Ok(index);
         }
     }
 

@@ -220,13 +220,28 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     );
 }
 
+/// EEPROM double words of slave 1, one read each.
+async fn eeprom_words(m: &Master, at: &[u16]) -> Vec<[u8; 4]> {
+    let mut out = Vec::new();
+    for &w in at {
+        out.push(m.eeprom_read(1, w, None).await.unwrap());
+    }
+    out
+}
+
 #[test]
 fn recovers_from_unplug_replug_and_bit_flips() {
     let (m, sim, _serial) = start();
     // Unplug the IO slave: working-counter errors, then a network of 2.
     sim.control("unplug 2").unwrap();
     recovered_from(&m, 0, "unplug not noticed");
-    assert_eq!(m.layout().slaves.len(), 2);
+    // The recovery count rises as the recovery starts, possibly before the
+    // phase leaves RUNNING: wait for the network it ends with.
+    let t = Instant::now();
+    while m.layout().slaves.len() != 2 || m.status().phase != Phase::Running {
+        assert!(t.elapsed() < Duration::from_secs(20), "no network of 2 after the unplug: {:?}", m.status());
+        std::thread::sleep(Duration::from_millis(20));
+    }
     // Plug it back: the slave count changes, the network is rebuilt.
     let before = m.status().recoveries;
     sim.control("replug 2").unwrap();
@@ -236,7 +251,11 @@ fn recovers_from_unplug_replug_and_bit_flips() {
         std::thread::sleep(Duration::from_millis(20));
     }
     assert!(sim.with_chip(|c| c.net.slaves[2].esm.state == ecmxf_sim::net::esm::AlState::Op));
-    // Bit flips both ways: SDO results stay right.
+    // Bit flips both ways: SDO and EEPROM results stay right. Reads start
+    // with one exchange and a lost answer is decided later: each read here
+    // differs from the one before, so a result left from it would show.
+    let words: Vec<[u8; 4]> = rt().block_on(async { eeprom_words(&m, &[0x08, 0x0A, 0x0C]).await });
+    assert!(words[0] != words[1] && words[1] != words[2] && words[2] != words[0], "{words:?}");
     sim.control("seed 3").unwrap();
     sim.control("flip mosi 0.0002").unwrap();
     sim.control("flip miso 0.0002").unwrap();
@@ -245,6 +264,8 @@ fn recovers_from_unplug_replug_and_bit_flips() {
             let v = (i * 7919).to_le_bytes().to_vec();
             m.sdo_write(1, 0x6083, 0, false, v.clone(), None).await.unwrap();
             assert_eq!(m.sdo_read(1, 0x6083, 0, false, None).await.unwrap(), v);
+            let n = i as usize % words.len();
+            assert_eq!(m.eeprom_read(1, 0x08 + 2 * n as u16, None).await.unwrap(), words[n], "read {i}");
         }
     });
     sim.control("flip mosi 0").unwrap();

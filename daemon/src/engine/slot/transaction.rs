@@ -1,8 +1,19 @@
 //! Transactions on the chip's single blocking slot (v049 表三 notes): start
-//! the operation with a guarded call, watch the busy bit in whatever answers
-//! come next (cyclic ones included), then fetch the result (or, on error
-//! bit3, the SDO abort code with command 69). One at a time, taken from the
-//! fair queue (`fair.rs`). Multi-step FoE transfers live in `foe.rs`.
+//! the operation, watch the busy bit in whatever answers come next (cyclic
+//! ones included), then fetch the result (or, on error bit3, the SDO abort
+//! code with command 69). One at a time, taken from the fair queue
+//! (`fair.rs`). Multi-step FoE transfers live in `foe.rs`.
+//!
+//! Writes (SDO download, EEPROM write, state change, raw datagrams) start
+//! with a guarded call: they must run exactly once. Reads (SDO upload,
+//! EEPROM read, PDO assignment, state refresh) may run twice without harm,
+//! so they go out once and the first poll follows at once: its exchange
+//! brings the read's answer (refused or started), one exchange instead of
+//! the guard's two. When that answer is lost to a bit error, the next
+//! header the chip builds decides: busy, the read runs; not busy, it is
+//! sent again (it never ran, or it already ended: either way a second run
+//! is the answer). Never a result of the transaction before it: a GET is
+//! only believed after a start the chip confirmed.
 //!
 //! Polls cost one exchange each and say as much as they can: where the
 //! result is read with a repeatable GET (SDO_GET, EEPROM_GET: a non-blocking
@@ -100,6 +111,10 @@ pub struct Active {
     since: Instant,
     /// When the last poll went out, and the exchange count right after it.
     polled: Option<(Instant, u64)>,
+    /// A read went out once and its answer was lost: whether the chip ran
+    /// it is not known until a header built after it says (busy: it runs;
+    /// not busy: start again, a read may run twice).
+    unsure: bool,
 }
 
 /// The reply made of `parts`, in the caller's `buffer` (taken: an empty
@@ -168,6 +183,7 @@ impl Active {
             buffer: job.buffer,
             since: now,
             polled: None,
+            unsure: false,
         })
     }
 
@@ -207,15 +223,29 @@ impl Active {
             return Ok((None, Progress::Done));
         }
         let data_size = port.data_size();
+        // Reads: once, and the first poll at once (see the module doc).
+        match self.request {
+            SlotRequest::SdoRead { slave, index, subindex, complete } => {
+                let access = SdoAccess::Read { max_len: (data_size - SDO_REQ_HEADER_LEN) as u16 };
+                let timeout_us = SDO_TIMEOUT_US;
+                let req = SdoRequest { slave, index, subindex, complete_access: complete, timeout_us, access };
+                return self.read_started(port, &req, now);
+            }
+            SlotRequest::EepromRead { slave, word } => {
+                let access = EepromAccess::Read { address: word };
+                return self.read_started(
+                    port,
+                    &EepromRequest { slave: slave.into(), access, timeout_us: 100_000 },
+                    now,
+                );
+            }
+            SlotRequest::PdoConfigRead { slave, assign_index } => {
+                return self.read_started(port, &PdoConfigReq { slave, assign_index }, now);
+            }
+            SlotRequest::GetState { .. } => return self.read_started(port, &StateUpdate, now),
+            _ => {}
+        }
         let answer = refused(&match &self.request {
-            SlotRequest::SdoRead { slave, index, subindex, complete } => port.call(&SdoRequest {
-                slave: *slave,
-                index: *index,
-                subindex: *subindex,
-                complete_access: *complete,
-                timeout_us: SDO_TIMEOUT_US,
-                access: SdoAccess::Read { max_len: (data_size - SDO_REQ_HEADER_LEN) as u16 },
-            })?,
             SlotRequest::SdoWrite { slave, index, subindex, complete, data } => {
                 if data.len() + SDO_REQ_HEADER_LEN > data_size {
                     let field = "data";
@@ -231,21 +261,16 @@ impl Active {
                     access: SdoAccess::Write(data),
                 })?
             }
-            SlotRequest::EepromRead { slave, word } => port.call(&EepromRequest {
-                slave: (*slave).into(),
-                access: EepromAccess::Read { address: *word },
-                timeout_us: 100_000,
-            })?,
             SlotRequest::EepromWrite { slave, word, value } => port.call(&EepromRequest {
                 slave: (*slave).into(),
                 access: EepromAccess::Write { address: *word, value: *value },
                 timeout_us: 100_000,
             })?,
             SlotRequest::SetState { target, state } => port.call(&StateCheck { target: *target, state: *state })?,
-            SlotRequest::GetState { .. } => port.call(&StateUpdate)?,
-            SlotRequest::PdoConfigRead { slave, assign_index } => {
-                port.call(&PdoConfigReq { slave: *slave, assign_index: *assign_index })?
-            }
+            SlotRequest::SdoRead { .. }
+            | SlotRequest::EepromRead { .. }
+            | SlotRequest::PdoConfigRead { .. }
+            | SlotRequest::GetState { .. } => unreachable!("reads start in read_started"),
             SlotRequest::Raw { head, data } => {
                 if data.len() + RAW_HEADER_LEN > data_size {
                     let reason = format!("{} bytes do not fit one {data_size}-byte data section", data.len());
@@ -316,6 +341,35 @@ impl Active {
         self.started(port, answer, Step::Wait, now)
     }
 
+    /// Starts a read (a blocking command that may run twice without harm)
+    /// with one exchange instead of a guarded call: `req` once, then the
+    /// first poll at once, whose exchange brings `req`'s answer. Refused:
+    /// the error. Lost (corrupt, or not the echo of `req`): `unsure`, and
+    /// the wait decides.
+    fn read_started<'a, L: Link, R: ecmxf_wire::Request<'a>>(
+        mut self,
+        port: &mut Port<L>,
+        req: &R,
+        now: Instant,
+    ) -> Result<(Option<Self>, Progress), PortError> {
+        let index = port.send_once(req)?;
+        self.step = Step::Wait;
+        self.since = now;
+        self.poll(port, now)?;
+        match port.previous() {
+            Some(a) if a.header.index == index && a.header.code == R::CODE && !a.header.is_nop() => {
+                if refused(&a) {
+                    port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+                    let what = self.describe();
+                    return Ok((None, self.finish(Err(EngineError::Refused(what)))));
+                }
+                self.unsure = false;
+            }
+            _ => self.unsure = true,
+        }
+        Ok((Some(self), Progress::Sent))
+    }
+
     /// After a blocking command went out: refused (its answer has the command
     /// error bit), or
     /// now waiting in `next`.
@@ -369,7 +423,7 @@ impl Active {
             Some(Fetch::Sdo) => port.send_once(&SdoGet)?,
             Some(Fetch::Eeprom) => port.send_once(&EepromGet)?,
             None => port.send_once(&InfoUpdate)?,
-        }
+        };
         self.polled = Some((now, port.stats().exchanges));
         Ok(())
     }
@@ -404,6 +458,24 @@ impl Active {
     }
 
     fn wait<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
+        if self.unsure {
+            // Only a header the chip built after the first poll (so after
+            // the read, had it run) tells: busy, it runs; else run it again.
+            let after = self.polled.map_or(u64::MAX, |(_, n)| n);
+            if port.status_exchange() <= after {
+                if now >= self.next_poll() {
+                    self.poll(port, now)?;
+                    return Ok((Some(self), Progress::Sent));
+                }
+                return Ok((Some(self), Progress::Waiting));
+            }
+            if !port.status().blocking_busy() {
+                self.step = Step::Start;
+                self.unsure = false;
+                return self.start(port, now);
+            }
+            self.unsure = false;
+        }
         // The GET poll that ran after the end is the newest word on the
         // operation; else the newest header.
         let status = self.fetched(port).map_or(*port.status(), |a| a.header);
