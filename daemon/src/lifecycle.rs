@@ -123,6 +123,10 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     let (master, _sim) = Master::from_config(config)?;
     let master = Arc::new(master);
     let ctx = Context::new(Arc::clone(&master), &api, nix::unistd::getuid().as_raw());
+    let layout_builder = tokio::spawn({
+        let ctx = Arc::clone(&ctx);
+        async move { ctx.image.keep_built(Arc::clone(&ctx.master)).await }
+    });
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
     if let Some(l) = metrics_listener {
         let sources =
@@ -158,6 +162,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
                     Err(e) => DaemonError::Task(format!("the API server: {e}")),
                 };
                 notifier.send(&format!("STOPPING=1\nSTATUS=failed: {why}"));
+                layout_builder.abort();
                 let m = Arc::clone(&master);
                 tokio::task::spawn_blocking(move || m.stop()).await.map_err(|e| DaemonError::Task(e.to_string()))?;
                 return Err(why);
@@ -195,6 +200,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         move || master.stop()
     });
     let _ = stop_api.send(());
+    layout_builder.abort();
     if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
         server.abort();
     }

@@ -149,3 +149,62 @@ fn an_output_only_network_without_coe_runs_answers_and_its_outputs_reach_the_sla
         });
     }
 }
+
+/// 48 slaves, 40 of them laid out from their SII (a Beckhoff EL2889 and an
+/// EasyCAT board: about a hundred EEPROM reads each), asked for by callers
+/// that give up after 100 ms, again and again: the daemon builds the
+/// layout once, on its own, and the callers get it as soon as it exists
+/// (issue 26: built inside a caller's deadline, it never finished).
+#[test]
+fn a_48_slave_layout_is_built_once_by_the_daemon_whatever_callers_give_up() {
+    let (Some(el2889), Some(easycat)) =
+        (ecmxf_e2e::fixture("sii_beckhoff_el2889.bin"), ecmxf_e2e::fixture("sii_abt_easycat_32x32.bin"))
+    else {
+        return;
+    };
+    run(async move {
+        let dir = ecmxf_e2e::temp_dir("layout-48");
+        let network = dir.join("net.toml");
+        let mut net = String::from("version = 1\n");
+        for _ in 0..8 {
+            for slave in [
+                "profile = \"digital-io\"".to_string(),
+                format!("sii = \"{}\"", el2889.display()),
+                "profile = \"digital-io\"".to_string(),
+                format!("sii = \"{}\"", el2889.display()),
+                format!("sii = \"{}\"", easycat.display()),
+                "profile = \"coupler\"".to_string(),
+            ] {
+                net.push_str(&format!("[[slave]]\n{slave}\n"));
+            }
+        }
+        std::fs::write(&network, net).unwrap();
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
+        let config = ecmxf_e2e::config_with_cycle(&link, "sync0_us = 1000\n", "");
+        let mut d = Daemon::binary_with_config(&config);
+        let ch = d.connect().await;
+        let running = std::time::Instant::now();
+        let mut pd = pb::process_data_client::ProcessDataClient::new(ch);
+        let mut gave_up = 0;
+        let image = loop {
+            let mut r = tonic::Request::new(pb::GetLayoutRequest {});
+            r.set_timeout(Duration::from_millis(100));
+            match pd.get_layout(r).await {
+                Ok(image) => break image.into_inner(),
+                Err(e) => {
+                    assert_eq!(e.code(), tonic::Code::DeadlineExceeded, "{e:?}");
+                    gave_up += 1;
+                }
+            }
+            let waited = running.elapsed();
+            assert!(waited < Duration::from_secs(20), "no layout {waited:?} after OP, callers gave up {gave_up} times");
+        };
+        assert!(gave_up > 0, "the layout was there before the first call: this test would show nothing");
+        let slaves: std::collections::BTreeSet<u32> = image.entries.iter().map(|e| e.slave).collect();
+        assert_eq!(slaves.len(), 40, "every slave with process data: {slaves:?}");
+        let named = image.entries.iter().filter(|e| e.slave == 46 && !e.label.is_empty()).count();
+        assert!(named > 0, "the EasyCAT's entries are named from its SII strings");
+        assert_eq!(d.log().matches("process image laid out").count(), 1, "{}", d.log());
+        eprintln!("48 slaves laid out {:?} after OP ({gave_up} callers gave up meanwhile)", running.elapsed());
+    });
+}

@@ -726,3 +726,67 @@ fn a_csp_sine_and_a_counter_stream_to_two_slaves_at_once() {
         );
     });
 }
+
+/// `request` with a deadline (`grpc-timeout`).
+fn within<T>(request: T, deadline: Duration) -> tonic::Request<T> {
+    let mut r = tonic::Request::new(request);
+    r.set_timeout(deadline);
+    r
+}
+
+/// The daemon lays out the process image itself once the network runs, as
+/// its own client taking every other turn of the blocking slot, and keeps
+/// it across a re-init that finds the same network (issue 26: built inside
+/// the first caller's deadline, it was thrown away call after call while
+/// SDO clients kept the slot busy, and writes by name failed for seconds).
+#[test]
+fn writes_by_name_succeed_from_the_start_while_16_sdo_readers_keep_the_slot_busy() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let stop = std::sync::Arc::new(std::sync::atomic::AtomicBool::new(false));
+        let readers: Vec<_> = (0..16)
+            .map(|_| {
+                let (ch, stop) = (ch.clone(), stop.clone());
+                tokio::spawn(async move {
+                    let mut sdo = pb::sdo_client::SdoClient::new(ch);
+                    let mut reads = 0u32;
+                    while !stop.load(std::sync::atomic::Ordering::Relaxed) {
+                        let r = pb::SdoUploadRequest { slave: 1, index: 0x1018, subindex: 1, ..Default::default() };
+                        match sdo.upload(r).await {
+                            Ok(_) => reads += 1,
+                            // The re-init below: the engine is recovering.
+                            Err(e) if e.code() == Code::Unavailable => {
+                                tokio::time::sleep(Duration::from_millis(10)).await
+                            }
+                            Err(e) => panic!("{e:?}"),
+                        }
+                    }
+                    reads
+                })
+            })
+            .collect();
+        let mut pd = ProcessDataClient::new(ch.clone());
+        let second = Duration::from_secs(1);
+        let lease =
+            pd.acquire_lease(within(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 0 }, second)).await.unwrap();
+        let lease = lease.into_inner().id;
+        for i in 0..10u64 {
+            let write = by_entry("2.0x7000:01", Kind::Unsigned(i));
+            let r = pd.write_outputs(within(
+                pb::WriteOutputsRequest { lease_id: lease.clone(), writes: vec![write] },
+                second,
+            ));
+            r.await.unwrap_or_else(|e| panic!("write {i} with a 1 s deadline: {e:?}"));
+        }
+        // A re-init that finds the same network keeps the layout: answered
+        // at once, however busy the slot.
+        MasterClient::new(ch.clone()).reinit(pb::ReinitRequest {}).await.unwrap();
+        let layout = pd.get_layout(within(pb::GetLayoutRequest {}, Duration::from_millis(100))).await;
+        assert_eq!(layout.unwrap().into_inner().entries.iter().filter(|e| e.slave == 2).count(), 2);
+        stop.store(true, std::sync::atomic::Ordering::Relaxed);
+        for r in readers {
+            assert!(r.await.unwrap() > 0, "every reader got its turns");
+        }
+    });
+}

@@ -2,19 +2,37 @@
 //! name, its place in the output or input image in bits, and a type. Built
 //! from each slave's assigned PDOs from the best source it has
 //! ([`crate::master::pdos`]: CoE, else SII, else ESI) and the offsets
-//! bring-up found; rebuilt when a new configuration is applied. Also the
-//! bit-level get/put of entry values.
+//! bring-up found. Also the bit-level get/put of entry values.
+//!
+//! The daemon builds it, not a caller ([`ImageCache::keep_built`]): once
+//! the network runs after each bring-up, as its own client on the blocking
+//! slot (every other turn, see `engine::slot::DAEMON_CLIENT`), several
+//! slaves at a time, and keeps it across recoveries that find the same
+//! network. A call that needs it before it is ready waits for that one
+//! build; its deadline can end the wait, never the work (issue 26: with
+//! the build inside the first caller's deadline, a busy daemon threw it
+//! away call after call).
 
 use std::collections::HashMap;
 use std::sync::Arc;
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::time::Instant;
 
 use ecmxf_proto::v1 as pb;
+use tokio::sync::{Notify, watch};
 
 use super::convert::{decode_value, pb_type, type_for_bits};
 use super::objects::{entry_name, lookup};
-use crate::engine::error::EngineError;
-use crate::master::Master;
+use crate::engine::bringup::SlaveSummary;
+use crate::engine::error::{EngineError, NotRunning};
+use crate::engine::telemetry::Phase;
 use crate::master::pdos::{PdoDescription, SlavePdos};
+use crate::master::{DAEMON_CLIENT, Master, as_client};
+
+/// Slaves whose PDOs are read at once: each read waits for the chip, so
+/// with a few in flight the next request is always queued when the slot
+/// frees.
+const BUILDERS: usize = 4;
 
 /// One entry.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -58,23 +76,19 @@ pub struct Image {
 }
 
 impl Image {
-    /// Reads the PDOs of every slave with process data.
-    pub async fn build(master: &Master) -> Result<Self, EngineError> {
-        let generation = master.status().config_generation;
-        let layout = master.layout();
+    /// Reads the PDOs of every slave with process data, [`BUILDERS`] slaves
+    /// at a time, and lays them out as bring-up placed them (`key`).
+    pub async fn build(master: &Arc<Master>, key: &LayoutKey) -> Result<Self, EngineError> {
         let mut image = Image {
-            output_bytes: layout.rx_size as u32,
-            input_bytes: layout.tx_size as u32,
-            generation,
+            output_bytes: key.rx_size as u32,
+            input_bytes: key.tx_size as u32,
+            generation: key.generation,
             cycle_us: master.config().cycle.sync0_us,
             ..Image::default()
         };
-        for (i, s) in layout.slaves.iter().enumerate() {
-            let pdos = master.slave_pdos(i as u8, s.rx_bytes, s.tx_bytes).await?;
-            image.mappings.push(Arc::new(pdos));
-        }
+        image.mappings = read_all_pdos(master, &key.slaves).await?;
         for output in [true, false] {
-            for (i, s) in layout.slaves.iter().enumerate() {
+            for (i, s) in key.slaves.iter().enumerate() {
                 let (bytes, offset) = if output { (s.rx_bytes, s.rx_offset) } else { (s.tx_bytes, s.tx_offset) };
                 if bytes == 0 {
                     continue;
@@ -213,23 +227,141 @@ pub fn entry_value(e: &Entry, image: &[u8]) -> pb::Value {
     decode_value(e.data_type, &raw).ok().flatten().unwrap_or(pb::Value { kind: Some(pb::value::Kind::Raw(raw)) })
 }
 
-/// A shared, lazily built image (rebuilt when the configuration changes).
-#[derive(Debug, Default)]
+/// Every slave's PDOs, in ring order: [`BUILDERS`] tasks take the next
+/// slave until none is left; the first error ends the build (the tasks
+/// still running are dropped with it).
+async fn read_all_pdos(master: &Arc<Master>, slaves: &[SlaveSummary]) -> Result<Vec<Arc<SlavePdos>>, EngineError> {
+    let next = Arc::new(AtomicUsize::new(0));
+    let sizes: Arc<[(usize, usize)]> = slaves.iter().map(|s| (s.rx_bytes, s.tx_bytes)).collect();
+    let mut tasks = tokio::task::JoinSet::new();
+    for _ in 0..BUILDERS.min(slaves.len()) {
+        let (master, next, sizes) = (Arc::clone(master), Arc::clone(&next), Arc::clone(&sizes));
+        tasks.spawn(as_client(DAEMON_CLIENT, async move {
+            let mut done = Vec::new();
+            loop {
+                let i = next.fetch_add(1, Ordering::Relaxed);
+                let Some(&(rx, tx)) = sizes.get(i) else { return Ok(done) };
+                done.push((i, master.slave_pdos(i as u8, rx, tx).await?));
+            }
+        }));
+    }
+    let mut out: Vec<Option<Arc<SlavePdos>>> = vec![None; slaves.len()];
+    while let Some(joined) = tasks.join_next().await {
+        let done = joined.map_err(|e| EngineError::Failed(format!("reading the PDOs: {e}")))??;
+        for (i, pdos) in done {
+            out[i] = Some(Arc::new(pdos));
+        }
+    }
+    Ok(out.into_iter().map(|p| p.unwrap_or_else(|| Arc::new(SlavePdos::none("not read")))).collect())
+}
+
+/// What an image is valid for: the configuration in force and the network
+/// bring-up found (identities, process data sizes and offsets). A recovery
+/// that finds the same keeps the image.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct LayoutKey {
+    generation: u64,
+    slaves: Vec<SlaveSummary>,
+    rx_size: usize,
+    tx_size: usize,
+}
+
+impl LayoutKey {
+    /// The master's now.
+    pub fn of(master: &Master) -> Self {
+        let generation = master.status().config_generation;
+        let layout = master.layout();
+        Self { generation, slaves: layout.slaves, rx_size: layout.rx_size, tx_size: layout.tx_size }
+    }
+}
+
+/// One build's outcome.
+#[derive(Clone, Debug)]
+struct Built {
+    key: LayoutKey,
+    result: Result<Arc<Image>, EngineError>,
+}
+
+/// The image of the network in force, kept built by the daemon.
+#[derive(Debug)]
 pub struct ImageCache {
-    image: tokio::sync::Mutex<Option<Arc<Image>>>,
+    built: watch::Sender<Option<Built>>,
+    /// A caller found a failed build and wants another try.
+    wanted: Notify,
+}
+
+impl Default for ImageCache {
+    fn default() -> Self {
+        Self { built: watch::Sender::new(None), wanted: Notify::new() }
+    }
 }
 
 impl ImageCache {
-    /// The image for the configuration in force.
+    /// The image for the network in force: at once when built; otherwise
+    /// after the build under way (or a new try, when the last one failed)
+    /// ends. A network that does not run and has no image is an error at
+    /// once: nothing would build one.
     pub async fn get(&self, master: &Master) -> Result<Arc<Image>, EngineError> {
-        let mut slot = self.image.lock().await;
-        let generation = master.status().config_generation;
-        if let Some(i) = slot.as_ref().filter(|i| i.generation == generation) {
-            return Ok(Arc::clone(i));
+        let mut built = self.built.subscribe();
+        let mut asked = false;
+        loop {
+            let key = LayoutKey::of(master);
+            match built.borrow_and_update().as_ref().filter(|b| b.key == key).map(|b| &b.result) {
+                Some(Ok(image)) => return Ok(Arc::clone(image)),
+                Some(Err(e)) if asked => return Err(e.clone()),
+                _ => {}
+            }
+            let phase = master.status().phase;
+            if phase != Phase::Running {
+                return Err(EngineError::Unavailable(NotRunning::Phase { phase, last_error: master.last_error() }));
+            }
+            if !asked {
+                self.wanted.notify_one();
+                asked = true;
+            }
+            if built.changed().await.is_err() {
+                return Err(EngineError::Unavailable(NotRunning::Stopped));
+            }
         }
-        let image = Arc::new(Image::build(master).await?);
-        *slot = Some(Arc::clone(&image));
-        Ok(image)
+    }
+
+    /// The daemon's builder, for as long as it runs: builds the image each
+    /// time the network runs with a layout it has none for, and again after
+    /// a failed build once the engine's phase, state or configuration
+    /// changes or a caller asks. Waits on the engine's status changes (not
+    /// on its periodic snapshots) and on callers; idle otherwise.
+    pub async fn keep_built(&self, master: Arc<Master>) {
+        let mut status = master.watch_status();
+        let mut just_failed = false;
+        loop {
+            let seen = status.borrow_and_update().key();
+            if seen.0 == Phase::Running && !just_failed {
+                let key = LayoutKey::of(&master);
+                let have = self.built.borrow().as_ref().is_some_and(|b| b.key == key && b.result.is_ok());
+                if !have {
+                    let started = Instant::now();
+                    let result = Image::build(&master, &key).await.map(Arc::new);
+                    let took_ms = started.elapsed().as_millis() as u64;
+                    match &result {
+                        Ok(i) => tracing::info!(
+                            slaves = key.slaves.len(),
+                            entries = i.entries.len(),
+                            took_ms,
+                            "process image laid out"
+                        ),
+                        Err(e) => tracing::warn!(took_ms, "process image not laid out: {e}"),
+                    }
+                    just_failed = result.is_err();
+                    self.built.send_replace(Some(Built { key, result }));
+                    continue;
+                }
+            }
+            tokio::select! {
+                r = status.wait_for(|s| s.key() != seen) => if r.is_err() { return },
+                () = self.wanted.notified() => {}
+            }
+            just_failed = false;
+        }
     }
 }
 

@@ -63,7 +63,7 @@ pub struct InputFrame {
     pub data: Vec<u8>,
 }
 
-pub use crate::engine::slot::as_client;
+pub use crate::engine::slot::{DAEMON_CLIENT, as_client};
 
 /// [`Master::verdict`]: the health, and the input age it was judged on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -192,6 +192,8 @@ pub struct Master {
     pub default_timeout: Duration,
     /// The configured ESI files, parsed.
     esi: esi::EsiLibrary,
+    /// SII descriptions by slave identity.
+    sii_cache: sii::SiiCache,
 }
 
 /// Opens the link the configuration names. For the in-process simulator,
@@ -319,6 +321,7 @@ impl Master {
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
             esi: esi::EsiLibrary::default(),
+            sii_cache: sii::SiiCache::default(),
         }
     }
 

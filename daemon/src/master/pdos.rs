@@ -124,7 +124,7 @@ impl Master {
                 // Without an ESI, the SII's PDO categories (when it has
                 // them) are what names and types the entries.
                 if esi_device.is_none() {
-                    match self.sii(slave, PDO_CATEGORIES).await {
+                    match self.sii_described(slave, PDO_CATEGORIES).await {
                         Ok(image) => {
                             complete(&mut rx, &from_sii_all(&image, &image.rx_pdos));
                             complete(&mut tx, &from_sii_all(&image, &image.tx_pdos));
@@ -138,7 +138,7 @@ impl Master {
             Err(e) if source_lacks(&e) => notes.push(format!("CoE: {e}")),
             Err(e) => return Err(e),
         }
-        match self.sii(slave, PDO_CATEGORIES).await {
+        match self.sii_described(slave, PDO_CATEGORIES).await {
             Ok(image) if !image.rx_pdos.is_empty() || !image.tx_pdos.is_empty() => {
                 let (rx, tx) = (from_sii(&image, &image.rx_pdos), from_sii(&image, &image.tx_pdos));
                 let note = notes.join("; ");

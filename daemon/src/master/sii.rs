@@ -2,15 +2,51 @@
 //! ETG.2010): the 64-word fixed area, then the category headers, each
 //! category's body read only when the caller wants it. A full image takes
 //! seconds over the chip's two-words-per-request EEPROM_REQ (cmd 38); the
-//! PDO categories of a terminal take a few dozen requests.
+//! PDO categories of a terminal take a hundred or more requests, so a
+//! reader that wants only some categories skips the fixed area but for its
+//! size word, and what one slave's categories say is kept for every slave
+//! of the same identity ([`SiiCache`]).
+
+use std::collections::HashMap;
+use std::sync::{Arc, Mutex};
 
 use ecmxf_devices::sii::{Sii, category};
+use tokio::sync::OnceCell;
 
 use super::Master;
 use crate::engine::error::EngineError;
 
 /// Where the category area starts (word 0x40).
 const CATEGORIES: u16 = 0x40;
+/// The fixed area's EEPROM size word (ETG.1000.6 table 2: word 0x3E, size
+/// in KiB less one); 0x3F, the version, comes in the same request.
+const SIZE_WORD: u16 = 0x3E;
+
+/// (vendor id, product code, revision) as bring-up read them.
+type Identity = (u32, u32, u32);
+
+/// Parsed SII categories by slave identity. Slaves of one vendor, product
+/// and revision carry the same description (the ESI they were programmed
+/// from; a configuration tool reads one ESI for all of them too), so a
+/// line of sixteen identical terminals costs one read, not sixteen. Only
+/// the category area is kept: nothing per device (serial, alias, station
+/// configuration) is. Forgotten whenever the daemon writes an EEPROM.
+#[derive(Debug, Default)]
+pub struct SiiCache {
+    by_identity: Mutex<HashMap<Identity, Arc<OnceCell<Arc<Sii>>>>>,
+}
+
+impl SiiCache {
+    fn cell(&self, identity: Identity) -> Arc<OnceCell<Arc<Sii>>> {
+        let mut map = self.by_identity.lock().unwrap_or_else(|e| e.into_inner());
+        Arc::clone(map.entry(identity).or_default())
+    }
+
+    /// Forgets every description (an EEPROM was written).
+    pub fn forget(&self) {
+        self.by_identity.lock().unwrap_or_else(|e| e.into_inner()).clear();
+    }
+}
 
 /// Which category bodies to read.
 #[derive(Clone, Copy, Debug)]
@@ -36,8 +72,17 @@ impl Master {
     /// runs past the EEPROM's own size (word 0x3E: (n + 1) x 128 bytes) is a
     /// corrupt image, an error naming its offset: never read on into
     /// whatever the EEPROM answers there.
+    /// With [`Categories::Only`] the fixed area is not wanted: only its size
+    /// word is read (the rest stays 0), one request instead of 32.
     pub async fn sii_words(&self, slave: u8, which: Categories<'_>) -> Result<Vec<u16>, EngineError> {
-        let mut words = self.eeprom_read_words(slave, 0, CATEGORIES, None).await?;
+        let mut words = match which {
+            Categories::All => self.eeprom_read_words(slave, 0, CATEGORIES, None).await?,
+            Categories::Only(_) => {
+                let mut fixed = vec![0; usize::from(SIZE_WORD)];
+                fixed.extend(self.eeprom_read_words(slave, SIZE_WORD, CATEGORIES - SIZE_WORD, None).await?);
+                fixed
+            }
+        };
         let size = words.get(0x3E).map_or(0x1_0000, |&n| (u32::from(n) + 1) * 64).min(0x1_0000);
         let mut at = u32::from(CATEGORIES);
         while at + 2 <= size {
@@ -72,5 +117,20 @@ impl Master {
         let words = self.sii_words(slave, which).await?;
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         Sii::parse(&bytes).map_err(|e| EngineError::BadDeviceData(format!("slave {slave}'s SII: {e}")))
+    }
+
+    /// The categories `which` asks for, read once per slave identity (see
+    /// [`SiiCache`]): `which` must be the same set for every caller of
+    /// this, as only the PDO description's reader is. A slave whose
+    /// identity bring-up did not learn (all zero) is always read.
+    pub async fn sii_described(&self, slave: u8, which: Categories<'_>) -> Result<Arc<Sii>, EngineError> {
+        let identity = self.layout().slaves.get(usize::from(slave)).map(|s| (s.vendor_id, s.product_code, s.revision));
+        match identity.filter(|&id| id != (0, 0, 0)) {
+            Some(id) => {
+                let cell = self.sii_cache.cell(id);
+                cell.get_or_try_init(|| async { self.sii(slave, which).await.map(Arc::new) }).await.cloned()
+            }
+            None => self.sii(slave, which).await.map(Arc::new),
+        }
     }
 }

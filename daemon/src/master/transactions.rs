@@ -116,7 +116,10 @@ impl Master {
         value: u16,
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
-        self.request(SlotRequest::EepromWrite { slave, word, value }, timeout).await.map(|_| ())
+        let written = self.request(SlotRequest::EepromWrite { slave, word, value }, timeout).await.map(|_| ());
+        // What was read of this EEPROM (or one of its identity) may be old.
+        self.sii_cache.forget();
+        written
     }
 
     /// Requests a state.

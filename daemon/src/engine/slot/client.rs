@@ -8,6 +8,13 @@ tokio::task_local! {
     static CLIENT: u64;
 }
 
+/// The daemon's own work (the process-image layout it builds after each
+/// bring-up): its line gets every other turn whatever the number of busy
+/// clients, so work no caller's deadline bounds is done in a bounded time
+/// and still leaves clients half of the slot. Even, so no API client id
+/// (always odd, see `api::auth`) can be it.
+pub const DAEMON_CLIENT: u64 = u64::MAX - 1;
+
 /// Runs `work` on behalf of client `id` (non-zero: a connection, a peer):
 /// its requests to the chip's blocking slot take turns with other clients'
 /// instead of queuing behind them. Requests made outside any client share

@@ -5,10 +5,13 @@
 //! two hundred (the vendor driver's one global mutex gives no such promise).
 //!
 //! Clients are numbered by the API layer (see [`super::as_client`]); requests
-//! made outside any client share line 0.
+//! made outside any client share line 0. The daemon's own work
+//! ([`super::client::DAEMON_CLIENT`]) has a line of its own that takes
+//! every other turn while clients are busy.
 
 use std::collections::VecDeque;
 
+use super::client::DAEMON_CLIENT;
 use super::request::Job;
 
 /// Per-client lines served round-robin.
@@ -20,6 +23,9 @@ pub struct FairQueue {
     /// The line whose turn is next.
     turn: usize,
     len: usize,
+    /// The daemon's own line, and whether it goes next.
+    daemon: VecDeque<Job>,
+    daemon_next: bool,
 }
 
 impl FairQueue {
@@ -30,6 +36,10 @@ impl FairQueue {
     pub fn push(&mut self, job: Job) {
         let client = job.client;
         self.len += 1;
+        if client == DAEMON_CLIENT {
+            self.daemon.push_back(job);
+            return;
+        }
         if let Some((_, line)) = self.lines.iter_mut().find(|(c, _)| *c == client) {
             line.push_back(job);
             return;
@@ -47,6 +57,13 @@ impl FairQueue {
         if self.len == 0 {
             return None;
         }
+        let clients_waiting = self.len > self.daemon.len();
+        if !self.daemon.is_empty() && (self.daemon_next || !clients_waiting) {
+            self.daemon_next = false;
+            self.len -= 1;
+            return self.daemon.pop_front();
+        }
+        self.daemon_next = true;
         for _ in 0..self.lines.len() {
             let i = self.turn % self.lines.len();
             self.turn = i + 1;
@@ -71,7 +88,7 @@ impl FairQueue {
     /// Every waiting job, in no particular order (for failing them all).
     pub fn drain(&mut self) -> impl Iterator<Item = Job> + '_ {
         self.len = 0;
-        self.lines.iter_mut().flat_map(|(_, line)| line.drain(..))
+        self.daemon.drain(..).chain(self.lines.iter_mut().flat_map(|(_, line)| line.drain(..)))
     }
 
     fn forget_empty_lines(&mut self) {
@@ -121,6 +138,28 @@ mod tests {
         q.push(Job { client: 4, ..job(40) });
         let order: Vec<u8> = std::iter::from_fn(|| q.pop()).map(slave).collect();
         assert_eq!(order, [40, 11, 12]);
+    }
+
+    #[test]
+    fn the_daemon_takes_every_other_turn_however_many_clients_wait() {
+        let mut q = FairQueue::default();
+        for client in [1, 3, 5] {
+            for n in 0..3 {
+                q.push(Job { client, ..job(client as u8 * 10 + n) });
+            }
+        }
+        for n in 0..4 {
+            q.push(Job { client: DAEMON_CLIENT, ..job(200 + n) });
+        }
+        let order: Vec<u8> = std::iter::from_fn(|| q.pop()).map(slave).collect();
+        // With clients waiting, every other job is the daemon's until its
+        // line is empty; alone, its jobs run back to back.
+        assert_eq!(order, [10, 200, 30, 201, 50, 202, 11, 203, 31, 51, 12, 32, 52]);
+        q.push(Job { client: DAEMON_CLIENT, ..job(1) });
+        q.push(Job { client: DAEMON_CLIENT, ..job(2) });
+        assert_eq!(q.len(), 2);
+        assert_eq!(q.drain().count(), 2);
+        assert!(q.pop().is_none());
     }
 
     #[test]

@@ -17,7 +17,7 @@ mod fair;
 pub mod request;
 mod transaction;
 
-pub use client::{as_client, current_client};
+pub use client::{DAEMON_CLIENT, as_client, current_client};
 pub(super) use fair::FairQueue;
 pub use request::{Immediate, Job, SlotRequest, TransferProgress};
 pub(super) use transaction::{Active, Progress};
