@@ -7,9 +7,9 @@
 //! Writes (SDO download, EEPROM write, state change, raw datagrams) start
 //! with a guarded call: they must run exactly once. Reads (SDO upload,
 //! EEPROM read, PDO assignment, state refresh) may run twice without harm,
-//! so they go out once and the first poll follows at once: its exchange
-//! brings the read's answer (refused or started), one exchange instead of
-//! the guard's two. When that answer is lost to a bit error, the next
+//! so they go out once, and whichever exchange comes next (the first poll,
+//! at once when nothing else is due) brings the read's answer (refused or
+//! started): one exchange instead of the guard's two. When that answer is lost to a bit error, the next
 //! header the chip builds decides: busy, the read runs; not busy, it is
 //! sent again (it never ran, or it already ended: either way a second run
 //! is the answer). Never a result of the transaction before it: a GET is
@@ -111,10 +111,13 @@ pub struct Active {
     since: Instant,
     /// When the last poll went out, and the exchange count right after it.
     polled: Option<(Instant, u64)>,
-    /// A read went out once and its answer was lost: whether the chip ran
-    /// it is not known until a header built after it says (busy: it runs;
-    /// not busy: start again, a read may run twice).
-    unsure: bool,
+    /// A read went out once (index, code, the exchange count right after
+    /// it) and its answer has not been looked at yet.
+    sent_read: Option<(u8, CommandCode, u64)>,
+    /// A read's answer was lost: whether the chip ran it is not known until
+    /// a header brought after this exchange says (busy: it runs; not busy:
+    /// start again, a read may run twice).
+    unsure_after: Option<u64>,
 }
 
 /// The reply made of `parts`, in the caller's `buffer` (taken: an empty
@@ -183,7 +186,8 @@ impl Active {
             buffer: job.buffer,
             since: now,
             polled: None,
-            unsure: false,
+            sent_read: None,
+            unsure_after: None,
         })
     }
 
@@ -342,10 +346,13 @@ impl Active {
     }
 
     /// Starts a read (a blocking command that may run twice without harm)
-    /// with one exchange instead of a guarded call: `req` once, then the
-    /// first poll at once, whose exchange brings `req`'s answer. Refused:
-    /// the error. Lost (corrupt, or not the echo of `req`): `unsure`, and
-    /// the wait decides.
+    /// with one exchange instead of a guarded call: `req` once. The next
+    /// exchange, whichever it is (the first poll, a FIFO call, the
+    /// emergency question), brings its answer; the next step looks at it
+    /// ([`Active::read_answered`]). A step of its own, so that the engine
+    /// looks at what the read's own exchange brought (the answer to the
+    /// packet before it: an emergency question's) before another exchange
+    /// replaces it.
     fn read_started<'a, L: Link, R: ecmxf_wire::Request<'a>>(
         mut self,
         port: &mut Port<L>,
@@ -354,20 +361,36 @@ impl Active {
     ) -> Result<(Option<Self>, Progress), PortError> {
         let index = port.send_once(req)?;
         self.step = Step::Wait;
-        self.since = now;
-        self.poll(port, now)?;
+        (self.since, self.polled) = (now, None);
+        self.sent_read = Some((index, R::CODE, port.stats().exchanges));
+        Ok((Some(self), Progress::Sent))
+    }
+
+    /// The answer to a read sent once: brought by the exchange after it
+    /// (the first poll, sent now when no exchange came since). Refused: the
+    /// error. Lost (corrupt, or replaced by a later answer: not the echo of
+    /// the read): decided later (`unsure_after`). `Err(self)` to go on.
+    fn read_answered<L: Link>(
+        mut self,
+        port: &mut Port<L>,
+        now: Instant,
+    ) -> Result<Result<(Option<Self>, Progress), Self>, PortError> {
+        let Some((index, code, at)) = self.sent_read.take() else { return Ok(Err(self)) };
+        let polled_now = port.stats().exchanges == at;
+        if polled_now {
+            self.poll(port, now)?;
+        }
         match port.previous() {
-            Some(a) if a.header.index == index && a.header.code == R::CODE && !a.header.is_nop() => {
+            Some(a) if a.header.index == index && a.header.code == code && !a.header.is_nop() => {
                 if refused(&a) {
                     port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
                     let what = self.describe();
-                    return Ok((None, self.finish(Err(EngineError::Refused(what)))));
+                    return Ok(Ok((None, self.finish(Err(EngineError::Refused(what))))));
                 }
-                self.unsure = false;
             }
-            _ => self.unsure = true,
+            _ => self.unsure_after = Some(at + 1),
         }
-        Ok((Some(self), Progress::Sent))
+        if polled_now { Ok(Ok((Some(self), Progress::Sent))) } else { Ok(Err(self)) }
     }
 
     /// After a blocking command went out: refused (its answer has the command
@@ -457,25 +480,31 @@ impl Active {
         }
     }
 
-    fn wait<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
-        if self.unsure {
-            // Only a header the chip built after the first poll (so after
-            // the read, had it run) tells: busy, it runs; else run it again.
-            let after = self.polled.map_or(u64::MAX, |(_, n)| n);
+    fn wait<L: Link>(self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
+        let mut this = match self.read_answered(port, now)? {
+            Ok(done) => return Ok(done),
+            Err(this) => this,
+        };
+        if let Some(after) = this.unsure_after {
+            // Only a header built after the chip took the packet that
+            // followed the read tells: busy, it runs; else run it again.
             if port.status_exchange() <= after {
-                if now >= self.next_poll() {
-                    self.poll(port, now)?;
-                    return Ok((Some(self), Progress::Sent));
+                if now >= this.next_poll() {
+                    this.poll(port, now)?;
+                    return Ok((Some(this), Progress::Sent));
                 }
-                return Ok((Some(self), Progress::Waiting));
+                return Ok((Some(this), Progress::Waiting));
             }
+            this.unsure_after = None;
             if !port.status().blocking_busy() {
-                self.step = Step::Start;
-                self.unsure = false;
-                return self.start(port, now);
+                this.step = Step::Start;
+                return this.start(port, now);
             }
-            self.unsure = false;
         }
+        this.waited(port, now)
+    }
+
+    fn waited<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
         // The GET poll that ran after the end is the newest word on the
         // operation; else the newest header.
         let status = self.fetched(port).map_or(*port.status(), |a| a.header);
