@@ -49,6 +49,26 @@ pub enum DaemonError {
     EngineStopped(Option<String>),
     /// The embedding program could not listen for signals (SIGTERM, SIGHUP).
     Signals(std::io::Error),
+    /// The network can never run with this configuration (the link cannot
+    /// carry its process data): why. Exit status [`EXIT_REFUSED`].
+    NetworkRefused(String),
+}
+
+/// The exit status of a daemon whose configuration can never work: a
+/// network the link budget refuses (EX_CONFIG of sysexits.h). The systemd
+/// unit lists it in RestartPreventExitStatus=, so it is not restarted in a
+/// loop; a configuration file that does not load exits 2, also listed.
+pub const EXIT_REFUSED: u8 = 78;
+
+impl DaemonError {
+    /// The process exit status for this error: [`EXIT_REFUSED`] for a
+    /// refused network, 1 otherwise.
+    pub fn exit_status(&self) -> u8 {
+        match self {
+            Self::NetworkRefused(_) => EXIT_REFUSED,
+            _ => 1,
+        }
+    }
 }
 
 impl std::fmt::Display for DaemonError {
@@ -62,6 +82,10 @@ impl std::fmt::Display for DaemonError {
             Self::EngineStopped(Some(why)) => write!(f, "the engine stopped: {why}"),
             Self::EngineStopped(None) => f.write_str("the engine stopped"),
             Self::Signals(e) => write!(f, "cannot listen for signals: {e}"),
+            Self::NetworkRefused(why) => write!(
+                f,
+                "the network cannot run with this configuration, not retried (exit status {EXIT_REFUSED}): {why}"
+            ),
         }
     }
 }
@@ -144,6 +168,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     let mut changes = master.watch_status();
     let mut events = master.events();
     let mut events_open = true;
+    let mut event_log = crate::engine::events::EventLog::default();
     let mut reloads = options.reloads;
     let logging = options.logging;
     info!(logs = logging.as_ref().map_or("(embedded)", |l| l.sink), systemd = notifier.enabled(), watchdog = ?watchdog_every, "service");
@@ -151,7 +176,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     loop {
         tokio::select! {
             e = events.recv(), if events_open => match e {
-                Ok(e) => e.log(),
+                Ok(e) => event_log.log(&e, std::time::Instant::now()),
                 Err(broadcast::error::RecvError::Lagged(n)) => info!("{n} events not logged"),
                 Err(broadcast::error::RecvError::Closed) => events_open = false,
             },
@@ -181,6 +206,9 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
                 }
             }
             _ = ticker.tick(), if status_every.is_some() => info!("{}", status_line(&master.status())),
+            () = async { tokio::time::sleep_until(event_log.spell_ends().unwrap_or_else(std::time::Instant::now).into()).await }, if event_log.spell_ends().is_some() => {
+                event_log.end_spell();
+            }
             r = changes.changed() => {
                 if r.is_err() {
                     continue;
@@ -190,6 +218,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
             }
         }
     }
+    event_log.end_spell();
     // The bus first and at once: axes disabled and slaves in INIT within a
     // second, whatever clients are attached. The API stops taking calls
     // meanwhile; streams still open after a short grace are cut.
@@ -246,6 +275,11 @@ impl Announcer {
             notifier.send(&format!("READY=1\nSTATUS={}", self.status_sent));
         }
         if s.phase == Phase::Stopped {
+            if master.refused() {
+                let why = master.last_error().unwrap_or_default();
+                notifier.send(&format!("STOPPING=1\nSTATUS=refused: {why}"));
+                return Err(DaemonError::NetworkRefused(why));
+            }
             notifier.send("STOPPING=1\nSTATUS=the engine stopped");
             return Err(DaemonError::EngineStopped(master.last_error()));
         }

@@ -132,6 +132,37 @@ fn probe(config: &Config, path: Option<&std::path::Path>, force: bool) -> ExitCo
     }
 }
 
+/// The link budget of a simulator configuration, from its network file
+/// (or the demo network) with each slave's default mapping and the packet
+/// time its SPI clock gives: what bring-up would refuse, said offline.
+/// `None` where the frame sizes are known only from the slaves.
+#[cfg(feature = "sim")]
+fn offline_budget(
+    c: &Config,
+) -> Option<Result<ecmxfd::engine::link_budget::LinkBudget, ecmxfd::engine::link_budget::BudgetError>> {
+    let LinkConfig::Sim { network } = &c.link else { return None };
+    let (net, chip) = match network {
+        None => (ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()),
+        Some(p) => {
+            let f = ecmxf_sim::config::NetworkFile::load(p).ok()?;
+            (f.build(p).ok()?, f.chip_config())
+        }
+    };
+    let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
+    let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();
+    let data_size = c.chip.data_size;
+    let bits = ((data_size + ecmxf_wire::framing::OVERHEAD) * 8) as u64;
+    let packet_ns = bits * 1_000_000_000 / chip.spi_hz.max(1) + chip.processing_ns;
+    Some(ecmxfd::engine::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
+}
+
+#[cfg(not(feature = "sim"))]
+fn offline_budget(
+    _: &Config,
+) -> Option<Result<ecmxfd::engine::link_budget::LinkBudget, ecmxfd::engine::link_budget::BudgetError>> {
+    None
+}
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(path) = &cli.check_config {
@@ -146,13 +177,33 @@ fn main() -> ExitCode {
                     Some(us) => format!(", output latency budget {us} us"),
                     None => String::new(),
                 };
+                let budget = offline_budget(&c);
+                if let Some(Err(e)) = &budget {
+                    eprintln!("{}: the network cannot run: link budget: {e}", path.display());
+                    return ExitCode::from(ecmxfd::lifecycle::EXIT_REFUSED);
+                }
                 println!(
                     "{}: ok ({link}, {} expected slaves, {} us cycle{latency})",
                     path.display(),
                     c.slaves.len(),
                     c.cycle.sync0_us
                 );
-                ExitCode::SUCCESS
+                match budget {
+                    Some(Ok(b)) => {
+                        println!(
+                            "link budget: the process data needs {:.0}% of the SPI link ({} cycle(s) of frames a \
+                             packet, {:.0} exchanges/s at least)",
+                            b.load() * 100.0,
+                            b.frames_per_packet,
+                            b.min_exchanges_per_s()
+                        );
+                        ExitCode::SUCCESS
+                    }
+                    _ => {
+                        println!("link budget: checked at bring-up (the frame sizes come from the slaves)");
+                        ExitCode::SUCCESS
+                    }
+                }
             }
             Err(e) => {
                 eprintln!("{e}");
@@ -209,7 +260,7 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             error!("{e}");
-            ExitCode::FAILURE
+            ExitCode::from(e.exit_status())
         }
     }
 }

@@ -208,3 +208,51 @@ fn a_48_slave_layout_is_built_once_by_the_daemon_whatever_callers_give_up() {
         eprintln!("48 slaves laid out {:?} after OP ({gave_up} callers gave up meanwhile)", running.elapsed());
     });
 }
+
+/// A network the SPI link can never carry is refused once, with exit
+/// status 78 (EX_CONFIG, in the unit's RestartPreventExitStatus=), and a
+/// line naming the sizes and what to change, instead of a bring-up retried
+/// every few seconds forever (issue 26).
+#[test]
+fn a_network_the_link_cannot_carry_exits_once_with_status_78() {
+    let Some(easycat) = ecmxf_e2e::fixture("sii_abt_easycat_32x32.bin") else { return };
+    let dir = ecmxf_e2e::temp_dir("refused");
+    let network = dir.join("net.toml");
+    // 20 boards of 32 output bytes: a 640-byte frame, 512-byte packets.
+    let net: String = (0..20).map(|_| format!("[[slave]]\nsii = \"{}\"\n", easycat.display())).collect();
+    std::fs::write(&network, format!("version = 1\n{net}")).unwrap();
+    let config = dir.join("ecmxfd.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "version = 1\n[link]\nbackend = \"sim\"\nnetwork = \"{}\"\n[chip]\ndata_size = 512\n[realtime]\npriority = 0\n\
+             lock_memory = false\nspin_us = 0\n[recovery]\nbackoff_ms = 100\n",
+            network.display()
+        ),
+    )
+    .unwrap();
+    let started = std::time::Instant::now();
+    let out = std::process::Command::new(ecmxf_e2e::daemon_binary())
+        .args(["--config", &config.display().to_string(), "--socket", &dir.join("s.sock").display().to_string()])
+        .output()
+        .unwrap();
+    let log = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(78), "{log}");
+    assert!(started.elapsed() < Duration::from_secs(20), "took {:?}: {log}", started.elapsed());
+    let errors: Vec<&str> = log.lines().filter(|l| l.contains("ERROR")).collect();
+    assert_eq!(errors.len(), 1, "one line says it: {log}");
+    for needed in ["640 bytes", "512", "chip.data_size", "not retried"] {
+        assert!(errors[0].contains(needed), "{needed:?} missing: {}", errors[0]);
+    }
+    // Tried once: at most the bring-up event (when the log gets to it
+    // before the daemon exits) besides the line above.
+    assert!(log.matches("link budget").count() <= 2, "tried once: {log}");
+    // --check-config says so offline, with the same status.
+    let out = std::process::Command::new(ecmxf_e2e::daemon_binary())
+        .args(["--check-config", &config.display().to_string()])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&out.stderr);
+    assert_eq!(out.status.code(), Some(78), "{said}");
+    assert!(said.contains("640 bytes") && said.contains("chip.data_size"), "{said}");
+}

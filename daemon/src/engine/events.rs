@@ -269,6 +269,70 @@ impl Event {
     }
 }
 
+/// How long without an alarm ends its spell.
+pub const SPELL_QUIET: Duration = Duration::from_secs(1);
+
+/// The daemon's log of events: each one as it comes, except an alarm that
+/// repeats (the RxFIFO running dry): the first of a spell at once, then
+/// one line when the spell ends (no alarm for [`SPELL_QUIET`]) saying how
+/// many there were and for how long (issue 26: a stall of a few seconds
+/// wrote thousands of WARN lines). API subscribers still get every event.
+#[derive(Debug, Default)]
+pub struct EventLog {
+    spell: Option<Spell>,
+}
+
+#[derive(Clone, Copy, Debug)]
+struct Spell {
+    first_ms: u64,
+    last_ms: u64,
+    count: u64,
+    ends: Instant,
+}
+
+impl EventLog {
+    /// Logs `e`, received at `now`.
+    pub fn log(&mut self, e: &Event, now: Instant) {
+        if !matches!(e.kind, EventKind::FifoUnderrun) {
+            e.log();
+            return;
+        }
+        let t_ms = e.time_ns / 1_000_000;
+        match &mut self.spell {
+            Some(s) => {
+                s.count += 1;
+                s.last_ms = t_ms;
+                s.ends = now + SPELL_QUIET;
+            }
+            None => {
+                e.log();
+                self.spell = Some(Spell { first_ms: t_ms, last_ms: t_ms, count: 1, ends: now + SPELL_QUIET });
+            }
+        }
+    }
+
+    /// When the open spell ends if no alarm comes (`None`: none open).
+    pub fn spell_ends(&self) -> Option<Instant> {
+        self.spell.map(|s| s.ends)
+    }
+
+    /// Ends the open spell: one line with its count, when there was more
+    /// than the one already logged. Returns that count.
+    pub fn end_spell(&mut self) -> u64 {
+        let Some(s) = self.spell.take() else { return 0 };
+        if s.count > 1 {
+            let (count, over_ms) = (s.count, s.last_ms - s.first_ms);
+            tracing::warn!(
+                event = EventKind::FifoUnderrun.name(),
+                count,
+                over_ms,
+                "RxFIFO ran dry {count} times in {over_ms} ms (the first is logged above)"
+            );
+        }
+        s.count
+    }
+}
+
 /// The engine side: detects changes and pushes events.
 #[derive(Debug)]
 pub struct EventSink {
@@ -397,6 +461,24 @@ fn quiet(last: &mut Option<Instant>, now: Instant) -> bool {
 mod tests {
     use super::*;
     use ecmxf_wire::CommandCode;
+
+    #[test]
+    fn a_spell_of_underruns_is_one_line_then_one_count() {
+        let mut log = EventLog::default();
+        let t0 = Instant::now();
+        let underrun = |ms: u64| Event { time_ns: ms * 1_000_000, kind: EventKind::FifoUnderrun };
+        log.log(&Event { time_ns: 0, kind: EventKind::Lost(1) }, t0);
+        assert_eq!(log.spell_ends(), None, "other events open no spell");
+        for i in 0..5 {
+            log.log(&underrun(10 + i * 45), t0 + Duration::from_millis(i * 45));
+        }
+        assert_eq!(log.spell_ends(), Some(t0 + Duration::from_millis(4 * 45) + SPELL_QUIET));
+        assert_eq!(log.end_spell(), 5);
+        assert_eq!(log.spell_ends(), None);
+        // The next alarm opens a new spell, logged at once again.
+        log.log(&underrun(5000), t0 + Duration::from_secs(5));
+        assert_eq!(log.end_spell(), 1);
+    }
 
     fn header(state: EcatState, crc: u8, link: bool) -> ResponseHeader {
         let mut h =

@@ -223,9 +223,16 @@ impl<L: Link> Engine<L> {
             let layout = match result {
                 Ok(l) => l,
                 Err(e) => {
-                    error!(error = %e, "bring-up failed");
+                    if !e.is_permanent() {
+                        // A permanent one is said once, by the daemon as it exits.
+                        error!(error = %e, "bring-up failed");
+                    }
                     self.telemetry.set_error(format!("bring-up: {e}"));
                     self.events.emit(EventKind::BringUpFailed(e.to_string()));
+                    if e.is_permanent() {
+                        self.telemetry.refused.store(true, Relaxed);
+                        return self.stopped();
+                    }
                     if let bringup::BringUpError::Port(p) = &e {
                         self.reopen_if_needed(&RecoverCause::from_port(p));
                     }

@@ -99,6 +99,10 @@ pub struct Telemetry {
     /// The number of the last configuration a client applied that the
     /// engine has taken (0: the one it started with).
     pub config_generation: AtomicU64,
+    /// The engine stopped because the network can never run with this
+    /// configuration (a permanent bring-up error, e.g. the link budget):
+    /// restarting the daemon cannot help.
+    pub refused: std::sync::atomic::AtomicBool,
     /// The engine's epoch (time 0 of every `time_ns`) on the host's
     /// CLOCK_MONOTONIC, ns: lets a client on the same host measure how old
     /// a frame is when it arrives.

@@ -106,13 +106,16 @@ pub trait Link: Send {
 }
 
 /// Counts INT0 level changes for links that observe the level at moments
-/// (before and after transfers) rather than receive edge events.
+/// (before and after transfers) rather than receive edge events: the
+/// simulator links (the hardware link reads edge events).
+#[cfg(feature = "sim")]
 #[derive(Clone, Copy, Debug, Default)]
 pub(crate) struct LevelChanges {
     ready: Option<bool>,
     changes: u64,
 }
 
+#[cfg(feature = "sim")]
 impl LevelChanges {
     /// Notes whether the chip was ready when last looked at.
     pub(crate) fn saw(&mut self, ready: bool) {

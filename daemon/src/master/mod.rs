@@ -500,6 +500,12 @@ impl Master {
         self.telemetry.last_error()
     }
 
+    /// Whether the engine stopped because the network can never run with
+    /// the configuration in force (see `BringUpError::is_permanent`).
+    pub fn refused(&self) -> bool {
+        self.telemetry.refused.load(Ordering::Relaxed)
+    }
+
     /// The network as bring-up found it.
     pub fn layout(&self) -> NetworkLayout {
         self.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
