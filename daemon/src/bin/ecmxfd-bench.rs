@@ -8,12 +8,18 @@
 //! 3. RxFIFO level seen in the headers (min/max) and the longest gap between
 //!    FIFO exchanges;
 //! 4. the daemon process's CPU time per second of wall time;
-//! 5. the link's idle rate and the SPI exchanges each SDO adds above it,
-//!    from the simulator's own packet counter.
+//! 5. the link's idle rate against the minimum the plan needs (two packets
+//!    per FIFO call, see `link_budget`), and the SPI exchanges each SDO
+//!    adds above it, from the simulator's own packet counter;
+//! 6. a 24-slave network (24 TI-like 3-axis drives: 432-byte frames, one
+//!    frame a 512-byte packet) at 1 ms, idle: this process's CPU, the
+//!    link's rate against the plan's minimum, FIFO alarms.
 //!
-//! What runs where: the simulator is its own process (`ecmxf-sim serve`);
-//! the engine, its async runtime and the SDO callers run in this one, so
-//! the CPU figure is the daemon's work plus the callers'. Nothing is built.
+//! What runs where: the simulator is its own process (`ecmxf-sim serve`,
+//! one per network); the engine, its async runtime and the SDO callers run
+//! in this one, so the CPU figure under load is the daemon's work plus the
+//! callers'; the idle figures are taken while only the engine runs.
+//! Nothing is built.
 //!
 //! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS]`
 #![forbid(unsafe_code)]
@@ -44,14 +50,21 @@ impl Drop for Sim {
     }
 }
 
-fn serve() -> Result<Sim, String> {
+/// Serves the demo network, or the network file `network`.
+fn serve(network: Option<&std::path::Path>) -> Result<Sim, String> {
     let exe = std::env::current_exe().map_err(|e| e.to_string())?;
     let bin = exe.with_file_name("ecmxf-sim");
     if !bin.exists() {
         return Err(format!("{} not found: build it first (cargo build --release -p ecmxf-sim)", bin.display()));
     }
-    let socket = std::env::temp_dir().join(format!("ecmxfd-bench-{}.sock", std::process::id()));
-    let child = Command::new(&bin).arg("serve").arg("--socket").arg(&socket).spawn().map_err(|e| e.to_string())?;
+    let tag = if network.is_some() { "net" } else { "demo" };
+    let socket = std::env::temp_dir().join(format!("ecmxfd-bench-{}-{tag}.sock", std::process::id()));
+    let mut command = Command::new(&bin);
+    command.arg("serve").arg("--socket").arg(&socket);
+    if let Some(n) = network {
+        command.arg("--network").arg(n);
+    }
+    let child = command.spawn().map_err(|e| e.to_string())?;
     let t = Instant::now();
     while SocketLink::connect(&socket).is_err() {
         if t.elapsed() > Duration::from_secs(10) {
@@ -60,6 +73,32 @@ fn serve() -> Result<Sim, String> {
         std::thread::sleep(Duration::from_millis(20));
     }
     Ok(Sim { child, socket })
+}
+
+/// The simulator's own count of packets clocked: what the link carried,
+/// whichever side of the daemon sent it.
+fn packet_counter(socket: &std::path::Path) -> Result<impl FnMut() -> Result<u64, String> + use<>, String> {
+    let mut ctl = ecmxf_sim::server::SocketClient::connect(socket).map_err(|e| e.to_string())?;
+    Ok(move || -> Result<u64, String> {
+        let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
+        text.split_whitespace()
+            .find_map(|w| w.strip_prefix("packets="))
+            .and_then(|n| n.parse().ok())
+            .ok_or_else(|| format!("no packet count in {text:?}"))
+    })
+}
+
+/// The engine on `sim`, once its network runs.
+fn started(sim: &Sim, config: Config) -> Result<Master, String> {
+    let master = Master::start(SocketLink::connect(&sim.socket).map_err(|e| e.to_string())?, config);
+    let t = Instant::now();
+    while master.status().phase != Phase::Running {
+        if t.elapsed() > Duration::from_secs(60) {
+            return Err(format!("engine not running: {:?}", master.last_error()));
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    Ok(master)
 }
 
 fn cpu_seconds() -> f64 {
@@ -81,7 +120,7 @@ fn percentiles(mut v: Vec<Duration>) -> String {
 
 fn main() -> Result<(), String> {
     let secs: u64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(10);
-    let sim = serve()?;
+    let sim = serve(None)?;
     let config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
     let sim_config = ecmxf_sim::ChipConfig::default();
     let data_size = config.chip.data_size;
@@ -109,30 +148,15 @@ fn main() -> Result<(), String> {
     }
 
     // 2.-4. The engine with cyclic data.
-    let master = Arc::new(Master::start(SocketLink::connect(&sim.socket).map_err(|e| e.to_string())?, config));
-    let t = Instant::now();
-    while master.status().phase != Phase::Running {
-        if t.elapsed() > Duration::from_secs(30) {
-            return Err(format!("engine not running: {:?}", master.last_error()));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    // The simulator's own count of packets clocked: what the link carried,
-    // whichever side of the daemon sent it.
-    let mut ctl = ecmxf_sim::server::SocketClient::connect(&sim.socket).map_err(|e| e.to_string())?;
-    let mut packets = move || -> Result<u64, String> {
-        let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix("packets="))
-            .and_then(|n| n.parse().ok())
-            .ok_or_else(|| format!("no packet count in {text:?}"))
-    };
+    let master = Arc::new(started(&sim, config)?);
+    let mut packets = packet_counter(&sim.socket)?;
     // Idle first, before the async runtime and the level sampler exist:
     // cyclic data only, nothing else in this process.
     let (p0, t0, c0) = (packets()?, Instant::now(), cpu_seconds());
     std::thread::sleep(Duration::from_secs(3));
     let idle_cpu = (cpu_seconds() - c0) / t0.elapsed().as_secs_f64();
     let idle_rate = (packets()? - p0) as f64 / t0.elapsed().as_secs_f64();
+    let plan_minimum = plan_minimum(&master, data_size, modelled_ns);
     let rt = tokio::runtime::Builder::new_multi_thread()
         .worker_threads(2)
         .enable_all()
@@ -198,7 +222,10 @@ fn main() -> Result<(), String> {
     let (lmin, lmax) = *levels.lock().unwrap_or_else(|e| e.into_inner());
     let (window_packets, window) = single_window;
     let above_idle = window_packets as f64 - idle_rate * window.as_secs_f64();
-    println!("idle exchanges         : {idle_rate:.0}/s (simulator's packet count, cyclic data only, 3 s)");
+    println!(
+        "idle exchanges         : {idle_rate:.0}/s (simulator's packet count, cyclic data only, 3 s); the plan needs {plan_minimum:.0}/s ({:.2}x)",
+        idle_rate / plan_minimum.max(1.0)
+    );
     println!(
         "idle daemon CPU        : {:.1}% of a core (this process while only the engine runs: cyclic data at 125 us, no callers)",
         idle_cpu * 100.0
@@ -234,5 +261,51 @@ fn main() -> Result<(), String> {
     );
     master.stop();
     drop(sim);
+    many_slaves_idle(data_size, modelled_ns)?;
+    Ok(())
+}
+
+/// The exchanges per second the plan needs at least (see `link_budget`)
+/// for the master's network, with the modelled packet time.
+fn plan_minimum(master: &Master, data_size: usize, packet_ns: u64) -> f64 {
+    let l = master.layout();
+    let cycle_ns = u64::from(master.config().cycle.sync0_us) * 1000;
+    ecmxfd::engine::link_budget::check(data_size, l.rx_size, l.tx_size, packet_ns, cycle_ns)
+        .map_or(f64::NAN, |b| b.min_exchanges_per_s())
+}
+
+/// 6.: a 24-drive network at 1 ms, idle.
+fn many_slaves_idle(data_size: usize, packet_ns: u64) -> Result<(), String> {
+    let dir = std::env::temp_dir().join(format!("ecmxfd-bench-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
+    let network = dir.join("net24.toml");
+    let slaves: String = (0..24).map(|_| "[[slave]]\nprofile = \"ti-3axis\"\n").collect();
+    std::fs::write(&network, format!("version = 1\n{slaves}")).map_err(|e| e.to_string())?;
+    let sim = serve(Some(&network))?;
+    let mut config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
+    config.cycle.sync0_us = 1000;
+    let master = started(&sim, config)?;
+    let mut packets = packet_counter(&sim.socket)?;
+    // Settled first (the FIFO filled), then 3 s idle.
+    std::thread::sleep(Duration::from_secs(1));
+    let (s0, p0, t0, c0) = (master.status(), packets()?, Instant::now(), cpu_seconds());
+    std::thread::sleep(Duration::from_secs(3));
+    let cpu = (cpu_seconds() - c0) / t0.elapsed().as_secs_f64();
+    let rate = (packets()? - p0) as f64 / t0.elapsed().as_secs_f64();
+    let s = master.status();
+    let l = master.layout();
+    let minimum = plan_minimum(&master, data_size, packet_ns);
+    println!(
+        "24 drives at 1 ms, idle: CPU {:.1}% of a core, {rate:.0} exchanges/s (the plan needs {minimum:.0}/s: {}-byte output and {}-byte input frames), fifo alarms {}, input frames {} in {} cycles",
+        cpu * 100.0,
+        l.rx_size,
+        l.tx_size,
+        s.fifo_alarms - s0.fifo_alarms,
+        s.input_frames - s0.input_frames,
+        (t0.elapsed().as_secs_f64() * 1000.0) as u64
+    );
+    master.stop();
+    drop(sim);
+    let _ = std::fs::remove_dir_all(&dir);
     Ok(())
 }
