@@ -11,9 +11,10 @@
 //! 5. the link's idle rate against the minimum the plan needs (two packets
 //!    per FIFO call, see `link_budget`), and the SPI exchanges each SDO
 //!    adds above it, from the simulator's own packet counter;
-//! 6. a 24-slave network (24 TI-like 3-axis drives: 432-byte frames, one
-//!    frame a 512-byte packet) at 1 ms, idle: this process's CPU, the
-//!    link's rate against the plan's minimum, FIFO alarms.
+//! 6. a 24-slave network (10 TI-like 3-axis drives and 14 IO slaves:
+//!    404-byte frames, one a 512-byte packet) at 1 ms, idle: this
+//!    process's CPU, the link's rate against the plan's minimum, FIFO
+//!    alarms.
 //!
 //! What runs where: the simulator is its own process (`ecmxf-sim serve`,
 //! one per network); the engine, its async runtime and the SDO callers run
@@ -274,12 +275,14 @@ fn plan_minimum(master: &Master, data_size: usize, packet_ns: u64) -> f64 {
         .map_or(f64::NAN, |b| b.min_exchanges_per_s())
 }
 
-/// 6.: a 24-drive network at 1 ms, idle.
+/// 6.: a 24-slave network at 1 ms, idle.
 fn many_slaves_idle(data_size: usize, packet_ns: u64) -> Result<(), String> {
     let dir = std::env::temp_dir().join(format!("ecmxfd-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let network = dir.join("net24.toml");
-    let slaves: String = (0..24).map(|_| "[[slave]]\nprofile = \"ti-3axis\"\n").collect();
+    let slaves: String = (0..24)
+        .map(|i| format!("[[slave]]\nprofile = \"{}\"\n", if i < 10 { "ti-3axis" } else { "digital-io" }))
+        .collect();
     std::fs::write(&network, format!("version = 1\n{slaves}")).map_err(|e| e.to_string())?;
     let sim = serve(Some(&network))?;
     let mut config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
@@ -296,7 +299,7 @@ fn many_slaves_idle(data_size: usize, packet_ns: u64) -> Result<(), String> {
     let l = master.layout();
     let minimum = plan_minimum(&master, data_size, packet_ns);
     println!(
-        "24 drives at 1 ms, idle: CPU {:.1}% of a core, {rate:.0} exchanges/s (the plan needs {minimum:.0}/s: {}-byte output and {}-byte input frames), fifo alarms {}, input frames {} in {} cycles",
+        "24 slaves at 1 ms, idle: CPU {:.1}% of a core, {rate:.0} exchanges/s (the plan needs {minimum:.0}/s: {}-byte output and {}-byte input frames), fifo alarms {}, input frames {} in {} cycles",
         cpu * 100.0,
         l.rx_size,
         l.tx_size,
