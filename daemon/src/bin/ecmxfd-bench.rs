@@ -25,90 +25,19 @@
 //! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS]`
 #![forbid(unsafe_code)]
 
-use std::path::PathBuf;
-use std::process::{Child, Command};
+#[path = "bench_support/mod.rs"]
+mod support;
+
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::payload::control::InfoUpdate;
 use ecmxfd::config::{Config, LinkConfig};
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::socket::SocketLink;
 use ecmxfd::master::Master;
 use ecmxfd::port::Port;
-
-struct Sim {
-    child: Child,
-    socket: PathBuf,
-}
-
-impl Drop for Sim {
-    fn drop(&mut self) {
-        let _ = self.child.kill();
-        let _ = self.child.wait();
-        let _ = std::fs::remove_file(&self.socket);
-    }
-}
-
-/// Serves the demo network, or the network file `network`.
-fn serve(network: Option<&std::path::Path>) -> Result<Sim, String> {
-    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
-    let bin = exe.with_file_name("ecmxf-sim");
-    if !bin.exists() {
-        return Err(format!("{} not found: build it first (cargo build --release -p ecmxf-sim)", bin.display()));
-    }
-    let tag = if network.is_some() { "net" } else { "demo" };
-    let socket = std::env::temp_dir().join(format!("ecmxfd-bench-{}-{tag}.sock", std::process::id()));
-    let mut command = Command::new(&bin);
-    command.arg("serve").arg("--socket").arg(&socket);
-    if let Some(n) = network {
-        command.arg("--network").arg(n);
-    }
-    let child = command.spawn().map_err(|e| e.to_string())?;
-    let t = Instant::now();
-    while SocketLink::connect(&socket).is_err() {
-        if t.elapsed() > Duration::from_secs(10) {
-            return Err("the simulator did not start".into());
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    Ok(Sim { child, socket })
-}
-
-/// The simulator's own count of packets clocked: what the link carried,
-/// whichever side of the daemon sent it.
-fn packet_counter(socket: &std::path::Path) -> Result<impl FnMut() -> Result<u64, String> + use<>, String> {
-    let mut ctl = ecmxf_sim::server::SocketClient::connect(socket).map_err(|e| e.to_string())?;
-    Ok(move || -> Result<u64, String> {
-        let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix("packets="))
-            .and_then(|n| n.parse().ok())
-            .ok_or_else(|| format!("no packet count in {text:?}"))
-    })
-}
-
-/// The engine on `sim`, once its network runs.
-fn started(sim: &Sim, config: Config) -> Result<Master, String> {
-    let master = Master::start(SocketLink::connect(&sim.socket).map_err(|e| e.to_string())?, config);
-    let t = Instant::now();
-    while master.status().phase != Phase::Running {
-        if t.elapsed() > Duration::from_secs(60) {
-            return Err(format!("engine not running: {:?}", master.last_error()));
-        }
-        std::thread::sleep(Duration::from_millis(20));
-    }
-    Ok(master)
-}
-
-fn cpu_seconds() -> f64 {
-    let u = nix::sys::resource::getrusage(nix::sys::resource::UsageWho::RUSAGE_SELF);
-    u.map_or(0.0, |u| {
-        let t = |tv: nix::sys::time::TimeVal| tv.tv_sec() as f64 + tv.tv_usec() as f64 / 1e6;
-        t(u.user_time()) + t(u.system_time())
-    })
-}
+use support::{cpu_seconds, packet_counter, serve, started};
 
 fn percentiles(mut v: Vec<Duration>) -> String {
     if v.is_empty() {
