@@ -220,3 +220,42 @@ async fn reflection_list(ch: tonic::transport::Channel, path: &'static str) -> V
     let first = stream.message().await.unwrap().unwrap();
     first.list_services_response.unwrap().service.into_iter().map(|s| s.name).collect()
 }
+
+/// `states preop` then `states op`, and `states init` then `states op`,
+/// walk the state machine one step at a time (PRE-OP -> SAFE-OP -> OP):
+/// each succeeds, no recovery starts, and process data flows afterwards
+/// (issue 27: OP was asked for directly, every slave refused with AL status
+/// 0x0011, and the engine recovered on its own while the call failed).
+#[test]
+fn op_from_preop_or_init_walks_the_state_machine_without_a_recovery() {
+    run(async {
+        let mut d = Daemon::sim();
+        let ch = d.connect().await;
+        let mut state = StateClient::new(ch.clone());
+        let mut master = MasterClient::new(ch.clone());
+        let request = |slave: Option<u32>, s: pb::EcatState| pb::SetStateRequest {
+            slave,
+            state: s as i32,
+            wait: true,
+            timeout_ms: 5000,
+        };
+        let before = master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+        for (down, slave) in [(pb::EcatState::PreOp, None), (pb::EcatState::Init, None), (pb::EcatState::Init, Some(1))]
+        {
+            let r = state.set_state(request(slave, down)).await.unwrap().into_inner();
+            assert_eq!(r.state, down as i32, "{slave:?} down to {down:?}");
+            let r = state.set_state(request(slave, pb::EcatState::Op)).await;
+            let r = r.unwrap_or_else(|e| panic!("{slave:?} from {down:?} to OP: {e:?}")).into_inner();
+            assert_eq!(r.state, pb::EcatState::Op as i32, "{slave:?} from {down:?}");
+        }
+        // Running, flowing, and never recovered.
+        let frames = before.counters.as_ref().unwrap().input_frames;
+        tokio::time::sleep(std::time::Duration::from_millis(300)).await;
+        let s = master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
+        assert_eq!(s.phase, pb::EnginePhase::Running as i32, "{s:?}");
+        assert!(s.process_data_flowing, "{s:?}");
+        let c = s.counters.unwrap();
+        assert!(c.input_frames > frames, "{c:?}");
+        assert_eq!(c.recoveries, before.counters.unwrap().recoveries, "a step was refused and the engine recovered");
+    });
+}

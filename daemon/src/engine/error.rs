@@ -71,6 +71,18 @@ impl std::error::Error for EngineError {}
 pub enum WrongState {
     /// A slave refused the state asked for (STATE_CHECK failed).
     Refused(EcatState),
+    /// A step of a state walk was refused, by this slave (see
+    /// `master::states`).
+    StepRefused {
+        /// The slave.
+        slave: u8,
+        /// The state asked for.
+        asked: EcatState,
+        /// The state it is in, if it could be read.
+        state: Option<EcatState>,
+        /// Its AL status code, if it could be read.
+        al_status: Option<u16>,
+    },
     /// Nothing to stream: no slave maps a TxPDO.
     NoInputs,
 }
@@ -79,6 +91,18 @@ impl fmt::Display for WrongState {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Self::Refused(state) => write!(f, "a slave refused {state}"),
+            Self::StepRefused { slave, asked, state, al_status } => {
+                write!(f, "slave {slave} refused {asked}")?;
+                if let Some(s) = state {
+                    write!(f, ": it is in {s}")?;
+                }
+                match al_status {
+                    Some(c) if *c != 0 => {
+                        write!(f, ", AL status {c:#06x} ({})", ecmxf_wire::al_status_text(*c))
+                    }
+                    _ => Ok(()),
+                }
+            }
             Self::NoInputs => f.write_str("the process image has no inputs (no slave maps a TxPDO)"),
         }
     }

@@ -40,6 +40,7 @@ pub mod esi;
 mod network;
 pub mod pdos;
 pub mod sii;
+pub mod states;
 pub mod transactions;
 
 /// Requests that may wait at once.

@@ -122,19 +122,6 @@ impl Master {
         written
     }
 
-    /// Requests a state.
-    pub async fn set_state(
-        &self,
-        target: SlaveSelector,
-        state: EcatState,
-        timeout: Option<Duration>,
-    ) -> Result<(), EngineError> {
-        if !state.is_requestable() {
-            return Err(EngineError::BadArgument { field: "state", reason: format!("{state} cannot be requested") });
-        }
-        self.request(SlotRequest::SetState { target, state }, timeout).await.map(|_| ())
-    }
-
     /// The state a slave (or, for `All`, the network) is in now, freshly
     /// read from the slaves.
     pub async fn get_state(&self, target: SlaveSelector, timeout: Option<Duration>) -> Result<EcatState, EngineError> {
