@@ -549,3 +549,30 @@ fn streamed_frames_play_once_each_in_order_one_per_cycle() {
     let dry = frames.counters().dry.load(std::sync::atomic::Ordering::Relaxed);
     eprintln!("{total} frames at 8 kHz: played once each in order; {repeats} underrun cycles; {dry} dry pushes");
 }
+
+/// A slave that refuses SAFE-OP at bring-up is named, with its state and
+/// AL status code and text, in the error the daemon logs and reports
+/// (issue 27: "ECAT_STATE_CHECK: failed on the chip" named no one).
+#[test]
+fn a_bring_up_refusal_names_the_slave_its_state_and_al_status() {
+    let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let mut net = ecmxf_sim::Network::demo();
+    // The TI drive's shortest cycle is 2 ms: a 1 ms cycle is refused.
+    net.slaves[1].min_cycle_ns = 2_000_000;
+    let (link, _sim) = SimLink::new(Chip::new(net, ecmxf_sim::ChipConfig::default()));
+    let mut config = Config::simulator();
+    config.cycle.sync0_us = 1000;
+    let m = Master::start(link, config);
+    let t = Instant::now();
+    let error = loop {
+        if let Some(e) = m.last_error().filter(|e| e.contains("SAFE")) {
+            break e;
+        }
+        assert!(t.elapsed() < Duration::from_secs(20), "no refusal reported: {:?}", m.status());
+        std::thread::sleep(Duration::from_millis(20));
+    };
+    m.stop();
+    eprintln!("{error}");
+    assert!(error.contains("slave 1 PREOP") && error.contains("AL status 0x0035"), "{error}");
+    assert!(!error.contains("slave 0 ") && !error.contains("slave 2 "), "only the slave that refused: {error}");
+}

@@ -62,6 +62,15 @@ pub enum BringUpError {
     /// cycle (see `link_budget`): no retry can change that, only the
     /// configuration can.
     Refused(super::link_budget::BudgetError),
+    /// Slaves did not reach the state asked for (STATE_CHECK failed): each
+    /// one not there, with its state and AL status code.
+    StateRefused {
+        /// The state asked for.
+        asked: EcatState,
+        /// (position, state, AL status code) of each slave not in `asked`
+        /// or reporting a code; empty when none could be read.
+        slaves: Vec<(u8, EcatState, u16)>,
+    },
 }
 
 impl BringUpError {
@@ -83,6 +92,12 @@ impl fmt::Display for BringUpError {
                 write!(f, "slave {position} is {found}, the configuration expects {expected}")
             }
             Self::Refused(e) => write!(f, "link budget: {e}"),
+            Self::StateRefused { asked, slaves } if slaves.is_empty() => {
+                write!(f, "the slaves did not reach {asked} (STATE_CHECK failed; their states could not be read)")
+            }
+            Self::StateRefused { asked, slaves } => {
+                write!(f, "the slaves did not reach {asked}: {}", describe_states(slaves))
+            }
         }
     }
 }
@@ -147,6 +162,12 @@ fn reply<'a, R: Reply<'a>>(h: &ecmxf_wire::ResponseHeader, data: &'a [u8]) -> Op
     R::decode(&ReplyFields { value: h.return_value, data_len: h.data_len }, data).ok()
 }
 
+/// How long all slaves get to reach a state.
+const STATE_TIMEOUT: Duration = Duration::from_secs(5);
+
+/// What [`blocking`] says of a command the chip ran and that failed (bit3).
+const FAILED_ON_CHIP: &str = "failed on the chip";
+
 /// Runs a blocking command to its end: refused (bit7) and failed (bit3) are
 /// errors; the bits are cleared for what follows.
 pub fn blocking<'a, L: Link, R: Request<'a>>(
@@ -166,7 +187,7 @@ pub fn blocking<'a, L: Link, R: Request<'a>>(
         if !h.blocking_busy() {
             if h.errors.contains(ErrorFlags::BLOCKING_FAILED) {
                 port.pending_control |= ControlFlags::CLEAR_BLOCKING_ERROR;
-                return Err(step(name, "failed on the chip"));
+                return Err(step(name, FAILED_ON_CHIP));
             }
             return Ok(());
         }
@@ -175,6 +196,46 @@ pub fn blocking<'a, L: Link, R: Request<'a>>(
         }
         std::thread::sleep(Duration::from_micros(200));
     }
+}
+
+/// Asks every slave for `state` and waits for it; when that fails, reads
+/// each slave's state and AL status code so the error names the slaves
+/// that are not there and why (issue 27: "ECAT_STATE_CHECK: failed on the
+/// chip" named no one).
+fn enter<L: Link>(port: &mut Port<L>, state: EcatState, slaves: usize) -> Result<(), BringUpError> {
+    match blocking(port, &StateCheck { target: SlaveSelector::All, state }, STATE_TIMEOUT) {
+        Err(BringUpError::Step { detail, .. }) if detail == FAILED_ON_CHIP => {
+            let found = slave_states(port, slaves);
+            let slaves = found.into_iter().filter(|&(_, s, code)| s != state || code != 0).collect();
+            Err(BringUpError::StateRefused { asked: state, slaves })
+        }
+        other => other,
+    }
+}
+
+/// (position, state, AL status code) of the first `slaves` slaves, as they
+/// answer now (command 21); a slave that does not answer is left out.
+pub fn slave_states<L: Link>(port: &mut Port<L>, slaves: usize) -> Vec<(u8, EcatState, u16)> {
+    let mut out = Vec::new();
+    for i in 0..slaves.min(usize::from(u8::MAX)) as u8 {
+        let mut read = |item| {
+            let a = port.call(&SlaveInfoGet { slave: i, item }).ok()?;
+            SlaveInfo::decode(item, a.data).ok()?.number()
+        };
+        if let (Some(state), Some(code)) = (read(SlaveInfoCode::State), read(SlaveInfoCode::AlStatus)) {
+            out.push((i, EcatState::from_u8(state as u8), code as u16));
+        }
+    }
+    out
+}
+
+/// "slave 2 PRE-OP, AL status 0x001d (invalid output configuration); ...".
+pub fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
+    let one = |&(i, state, code): &(u8, EcatState, u16)| match code {
+        0 => format!("slave {i} {state}"),
+        c => format!("slave {i} {state}, AL status {c:#06x} ({})", ecmxf_wire::al_status_text(c)),
+    };
+    slaves.iter().map(one).collect::<Vec<_>>().join("; ")
 }
 
 /// One numeric item of a slave (command 21; [`SlaveInfo::number`]); 0 when
@@ -310,7 +371,7 @@ pub fn bring_up<L: Link>(
     }
 
     // 2. PRE-OP.
-    blocking(port, &StateCheck { target: SlaveSelector::All, state: EcatState::PreOp }, SLOW)?;
+    enter(port, EcatState::PreOp, usize::from(count))?;
 
     // 3. PDO mapping, then RECONFIG.
     let mut remapped = false;
@@ -441,7 +502,7 @@ pub fn bring_up<L: Link>(
 
     let mut state = EcatState::PreOp;
     if c.target_state != "preop" {
-        blocking(port, &StateCheck { target: SlaveSelector::All, state: EcatState::SafeOp }, SLOW)?;
+        enter(port, EcatState::SafeOp, slaves.len())?;
         state = EcatState::SafeOp;
     }
     if op {
@@ -454,7 +515,7 @@ pub fn bring_up<L: Link>(
             port.call(&PdoFifoOp { op: FifoOpFlags::WRITE, frames: n as u8, outputs: &frames[..n * rx_size] })?;
             left -= n;
         }
-        blocking(port, &StateCheck { target: SlaveSelector::All, state: EcatState::Op }, SLOW)?;
+        enter(port, EcatState::Op, slaves.len())?;
         port.call(&FifoEnable(true))?;
         state = EcatState::Op;
     }

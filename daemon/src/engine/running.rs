@@ -12,12 +12,12 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
+use ecmxf_wire::CommandCode;
 use ecmxf_wire::flags::ControlFlags;
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
-use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
-use ecmxf_wire::{CommandCode, EcatState, al_status_text};
+use ecmxf_wire::payload::slave_info::SlaveCountGet;
 use tracing::{info, warn};
 
 use super::cyclic::Cyclic;
@@ -98,29 +98,14 @@ impl<L: Link> Engine<L> {
     /// and returns them as text, e.g. "slave 2 SAFE-OP, AL status 0x001a
     /// (...)". Read failures are left out.
     fn al_report(&mut self, slaves: usize) -> String {
-        let mut text = String::new();
-        for i in 0..slaves.min(usize::from(u8::MAX)) as u8 {
-            let mut read = |item| match self.port.call(&SlaveInfoGet { slave: i, item }) {
-                Ok(a) => match SlaveInfo::decode(item, a.data) {
-                    Ok(SlaveInfo::State(v)) => Some(u32::from(v.to_u8())),
-                    Ok(SlaveInfo::AlStatus(v)) => Some(u32::from(v)),
-                    _ => None,
-                },
-                Err(_) => None,
-            };
-            let (Some(state), Some(code)) = (read(SlaveInfoCode::State), read(SlaveInfoCode::AlStatus)) else {
-                continue;
-            };
-            let (state, code) = (EcatState::from_u8(state as u8), code as u16);
-            if code != 0 {
-                self.events.emit(EventKind::AlStatus { slave: i, state, code });
-                if !text.is_empty() {
-                    text.push_str("; ");
-                }
-                text.push_str(&format!("slave {i} {state}, AL status {code:#06x} ({})", al_status_text(code)));
-            }
+        let faulty: Vec<_> = super::bringup::slave_states(&mut self.port, slaves)
+            .into_iter()
+            .filter(|&(_, _, code)| code != 0)
+            .collect();
+        for &(slave, state, code) in &faulty {
+            self.events.emit(EventKind::AlStatus { slave, state, code });
         }
-        text
+        super::bringup::describe_states(&faulty)
     }
 
     /// The cause, with the slaves' AL status codes read and reported where
