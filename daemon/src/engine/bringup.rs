@@ -467,12 +467,23 @@ pub fn bring_up<L: Link>(
     let check =
         |packet: Duration| super::link_budget::check(data_size, rx_size, tx_size, packet.as_nanos() as u64, cycle_ns);
     let budget = match check(packet_time(port)?) {
-        // Measured once more before a refusal that stops the daemon: a
-        // host stall through most of the five packets must not decide.
-        Err(super::link_budget::BudgetError::TooSlow(_)) => check(packet_time(port)?),
-        other => other,
-    }
-    .map_err(BringUpError::Refused)?;
+        // Too slow as measured: for good only if the packet's bits at the
+        // link's own clock (a bound no host stall moves) are too slow as
+        // well; otherwise a loaded host may have slowed the measurement,
+        // and the bring-up is tried again.
+        Err(super::link_budget::BudgetError::TooSlow(measured)) => {
+            let bits = ((port.data_size() + ecmxf_wire::framing::OVERHEAD) * 8) as u64;
+            let bound = port.link_mut().clock_hz().map(|hz| Duration::from_nanos(bits * 1_000_000_000 / hz.max(1)));
+            match bound.map(check) {
+                Some(Err(e)) => return Err(BringUpError::Refused(e)),
+                _ => {
+                    let e = super::link_budget::BudgetError::TooSlow(measured);
+                    return Err(step("link budget", format!("{e} (as measured now; tried again)")));
+                }
+            }
+        }
+        other => other.map_err(BringUpError::Refused)?,
+    };
     if budget.load() > super::link_budget::WARN_LOAD {
         warn!(
             load_percent = (budget.load() * 100.0) as u32,

@@ -185,6 +185,10 @@ impl Link for HardwareLink {
         Ok(())
     }
 
+    fn clock_hz(&self) -> Option<u64> {
+        Some(u64::from(self.config.spi_hz))
+    }
+
     fn describe(&self) -> String {
         let line = |l: Option<u32>| l.map_or("not wired".to_string(), |l| format!("line {l}"));
         format!(

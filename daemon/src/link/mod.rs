@@ -101,6 +101,13 @@ pub trait Link: Send {
         Ok(None)
     }
 
+    /// The SPI clock, Hz, when the link knows it: a packet takes at least
+    /// its bits at this clock, which no host stall can make shorter (the
+    /// link budget refuses a network for good only on that bound).
+    fn clock_hz(&self) -> Option<u64> {
+        None
+    }
+
     /// A description for logs.
     fn describe(&self) -> String;
 }
@@ -149,6 +156,9 @@ impl<L: Link + ?Sized> Link for Box<L> {
     }
     fn int0_edges(&mut self) -> Result<Option<u64>, LinkError> {
         (**self).int0_edges()
+    }
+    fn clock_hz(&self) -> Option<u64> {
+        (**self).clock_hz()
     }
     fn describe(&self) -> String {
         (**self).describe()

@@ -118,6 +118,10 @@ impl Link for SimLink {
         Ok(Some(self.int0.count()))
     }
 
+    fn clock_hz(&self) -> Option<u64> {
+        Some(self.shared.chip().config.spi_hz)
+    }
+
     fn describe(&self) -> String {
         "in-process simulator".into()
     }
