@@ -224,7 +224,8 @@ impl Catalog {
             };
             match EsiFile::parse(&text) {
                 Ok(esi) => {
-                    out.devices.extend(esi.devices.iter().map(|d| CatalogDevice::from_esi(&file, esi.vendor_id, d)))
+                    out.devices.extend(esi.devices.iter().map(|d| CatalogDevice::from_esi(&file, esi.vendor_id, d)));
+                    out.skipped.extend(esi.skipped.iter().map(|why| format!("{}: {why}", file_name(&file))));
                 }
                 Err(e) => out.skipped.push(format!("{}: not an ESI file ({e})", file_name(&file))),
             }

@@ -193,6 +193,11 @@ pub struct EsiFile {
     pub vendor_name: String,
     /// Devices.
     pub devices: Vec<EsiDevice>,
+    /// Device entries that could not be read, each named (its `Type`
+    /// text, else its `Name`, else its place in the file) with the reason:
+    /// family files list passive terminals without a ProductCode, and one
+    /// such entry must not make the file's other devices unusable.
+    pub skipped: Vec<String>,
 }
 
 impl EsiFile {
@@ -206,12 +211,28 @@ impl EsiFile {
         let devices_node = child(root, "Descriptions")
             .and_then(|d| child(d, "Devices"))
             .ok_or(EsiError::Missing("Descriptions/Devices"))?;
-        let devices = children(devices_node, "Device").map(parse_device).collect::<Result<Vec<_>, _>>()?;
-        Ok(Self { vendor_id, vendor_name, devices })
+        let (mut devices, mut skipped, mut first_error) = (Vec::new(), Vec::new(), None);
+        for (n, node) in children(devices_node, "Device").enumerate() {
+            match parse_device(node) {
+                Ok(d) => devices.push(d),
+                Err(e) => {
+                    let named = text(node, "Type").or_else(|| text(node, "Name")).filter(|t| !t.is_empty());
+                    let label = named.map_or_else(|| format!("device #{}", n + 1), |t| format!("device {t:?}"));
+                    skipped.push(format!("{label} skipped: {e}"));
+                    first_error.get_or_insert(e);
+                }
+            }
+        }
+        // A file none of whose devices can be read is an error: its first.
+        if let (true, Some(e)) = (devices.is_empty(), first_error) {
+            return Err(e);
+        }
+        Ok(Self { vendor_id, vendor_name, devices, skipped })
     }
 
     /// The device with this product code and revision (the highest revision
-    /// when none is given).
+    /// when none is given). Devices the file lists but could not be read
+    /// ([`EsiFile::skipped`]) are not found.
     pub fn device(&self, product_code: u32, revision: Option<u32>) -> Result<&EsiDevice, EsiError> {
         self.devices
             .iter()
@@ -792,6 +813,27 @@ mod tests {
           <Mailbox DataLinkLayer="true"><CoE SdoInfo="true" PdoAssign="false" PdoConfig="true" CompleteAccess="false"/></Mailbox>
           <Eeprom><ByteSize>128</ByteSize><ConfigData>0C0D</ConfigData></Eeprom>
         </Device></Devices></Descriptions></EtherCATInfo>"##;
+
+    #[test]
+    fn a_device_entry_without_a_product_code_is_skipped_by_name_and_the_rest_stays_usable() {
+        // Beckhoff family files list passive terminals with no ProductCode.
+        let family = TERMINAL.replace(
+            "<Devices>",
+            "<Devices><Device><Type>EL9011</Type><Name>End terminal</Name></Device>\
+             <Device><Name>nameless</Name></Device><Device/>",
+        );
+        let f = EsiFile::parse(&family).unwrap();
+        assert_eq!(f.devices.len(), 1);
+        assert_eq!(f.device(1, Some(1)).unwrap().type_name, "T1");
+        assert_eq!(f.skipped.len(), 3, "{:?}", f.skipped);
+        assert!(f.skipped[0].contains("\"EL9011\"") && f.skipped[0].contains("ProductCode"), "{:?}", f.skipped);
+        assert!(f.skipped[1].contains("\"nameless\""), "{:?}", f.skipped);
+        assert!(f.skipped[2].contains("device #3"), "{:?}", f.skipped);
+        // Only unreadable devices: the file is an error, the first one's.
+        let none = r#"<EtherCATInfo><Vendor><Id>2</Id></Vendor><Descriptions><Devices>
+            <Device><Type>EL9011</Type></Device></Devices></Descriptions></EtherCATInfo>"#;
+        assert_eq!(EsiFile::parse(none), Err(EsiError::Missing("ProductCode")));
+    }
 
     #[test]
     fn the_sii_an_esi_implies_keeps_names_details_physics_and_its_size() {
