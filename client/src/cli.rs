@@ -289,7 +289,8 @@ pub enum SiiCommand {
         #[arg(long, value_name = "FILE")]
         backup: Option<PathBuf>,
     },
-    /// The whole image as binary: to a file, or standard output when it is not a terminal.
+    /// The image as binary, from word 0 through its categories' end marker: to a file, or
+    /// standard output when it is not a terminal.
     Dump {
         #[command(flatten)]
         slave: Position,
