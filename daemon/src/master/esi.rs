@@ -44,6 +44,9 @@ impl EsiLibrary {
         .await
         .map_err(|e| format!("parsing stopped: {e}"))?
         .map_err(|e| format!("ESI {}: {e}", path.display()))?;
+        for skipped in &parsed.skipped {
+            tracing::warn!(esi = %path.display(), "{skipped}");
+        }
         let file = Arc::new(parsed);
         self.files.lock().unwrap_or_else(|e| e.into_inner()).insert(path.to_path_buf(), Arc::clone(&file));
         Ok(file)
