@@ -80,6 +80,10 @@ pub struct SlaveSection {
     pub alias: u16,
     /// Serial number (profiles).
     pub serial: Option<u32>,
+    /// The shortest DC cycle the slave runs, us (default 125): a shorter
+    /// SYNC0 makes it refuse SAFE-OP with AL status 0x0035 (invalid sync
+    /// cycle time), as a real slave does.
+    pub min_cycle_us: Option<u32>,
 }
 
 pub use ecmxf_devices::config_file::{ConfigError, key_line};
@@ -198,6 +202,14 @@ pub const PROFILES: [&str; 4] = ["neuromeka-core", "ti-3axis", "digital-io", "co
 
 impl SlaveSection {
     fn build(&self, i: usize, base: &Path, file: &Path) -> Result<Slave, ConfigError> {
+        let mut slave = self.described(i, base, file)?;
+        if let Some(us) = self.min_cycle_us {
+            slave.min_cycle_ns = us.saturating_mul(1000);
+        }
+        Ok(slave)
+    }
+
+    fn described(&self, i: usize, base: &Path, file: &Path) -> Result<Slave, ConfigError> {
         let invalid = |key: &str, message: String| ConfigError::Invalid {
             file: file.into(),
             key: format!("slave[{i}].{key}"),

@@ -256,3 +256,36 @@ fn a_network_the_link_cannot_carry_exits_once_with_status_78() {
     assert_eq!(out.status.code(), Some(78), "{said}");
     assert!(said.contains("640 bytes") && said.contains("chip.data_size"), "{said}");
 }
+
+/// A slave that refuses SAFE-OP at bring-up is named, with its state and
+/// AL status, where a user looks: `ecmxfctl master` (the last error) and
+/// `ecmxfctl slaves`, which says the network is not running and why
+/// instead of "MISSING" for a slave that answers (issue 27).
+#[test]
+fn a_slave_refusing_safe_op_is_named_by_master_and_slaves() {
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("refusing");
+        let network = dir.join("net.toml");
+        let net = "version = 1\n[[slave]]\nprofile = \"digital-io\"\n[[slave]]\nprofile = \"ti-3axis\"\nmin_cycle_us = 2000\n";
+        std::fs::write(&network, net).unwrap();
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
+        let expected = "[[slave]]\nproduct_code = 0x0808\n[[slave]]\nproduct_code = 0x0402\n";
+        let config = ecmxf_e2e::config_with_cycle(&link, "sync0_us = 1000\n", expected);
+        let d = Daemon::binary_with_config(&config);
+        let want = "slave 1 PREOP, AL status 0x0035 (invalid sync cycle time)";
+        let started = std::time::Instant::now();
+        let master = loop {
+            let out = d.ctl(&["master"]);
+            if out.stdout.contains(want) {
+                break out;
+            }
+            assert!(started.elapsed() < Duration::from_secs(20), "not named: {}\n{}", out.stdout, d.log());
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        };
+        assert!(master.stdout.contains("SAFEOP"), "{}", master.stdout);
+        let slaves = d.ctl(&["slaves"]);
+        assert!(!slaves.stdout.contains("MISSING"), "{}", slaves.stdout);
+        assert!(slaves.stderr.contains(want), "{}{}", slaves.stdout, slaves.stderr);
+        assert!(d.log().contains(want), "{}", d.log());
+    });
+}

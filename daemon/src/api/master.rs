@@ -161,6 +161,14 @@ pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::List
     let m = &ctx.master;
     let layout = m.layout();
     let config = m.config();
+    // No bring-up has found the network yet: nothing is known of the
+    // slaves, so none is "missing"; the reason is bring-up's (which names
+    // the slave that refused, issue 27).
+    let phase = m.status().phase;
+    if layout.slaves.is_empty() && phase != crate::engine::telemetry::Phase::Running {
+        let why = crate::engine::error::NotRunning::Phase { phase, last_error: m.last_error() };
+        return Err(to_status(crate::engine::error::EngineError::Unavailable(why)));
+    }
     let mut slaves = Vec::with_capacity(layout.slaves.len());
     for (i, s) in layout.slaves.iter().enumerate() {
         let p = i as u8;
