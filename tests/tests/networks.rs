@@ -289,3 +289,35 @@ fn a_slave_refusing_safe_op_is_named_by_master_and_slaves() {
         assert!(d.log().contains(want), "{}", d.log());
     });
 }
+
+/// An SDO to a slave whose SII lists no CoE (a Beckhoff EL2889: no
+/// mailbox at all) is answered at once with FAILED_PRECONDITION naming the
+/// slave, not sent to time out in the chip as "SDO protocol timeout"; its
+/// PDOs still come from its SII (issue 27).
+#[test]
+fn an_sdo_to_a_slave_without_coe_is_refused_at_once_naming_it() {
+    let Some(el2889) = ecmxf_e2e::fixture("sii_beckhoff_el2889.bin") else { return };
+    run(async move {
+        let dir = ecmxf_e2e::temp_dir("no-coe");
+        let network = dir.join("net.toml");
+        let net =
+            format!("version = 1\n[[slave]]\nprofile = \"ti-3axis\"\n[[slave]]\nsii = \"{}\"\n", el2889.display());
+        std::fs::write(&network, net).unwrap();
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", network.display());
+        let mut d = Daemon::with_config(&ecmxf_e2e::config(&link, ""));
+        let ch = d.connect().await;
+        let mut sdo = pb::sdo_client::SdoClient::new(ch.clone());
+        let upload = |slave| pb::SdoUploadRequest { slave, index: 0x1018, subindex: 1, ..Default::default() };
+        assert!(sdo.upload(upload(0)).await.is_ok(), "the drive speaks CoE");
+        for _ in 0..2 {
+            let started = std::time::Instant::now();
+            let e = sdo.upload(upload(1)).await.unwrap_err();
+            assert_eq!(e.code(), tonic::Code::FailedPrecondition, "{e:?}");
+            assert!(e.message().contains("slave 1 has no CoE mailbox"), "{}", e.message());
+            assert!(started.elapsed() < Duration::from_millis(500), "took {:?}", started.elapsed());
+        }
+        let mut pd = pb::process_data_client::ProcessDataClient::new(ch);
+        let mapping = pd.get_mapping(pb::GetMappingRequest { slave: Some(1) }).await.unwrap().into_inner();
+        assert_eq!(mapping.slaves[0].source, pb::PdoSource::Sii as i32, "{mapping:?}");
+    });
+}

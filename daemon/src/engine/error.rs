@@ -85,6 +85,14 @@ pub enum WrongState {
     },
     /// Nothing to stream: no slave maps a TxPDO.
     NoInputs,
+    /// The slave does not speak CoE: its SII's mailbox protocols (word
+    /// 0x1C) do not list it.
+    NoCoe {
+        /// The slave.
+        slave: u8,
+        /// The protocols its SII lists (ETG.1000.6 table 2 bits).
+        protocols: u16,
+    },
 }
 
 impl fmt::Display for WrongState {
@@ -104,6 +112,16 @@ impl fmt::Display for WrongState {
                 }
             }
             Self::NoInputs => f.write_str("the process image has no inputs (no slave maps a TxPDO)"),
+            Self::NoCoe { slave, protocols } => {
+                let names: Vec<&str> =
+                    [(0x01, "AoE"), (0x02, "EoE"), (0x04, "CoE"), (0x08, "FoE"), (0x10, "SoE"), (0x20, "VoE")]
+                        .into_iter()
+                        .filter(|(bit, _)| protocols & bit != 0)
+                        .map(|(_, name)| name)
+                        .collect();
+                let listed = if names.is_empty() { "none".to_string() } else { names.join(", ") };
+                write!(f, "slave {slave} has no CoE mailbox (the mailbox protocols its SII lists: {listed})")
+            }
         }
     }
 }

@@ -37,6 +37,7 @@ use ecmxf_wire::EcatState;
 pub use transactions::RawAnswer;
 
 pub mod esi;
+pub mod mailbox;
 mod network;
 pub mod pdos;
 pub mod sii;
@@ -195,6 +196,8 @@ pub struct Master {
     esi: esi::EsiLibrary,
     /// SII descriptions by slave identity.
     sii_cache: sii::SiiCache,
+    /// Mailbox protocols by slave position.
+    mailbox: mailbox::MailboxProtocols,
 }
 
 /// Opens the link the configuration names. For the in-process simulator,
@@ -323,6 +326,7 @@ impl Master {
             default_timeout: Duration::from_secs(3),
             esi: esi::EsiLibrary::default(),
             sii_cache: sii::SiiCache::default(),
+            mailbox: mailbox::MailboxProtocols::default(),
         }
     }
 

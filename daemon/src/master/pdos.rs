@@ -89,7 +89,11 @@ impl SlavePdos {
 fn source_lacks(e: &EngineError) -> bool {
     matches!(
         e,
-        EngineError::Failed(_) | EngineError::SdoAbort { .. } | EngineError::Refused(_) | EngineError::BadDeviceData(_)
+        EngineError::Failed(_)
+            | EngineError::SdoAbort { .. }
+            | EngineError::Refused(_)
+            | EngineError::BadDeviceData(_)
+            | EngineError::WrongState(crate::engine::error::WrongState::NoCoe { .. })
     )
 }
 

@@ -36,6 +36,7 @@ impl Master {
         complete: bool,
         timeout: Option<Duration>,
     ) -> Result<Vec<u8>, EngineError> {
+        self.check_coe(slave).await?;
         self.request(SlotRequest::SdoRead { slave, index, subindex, complete }, timeout).await
     }
 
@@ -49,6 +50,7 @@ impl Master {
         data: Vec<u8>,
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
+        self.check_coe(slave).await?;
         self.request(SlotRequest::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
     }
 
@@ -149,6 +151,8 @@ impl Master {
             let reason = format!("{assign_index:#06x}; use {RX_PDO_ASSIGN:#06x} or {TX_PDO_ASSIGN:#06x}");
             return Err(EngineError::BadArgument { field: "assign_index", reason });
         }
+        // The chip reads the assignment over CoE.
+        self.check_coe(slave).await?;
         let d = self.request(SlotRequest::PdoConfigRead { slave, assign_index }, timeout).await?;
         let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
         PdoConfigReply::decode(&fields, &d)

@@ -1,0 +1,52 @@
+//! Which mailbox protocols each slave speaks, from its SII (word 0x1C,
+//! ETG.1000.6 table 2): an SDO to a slave without CoE is answered at once,
+//! naming the slave, instead of being sent and timing out in the chip a
+//! second later as "SDO protocol timeout" (issue 27). Read once per slave
+//! (one EEPROM request) the first time an SDO goes to it, and kept while
+//! the same device sits at that position.
+
+use std::collections::HashMap;
+use std::sync::Mutex;
+
+use ecmxf_devices::sii::protocol;
+
+use super::Master;
+use crate::engine::error::{EngineError, WrongState};
+
+/// SII word of the mailbox protocols.
+const PROTOCOLS_WORD: u16 = 0x1C;
+
+/// (vendor id, product code, revision) as bring-up read them.
+type Identity = (u32, u32, u32);
+
+/// The mailbox protocols read so far, by slave position.
+#[derive(Debug, Default)]
+pub struct MailboxProtocols {
+    by_position: Mutex<HashMap<u8, (Identity, u16)>>,
+}
+
+impl Master {
+    /// Ok when `slave` speaks CoE, or when its SII cannot say (the SDO then
+    /// goes out and the slave answers for itself); [`WrongState::NoCoe`]
+    /// when its SII lists the mailbox protocols and CoE is not among them.
+    pub async fn check_coe(&self, slave: u8) -> Result<(), EngineError> {
+        let Some(found) = self.layout().slaves.get(usize::from(slave)).cloned() else { return Ok(()) };
+        let identity = (found.vendor_id, found.product_code, found.revision);
+        let known = self.mailbox.by_position.lock().unwrap_or_else(|e| e.into_inner()).get(&slave).copied();
+        let protocols = match known {
+            Some((id, p)) if id == identity => p,
+            _ => match self.eeprom_read(slave, PROTOCOLS_WORD, None).await {
+                Ok(words) => {
+                    let p = u16::from_le_bytes([words[0], words[1]]);
+                    self.mailbox.by_position.lock().unwrap_or_else(|e| e.into_inner()).insert(slave, (identity, p));
+                    p
+                }
+                Err(_) => return Ok(()),
+            },
+        };
+        if protocols & protocol::COE == 0 {
+            return Err(EngineError::WrongState(WrongState::NoCoe { slave, protocols }));
+        }
+        Ok(())
+    }
+}
