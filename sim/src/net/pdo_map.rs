@@ -3,6 +3,16 @@
 //! (CiA301 / ETG.1000.6 5.6.7): writable in PRE-OP only on configurable
 //! devices, entries only while subindex 0 is 0, mapped objects must exist,
 //! be mappable in that direction and match in size.
+//!
+//! Those rules are for a host that remaps. A device's own mapping (what its
+//! description gives) is taken as it stands, the way the device runs it
+//! (issue 27): entries shorter or longer than their object (Beckhoff's
+//! "compact" PDOs map 16 bits of UDINT objects; a BOOL mapped as 16 bits)
+//! carry the object's low bits; an entry flagged for the other direction
+//! carries its object all the same; an entry naming an object the
+//! dictionary lacks, or a PDO-communication object itself (an open-source
+//! board mapping 0x1600:01..05 as USINT), is a placeholder: its bits are in
+//! the image and move no object.
 
 use ecmxf_wire::payload::pdo::PdoEntry;
 use ecmxf_wire::payload::sdo::SdoAbortCode;
@@ -40,8 +50,9 @@ impl Layout {
     }
 }
 
-/// Computes the layout of one direction from the dictionary. Fails with the
-/// object at fault when the mapping is inconsistent.
+/// Computes the layout of one direction from the dictionary, as the
+/// mapping stands (see the module doc). Fails with the object at fault only
+/// when an assigned PDO has no mapping object.
 pub fn layout(od: &ObjectDictionary, rx: bool) -> Result<Layout, u16> {
     let assign = if rx { RX_ASSIGN } else { TX_ASSIGN };
     let Some(a) = od.object(assign) else {
@@ -55,12 +66,6 @@ pub fn layout(od: &ObjectDictionary, rx: bool) -> Result<Layout, u16> {
         let n = map.entries.get(&0).map_or(0, Entry::int) as u8;
         for s in 1..=n {
             let e = PdoEntry::from_u32(od.int(pdo, s) as u32);
-            if e.index != 0 {
-                let target = od.entry(e.index, e.subindex).ok_or(pdo)?;
-                if !target.mappable.allows(rx) || target.dtype.bits() != u32::from(e.bits) {
-                    return Err(pdo);
-                }
-            }
             out.entries.push(MappedEntry { index: e.index, subindex: e.subindex, bit_offset: out.bits, bits: e.bits });
             out.bits += u32::from(e.bits);
         }
@@ -131,30 +136,41 @@ pub fn validate_write(od: &ObjectDictionary, index: u16, sub: u8, data: &[u8]) -
 }
 
 /// Copies `bits` bits from `src` at bit `from` to `dst` at bit `to`
-/// (LSB-first, as EtherCAT process images are).
+/// (LSB-first, as EtherCAT process images are). Bits beyond the end of
+/// `src` are 0 (an entry wider than its object); the copy stops at the end
+/// of `dst` (an entry narrower than its object's value).
 pub fn copy_bits(src: &[u8], from: u32, dst: &mut [u8], to: u32, bits: u32) {
     if from % 8 == 0 && to % 8 == 0 && bits % 8 == 0 {
         let (f, t, n) = ((from / 8) as usize, (to / 8) as usize, (bits / 8) as usize);
-        if f + n <= src.len() && t + n <= dst.len() {
-            dst[t..t + n].copy_from_slice(&src[f..f + n]);
+        let Some(out) = dst.get_mut(t..(t + n).min(dst.len())) else { return };
+        let have = src.get(f..).unwrap_or(&[]);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = have.get(i).copied().unwrap_or(0);
         }
         return;
     }
     for i in 0..bits {
         let (sb, db) = (from + i, to + i);
         let (si, di) = ((sb / 8) as usize, (db / 8) as usize);
-        if si >= src.len() || di >= dst.len() {
+        if di >= dst.len() {
             return;
         }
-        let bit = (src[si] >> (sb % 8)) & 1;
+        let bit = src.get(si).map_or(0, |b| (b >> (sb % 8)) & 1);
         dst[di] = (dst[di] & !(1 << (db % 8))) | (bit << (db % 8));
     }
+}
+
+/// Whether a mapped entry moves no object: padding, or a PDO-communication
+/// object (mapping 0x1600-0x1BFF, assignment and SM objects 0x1C00-0x1C3F),
+/// which process data must never overwrite.
+fn placeholder(m: &MappedEntry) -> bool {
+    m.index == 0 || (0x1600..0x1C40).contains(&m.index)
 }
 
 /// Moves an output image into the mapped objects.
 pub fn image_to_od(od: &mut ObjectDictionary, layout: &Layout, image: &[u8]) {
     for m in &layout.entries {
-        if m.index == 0 {
+        if placeholder(m) {
             continue;
         }
         if let Some(e) = od.entry_mut(m.index, m.subindex) {
@@ -166,7 +182,7 @@ pub fn image_to_od(od: &mut ObjectDictionary, layout: &Layout, image: &[u8]) {
 /// Moves the mapped objects into an input image.
 pub fn od_to_image(od: &ObjectDictionary, layout: &Layout, image: &mut [u8]) {
     for m in &layout.entries {
-        if m.index == 0 {
+        if placeholder(m) {
             continue;
         }
         if let Some(e) = od.entry(m.index, m.subindex) {
@@ -193,6 +209,38 @@ mod tests {
         add_assignment(&mut od, RX_ASSIGN, &[0x1600], 2, fixed);
         add_assignment(&mut od, TX_ASSIGN, &[0x1A00], 2, fixed);
         od
+    }
+
+    #[test]
+    fn a_devices_own_mapping_is_taken_as_it_stands() {
+        let mut od = od(true);
+        od.insert(
+            0x6010,
+            Object::var("count", Entry::new("count", DataType::UInt32, Access::RO).mappable(Mappable::Tx)),
+        );
+        od.insert(0x6020, Object::var("flag", Entry::new("flag", DataType::Bool, Access::RO).mappable(Mappable::Rx)));
+        let entries = [
+            PdoEntry { index: 0x6010, subindex: 0, bits: 16 }, // compact: 16 bits of a UDINT
+            PdoEntry { index: 0x6020, subindex: 0, bits: 16 }, // a BOOL as 16 bits, flagged for outputs
+            PdoEntry { index: 0x1A00, subindex: 1, bits: 8 },  // the mapping object itself
+            PdoEntry { index: 0x7777, subindex: 1, bits: 8 },  // not in the dictionary
+        ];
+        add_mapping(&mut od, 0x1A00, "TxPDO", &entries, true);
+        let tx = layout(&od, false).unwrap();
+        assert_eq!(tx.bits, 48);
+        od.entry_mut(0x6010, 0).unwrap().value = 0x0012_3456u32.to_le_bytes().to_vec();
+        od.entry_mut(0x6020, 0).unwrap().value = vec![1];
+        let mut image = vec![0xAA; 6];
+        od_to_image(&od, &tx, &mut image);
+        assert_eq!(&image[..2], &[0x56, 0x34], "the object's low 16 bits");
+        assert_eq!(image[2], 1, "the BOOL's byte");
+        assert_eq!(&image[4..], &[0xAA, 0xAA], "placeholders move nothing");
+        // Outputs never overwrite a mapping object.
+        add_mapping(&mut od, 0x1600, "RxPDO", &[PdoEntry { index: 0x1600, subindex: 1, bits: 32 }], true);
+        let rx = layout(&od, true).unwrap();
+        let before = od.int(0x1600, 1);
+        image_to_od(&mut od, &rx, &[0xFF; 4]);
+        assert_eq!(od.int(0x1600, 1), before);
     }
 
     fn write(od: &mut ObjectDictionary, index: u16, sub: u8, data: &[u8], state: AlState) -> SdoResult<()> {
