@@ -50,6 +50,9 @@ pub struct Slave {
     pub eeprom: Vec<u8>,
     /// Whether the slave speaks CoE (has a mailbox).
     pub has_mailbox: bool,
+    /// Whether its SII lists CoE among the mailbox protocols (word 0x1C): a
+    /// slave without it never answers a CoE request.
+    pub has_coe: bool,
     /// DC supported.
     pub has_dc: bool,
     /// Shortest SYNC0 cycle it accepts, ns (0 = no limit).
@@ -142,6 +145,7 @@ impl Slave {
         let mut s = Self {
             name,
             has_mailbox: sii.mailbox.rx_size > 0,
+            has_coe: sii.protocols & ecmxf_devices::sii::protocol::COE != 0,
             eeprom,
             has_dc,
             min_cycle_ns: 125_000,
@@ -198,9 +202,13 @@ impl Slave {
     }
 
     fn mailbox_ready(&self) -> SdoResult<()> {
-        // Without a mailbox, or below PRE-OP, the request never gets an
-        // answer: the master times out.
-        if !self.present || !self.has_mailbox || matches!(self.esm.state, AlState::Init | AlState::Boot) {
+        // Without a mailbox, without CoE in its SII's protocols, or below
+        // PRE-OP, the request never gets a CoE answer: the master times out.
+        if !self.present
+            || !self.has_mailbox
+            || !self.has_coe
+            || matches!(self.esm.state, AlState::Init | AlState::Boot)
+        {
             return Err(SdoAbortCode::TIMEOUT);
         }
         Ok(())
@@ -356,3 +364,23 @@ impl Slave {
 
 /// Re-exported for device builders.
 pub use cia402::AxisSpec;
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ecmxf_devices::sii::protocol;
+
+    #[test]
+    fn a_slave_whose_sii_lists_no_coe_never_answers_coe() {
+        let mut drive = super::super::profiles::ti_three_axis(1, 1);
+        drive.esm.state = AlState::PreOp;
+        assert!(drive.sdo_upload(0x1018, 1, false).is_ok());
+        // The same device with FoE and SoE only in its SII (word 0x1C).
+        let mut eeprom = drive.eeprom.clone();
+        eeprom[0x38..0x3A].copy_from_slice(&(protocol::FOE | protocol::SOE).to_le_bytes());
+        let mut other = Slave::new(eeprom, drive.od.clone(), drive.device.clone(), drive.has_dc);
+        other.esm.state = AlState::PreOp;
+        assert!(other.has_mailbox && !other.has_coe);
+        assert_eq!(other.sdo_upload(0x1018, 1, false), Err(SdoAbortCode::TIMEOUT));
+    }
+}
