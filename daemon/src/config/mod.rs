@@ -477,15 +477,18 @@ impl Config {
             // below absorbs the longer sleeps).
             realtime: RealtimeConfig { priority: 0, cpu: None, lock_memory: false, spin_us: 0 },
             // Without real-time priority, and on a virtual machine, a thread
-            // can stall for 25 ms: keep about 23 ms of outputs queued (32 ms
-            // of depth) at the cost of that much output latency. Bring-up
-            // fits the depths to the 16 KiB FIFO memory.
+            // can stall for 25 ms: keep about 17 ms of outputs queued (the
+            // budget below) and room for 12 ms of inputs, so a stall runs
+            // neither FIFO dry nor over (a 40-frame TxFIFO, 5 ms, lost a few
+            // input frames a minute under ecmxfd-pi-bench's CPU quota). The
+            // two share the 16 KiB FIFO memory (192 + 96 frames of the demo's
+            // 53 bytes); bring-up fits the depths to larger frames.
             cycle: CycleConfig {
                 sync0_us: 125,
-                fifo_rx_depth: 255,
-                fifo_tx_depth: 40,
-                fifo_low: 128,
-                fifo_high: 240,
+                fifo_rx_depth: 192,
+                fifo_tx_depth: 96,
+                fifo_low: 96,
+                fifo_high: 184,
                 // As config/ecmxfd-sim.toml: deep enough for a VM's stalls.
                 output_latency_us: Some(20_000),
                 ..CycleConfig::default()
