@@ -1,6 +1,7 @@
-//! API benchmark: starts `ecmxfd --sim` (this build's profile; run it with
-//! `cargo run --release -p ecmxf-e2e --bin ecmxf-api-bench`) and measures
-//! over its Unix socket:
+//! API benchmark: starts the `ecmxfd` binary next to this one with `--sim`,
+//! as its own process (build both first: `cargo build --release -p ecmxfd
+//! -p ecmxf-e2e --bins`; this bench builds nothing and replaces no binary),
+//! and measures over its Unix socket:
 //! - unary SDO upload latency, one client, then 16 concurrent clients
 //!   (each on its own connection);
 //! - input streaming to 16 concurrent subscribers: samples/s and the
@@ -8,6 +9,10 @@
 //!   arrives minus when the engine received the frame);
 //! - both at once.
 //!
+//! What runs where: the daemon (engine and in-process simulator) in its own
+//! process, the clients in this one; each process's CPU comes from its own
+//! /proc entry. A frame-to-subscriber latency below zero (the clocks
+//! disagree) is not clamped: such samples are counted and said as an error.
 //! Prints medians, p99 and max from this one run. `--secs N` sets each
 //! phase's length (default 5).
 #![forbid(unsafe_code)]
@@ -48,8 +53,9 @@ async fn sdo_load(ch: Channel, until: Instant) -> Vec<u64> {
     out
 }
 
-/// (frame-to-subscriber latencies in us, samples, frames lost).
-async fn subscriber(ch: Channel, until: Instant) -> (Vec<u64>, u64) {
+/// (frame-to-subscriber latencies in us, frames lost, samples whose
+/// latency came out negative).
+async fn subscriber(ch: Channel, until: Instant) -> (Vec<u64>, u64, u64) {
     let mut pd = ProcessDataClient::new(ch);
     let mut s = pd
         .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
@@ -57,16 +63,19 @@ async fn subscriber(ch: Channel, until: Instant) -> (Vec<u64>, u64) {
         .expect("stream")
         .into_inner();
     let mut lat = Vec::new();
-    let mut lost = 0;
+    let (mut lost, mut negative) = (0, 0);
     while let Some(m) = s.next().await {
         let m = m.expect("sample");
-        lat.push(monotonic_ns().saturating_sub(m.monotonic_ns) / 1000);
+        match monotonic_ns().checked_sub(m.monotonic_ns) {
+            Some(ns) => lat.push(ns / 1000),
+            None => negative += 1,
+        }
         lost += m.lost;
         if Instant::now() >= until {
             break;
         }
     }
-    (lat, lost)
+    (lat, lost, negative)
 }
 
 async fn channels(d: &Daemon, n: usize) -> Vec<Channel> {
@@ -81,13 +90,19 @@ async fn streams(d: &Daemon, clients: usize, secs: u64, label: &str) {
     let until = Instant::now() + Duration::from_secs(secs);
     let tasks: Vec<_> = channels(d, clients).await.into_iter().map(|c| tokio::spawn(subscriber(c, until))).collect();
     let mut all = Vec::new();
-    let mut lost = 0;
+    let (mut lost, mut negative) = (0, 0);
     let mut per = Vec::new();
     for t in tasks {
-        let (l, k) = t.await.expect("task");
+        let (l, k, n) = t.await.expect("task");
         per.push(l.len());
         all.extend(l);
         lost += k;
+        negative += n;
+    }
+    if negative > 0 {
+        println!(
+            "ERROR: {negative} samples arrived before the engine received their frame (clocks disagree); left out"
+        );
     }
     report(&format!("stream, {clients} subscriber(s){label}: frame->subscriber"), all, secs as f64);
     println!(
@@ -100,25 +115,24 @@ async fn streams(d: &Daemon, clients: usize, secs: u64, label: &str) {
 
 fn main() {
     let secs: u64 = std::env::args().skip_while(|a| a != "--secs").nth(1).and_then(|v| v.parse().ok()).unwrap_or(5);
-    // The daemon of this very source, in this build's profile.
-    let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-    let profile: &[&str] = if cfg!(debug_assertions) { &[] } else { &["--release"] };
-    let built = std::process::Command::new(cargo)
-        .args(["build", "-q", "-p", "ecmxfd", "--bin", "ecmxfd"])
-        .args(profile)
-        .current_dir(ecmxf_e2e::repo())
-        .status()
-        .expect("run cargo build");
-    assert!(built.success(), "building ecmxfd failed");
+    let daemon = ecmxf_e2e::daemon_binary();
+    if !daemon.exists() {
+        eprintln!(
+            "{} not found: build it first (cargo build --release -p ecmxfd -p ecmxf-e2e --bins)",
+            daemon.display()
+        );
+        std::process::exit(2);
+    }
     let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build().expect("runtime");
     rt.block_on(async {
         let started = Instant::now();
-        let mut d = Daemon::sim();
+        let mut d = Daemon::binary_sim();
         let ch = d.connect().await;
         let info = pb::master_client::MasterClient::new(ch.clone()).get_info(pb::GetInfoRequest {}).await.unwrap().into_inner();
         println!(
-            "ecmxfd --sim ({} build of the bench), {} us cycle, {} B in / {} B out per frame, {} s per phase",
-            if cfg!(debug_assertions) { "debug" } else { "release" },
+            "{} --sim (pid {}), {} us cycle, {} B in / {} B out per frame, {} s per phase",
+            daemon.display(),
+            d.pid(),
             info.sync0_us,
             info.input_image_bytes,
             info.output_image_bytes,
@@ -165,7 +179,7 @@ fn main() {
             ticks / 100.0
         };
         println!(
-            "cpu seconds: daemon {:.1}, bench client {:.1}, wall {:.1} s on {} cores",
+            "cpu seconds: daemon process {:.1}, bench clients (this process) {:.1}, wall {:.1} s on {} cores",
             cpu(d.pid()),
             cpu(std::process::id()),
             started.elapsed().as_secs_f64(),
