@@ -151,8 +151,7 @@ fn offline_budget(
     let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
     let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();
     let data_size = c.chip.data_size;
-    let bits = ((data_size + ecmxf_wire::framing::OVERHEAD) * 8) as u64;
-    let packet_ns = bits * 1_000_000_000 / chip.spi_hz.max(1) + chip.processing_ns;
+    let packet_ns = ecmxfd::engine::link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
     Some(ecmxfd::engine::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
 }
 

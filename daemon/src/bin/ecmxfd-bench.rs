@@ -54,8 +54,7 @@ fn main() -> Result<(), String> {
     let config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
     let sim_config = ecmxf_sim::ChipConfig::default();
     let data_size = config.chip.data_size;
-    let packet_bits = (data_size as u64 + 32) * 8;
-    let modelled_ns = packet_bits * 1_000_000_000 / sim_config.spi_hz + sim_config.processing_ns;
+    let modelled_ns = ecmxfd::engine::link_budget::clocked_ns(data_size, sim_config.spi_hz) + sim_config.processing_ns;
     let modelled_rate = 1e9 / modelled_ns as f64;
 
     // 1. Raw port rate: guarded INFO_UPDATEs back to back.

@@ -472,8 +472,10 @@ pub fn bring_up<L: Link>(
         // well; otherwise a loaded host may have slowed the measurement,
         // and the bring-up is tried again.
         Err(super::link_budget::BudgetError::TooSlow(measured)) => {
-            let bits = ((port.data_size() + ecmxf_wire::framing::OVERHEAD) * 8) as u64;
-            let bound = port.link_mut().clock_hz().map(|hz| Duration::from_nanos(bits * 1_000_000_000 / hz.max(1)));
+            let bound = port
+                .link_mut()
+                .clock_hz()
+                .map(|hz| Duration::from_nanos(super::link_budget::clocked_ns(data_size, hz)));
             match bound.map(check) {
                 Some(Err(e)) => return Err(BringUpError::Refused(e)),
                 _ => {

@@ -49,10 +49,7 @@ impl LinkBudget {
     /// (1.0: all): [`PACKETS_PER_CALL`] packets per `frames_per_packet`
     /// cycles.
     pub fn load(&self) -> f64 {
-        if self.frames_per_packet == usize::MAX {
-            return 0.0;
-        }
-        (PACKETS_PER_CALL * self.packet_ns) as f64 / (self.frames_per_packet as f64 * self.cycle_ns.max(1) as f64)
+        self.min_exchanges_per_s() * self.packet_ns as f64 / 1e9
     }
 
     /// Exchanges per second the plan needs at least (0: no process data).
@@ -62,6 +59,13 @@ impl LinkBudget {
         }
         (PACKETS_PER_CALL as f64) * 1e9 / (self.frames_per_packet as f64 * self.cycle_ns.max(1) as f64)
     }
+}
+
+/// The time the bits of a packet with a `data_size`-byte data section take
+/// at `hz`: a lower bound of the packet's time (the chip's processing and
+/// the host's wake-up come on top).
+pub fn clocked_ns(data_size: usize, hz: u64) -> u64 {
+    ((data_size + ecmxf_wire::framing::OVERHEAD) * 8) as u64 * 1_000_000_000 / hz.max(1)
 }
 
 /// Why the link cannot carry the process data.

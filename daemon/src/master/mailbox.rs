@@ -10,14 +10,11 @@ use std::sync::Mutex;
 
 use ecmxf_devices::sii::protocol;
 
-use super::Master;
+use super::{Identity, Master};
 use crate::engine::error::{EngineError, WrongState};
 
 /// SII word of the mailbox protocols.
 const PROTOCOLS_WORD: u16 = 0x1C;
-
-/// (vendor id, product code, revision) as bring-up read them.
-type Identity = (u32, u32, u32);
 
 /// The mailbox protocols read so far, by slave position.
 #[derive(Debug, Default)]
@@ -30,8 +27,7 @@ impl Master {
     /// goes out and the slave answers for itself); [`WrongState::NoCoe`]
     /// when its SII lists the mailbox protocols and CoE is not among them.
     pub async fn check_coe(&self, slave: u8) -> Result<(), EngineError> {
-        let Some(found) = self.layout().slaves.get(usize::from(slave)).cloned() else { return Ok(()) };
-        let identity = (found.vendor_id, found.product_code, found.revision);
+        let Some(identity) = self.identity(slave) else { return Ok(()) };
         let known = self.mailbox.by_position.lock().unwrap_or_else(|e| e.into_inner()).get(&slave).copied();
         let protocols = match known {
             Some((id, p)) if id == identity => p,

@@ -44,6 +44,9 @@ pub mod sii;
 pub mod states;
 pub mod transactions;
 
+/// A slave's identity: (vendor id, product code, revision).
+pub type Identity = (u32, u32, u32);
+
 /// Requests that may wait at once.
 pub const QUEUE_DEPTH: usize = 256;
 /// Input frames a subscriber may fall behind by before losing some.
@@ -509,6 +512,13 @@ impl Master {
     /// the configuration in force (see `BringUpError::is_permanent`).
     pub fn refused(&self) -> bool {
         self.telemetry.refused.load(Ordering::Relaxed)
+    }
+
+    /// (vendor id, product code, revision) of the slave at `position` as
+    /// bring-up read them; `None` past the end of the ring.
+    pub fn identity(&self, position: u8) -> Option<Identity> {
+        let layout = self.layout.lock().unwrap_or_else(|e| e.into_inner());
+        layout.slaves.get(usize::from(position)).map(|s| (s.vendor_id, s.product_code, s.revision))
     }
 
     /// The network as bring-up found it.

@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex};
 use ecmxf_devices::sii::{Sii, category};
 use tokio::sync::OnceCell;
 
-use super::Master;
+use super::{Identity, Master};
 use crate::engine::error::EngineError;
 
 /// Where the category area starts (word 0x40).
@@ -21,9 +21,6 @@ const CATEGORIES: u16 = 0x40;
 /// The fixed area's EEPROM size word (ETG.1000.6 table 2: word 0x3E, size
 /// in KiB less one); 0x3F, the version, comes in the same request.
 const SIZE_WORD: u16 = 0x3E;
-
-/// (vendor id, product code, revision) as bring-up read them.
-type Identity = (u32, u32, u32);
 
 /// Parsed SII categories by slave identity. Slaves of one vendor, product
 /// and revision carry the same description (the ESI they were programmed
@@ -124,8 +121,7 @@ impl Master {
     /// this, as only the PDO description's reader is. A slave whose
     /// identity bring-up did not learn (all zero) is always read.
     pub async fn sii_described(&self, slave: u8, which: Categories<'_>) -> Result<Arc<Sii>, EngineError> {
-        let identity = self.layout().slaves.get(usize::from(slave)).map(|s| (s.vendor_id, s.product_code, s.revision));
-        match identity.filter(|&id| id != (0, 0, 0)) {
+        match self.identity(slave).filter(|&id| id != (0, 0, 0)) {
             Some(id) => {
                 let cell = self.sii_cache.cell(id);
                 cell.get_or_try_init(|| async { self.sii(slave, which).await.map(Arc::new) }).await.cloned()

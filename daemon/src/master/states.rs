@@ -88,11 +88,7 @@ impl Master {
         for slave in slaves {
             let read = |item| async move {
                 let d = self.request(SlotRequest::SlaveInfo { slave, item }, timeout).await.ok()?;
-                match SlaveInfo::decode(item, &d).ok()? {
-                    SlaveInfo::State(s) => Some(u32::from(s.to_u8())),
-                    SlaveInfo::AlStatus(c) => Some(u32::from(c)),
-                    _ => None,
-                }
+                SlaveInfo::decode(item, &d).ok()?.number()
             };
             let state = read(SlaveInfoCode::State).await.map(|v| EcatState::from_u8(v as u8));
             let code = read(SlaveInfoCode::AlStatus).await.map(|v| v as u16);

@@ -9,10 +9,10 @@
 //! EEPROM read, PDO assignment, state refresh) may run twice without harm,
 //! so they go out once, and whichever exchange comes next (the first poll,
 //! at once when nothing else is due) brings the read's answer (refused or
-//! started): one exchange instead of the guard's two. When that answer is lost to a bit error, the next
-//! header the chip builds decides: busy, the read runs; not busy, it is
-//! sent again (it never ran, or it already ended: either way a second run
-//! is the answer). Never a result of the transaction before it: a GET is
+//! started): one exchange instead of the guard's two. When that answer is
+//! lost to a bit error, the next header the chip builds decides: busy, the
+//! read runs; not busy, it is sent again (it never ran, or it already
+//! ended: either way a second run is the answer). Never a result of the transaction before it: a GET is
 //! only believed after a start the chip confirmed.
 //!
 //! Polls cost one exchange each and say as much as they can: where the
@@ -321,9 +321,7 @@ impl Active {
                     Immediate::Emergencies(n) => port.call(&CoeEmergencyGet(*n))?,
                 };
                 if refused(&a) {
-                    port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-                    let what = self.describe();
-                    return Ok((None, self.finish(Err(EngineError::Refused(what)))));
+                    return Ok(self.refused_by_chip(port));
                 }
                 let out = fill(&mut self.buffer, &[&[a.header.return_value], a.data]);
                 return Ok((None, self.finish(Ok(out))));
@@ -383,14 +381,20 @@ impl Active {
         match port.previous() {
             Some(a) if a.header.index == index && a.header.code == code && !a.header.is_nop() => {
                 if refused(&a) {
-                    port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-                    let what = self.describe();
-                    return Ok(Ok((None, self.finish(Err(EngineError::Refused(what))))));
+                    return Ok(Ok(self.refused_by_chip(port)));
                 }
             }
             _ => self.unsure_after = Some(at + 1),
         }
         if polled_now { Ok(Ok((Some(self), Progress::Sent))) } else { Ok(Err(self)) }
+    }
+
+    /// The chip refused the command (error bit7): the bit is cleared with
+    /// the next packet and the caller gets [`EngineError::Refused`].
+    fn refused_by_chip<L: Link>(self, port: &mut Port<L>) -> (Option<Self>, Progress) {
+        port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+        let what = self.describe();
+        (None, self.finish(Err(EngineError::Refused(what))))
     }
 
     /// After a blocking command went out: refused (its answer has the command
@@ -404,9 +408,7 @@ impl Active {
         now: Instant,
     ) -> Result<(Option<Self>, Progress), PortError> {
         if refused {
-            port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-            let what = self.describe();
-            return Ok((None, self.finish(Err(EngineError::Refused(what)))));
+            return Ok(self.refused_by_chip(port));
         }
         self.step = next;
         (self.since, self.polled) = (now, None);
