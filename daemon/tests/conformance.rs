@@ -1,4 +1,5 @@
-//! Conformance over every device description in ../shared/fixtures: each
+//! Conformance over every device description in ../shared/fixtures and its
+//! incoming/ folder: each
 //! device of every ESI file, and every SII dump, alone on the simulator,
 //! through the daemon's engine as it runs in production. Files added there
 //! are picked up without code changes. Per device:
@@ -192,7 +193,7 @@ fn every_fixture_device_alone_reaches_op_with_the_pdos_its_file_describes() {
     let Some(dir) = fixtures() else { return };
     let tmp = std::env::temp_dir().join(format!("ecmxf-conformance-{}", std::process::id()));
     std::fs::create_dir_all(&tmp).unwrap();
-    let catalog = Catalog::scan(&dir).unwrap();
+    let catalog = Catalog::scan_with_incoming(&dir).unwrap();
     for skipped in &catalog.skipped {
         eprintln!("{skipped}, skipped");
     }

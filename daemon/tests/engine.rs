@@ -162,6 +162,23 @@ fn sdo_read_write_abort_and_slave_info() {
     });
 }
 
+/// A read the chip gives up on (the EEPROM slower than the 100 ms the
+/// daemon's request allows) is an error to the client, never the word an
+/// earlier read left in the chip's result (issue 28).
+#[test]
+fn a_timed_out_eeprom_read_never_returns_data_to_a_client() {
+    let (m, sim, _serial) = start();
+    rt().block_on(async {
+        assert_eq!(m.eeprom_read(1, 0x08, None).await.unwrap(), 0x059Du32.to_le_bytes());
+        let normal = sim.with_chip(|c| std::mem::replace(&mut c.config.timing.eeprom_ns, 150_000_000));
+        let e = m.eeprom_read(1, 0x0A, Some(Duration::from_secs(2))).await.unwrap_err();
+        assert!(e.to_string().contains("EEPROM word 0x000a of slave 1"), "{e}");
+        sim.with_chip(|c| c.config.timing.eeprom_ns = normal);
+        // The product code's low word, read again within the time.
+        assert_eq!(&m.eeprom_read(1, 0x0A, None).await.unwrap()[..2], &0x0402u16.to_le_bytes());
+    });
+}
+
 #[test]
 fn cancelled_requests_leave_the_slot_clean() {
     let (m, _sim, _serial) = start();

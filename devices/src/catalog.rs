@@ -243,6 +243,23 @@ impl Catalog {
     }
 }
 
+impl Catalog {
+    /// A fixtures folder as the tests read it: its files, then those in
+    /// its `incoming/` (shapes that arrived after the others, read from
+    /// the day they arrive).
+    pub fn scan_with_incoming(dir: &Path) -> std::io::Result<Self> {
+        let mut out = Self::scan(dir)?;
+        let incoming = dir.join("incoming");
+        if incoming.is_dir() {
+            let more = Self::scan(&incoming)?;
+            out.devices.extend(more.devices);
+            out.skipped.extend(more.skipped);
+            out.failed.extend(more.failed);
+        }
+        Ok(out)
+    }
+}
+
 /// Splits devices, in order, into networks of at most `max_slaves` slaves
 /// and `max_bytes` of process data each way; a device bigger than that
 /// alone. (A large image leaves the SPI link little room at short cycles:

@@ -31,6 +31,13 @@ pub enum EsiError {
         /// Its text.
         text: String,
     },
+    /// A PDO given only as a reference to a named PDO (`<TxPdo Ref="..."/>`,
+    /// early Beckhoff catalogues) that the file does not define: its
+    /// entries, and so the device's process image, are unknown.
+    PdoReference {
+        /// The name referred to.
+        name: String,
+    },
     /// No device with that product code (and revision).
     NoSuchDevice {
         /// Product code asked for.
@@ -46,6 +53,10 @@ impl fmt::Display for EsiError {
             Self::Xml(e) => write!(f, "ESI is not well-formed XML: {e}"),
             Self::Missing(what) => write!(f, "ESI has no {what}"),
             Self::Number { what, text } => write!(f, "ESI {what} {text:?} is not a number"),
+            Self::PdoReference { name } => write!(
+                f,
+                "its PDOs are references to {name:?}, a PDO this file does not define, so its process image is unknown"
+            ),
             Self::NoSuchDevice { product_code, revision: Some(r) } => {
                 write!(f, "ESI has no device with product code {product_code:#010x} and revision {r:#010x}")
             }
@@ -274,6 +285,9 @@ pub fn data_type(name: &str, bits: u32) -> DataType {
 }
 
 fn parse_pdo(n: Node<'_, '_>) -> Result<EsiPdo, EsiError> {
+    if let (Some(name), None) = (n.attribute("Ref"), child(n, "Index")) {
+        return Err(EsiError::PdoReference { name: name.to_string() });
+    }
     let flag = |a: &str| n.attribute(a).is_some_and(|v| v == "1" || v.eq_ignore_ascii_case("true"));
     let mut entries = Vec::new();
     for e in children(n, "Entry") {
@@ -833,6 +847,24 @@ mod tests {
         let none = r#"<EtherCATInfo><Vendor><Id>2</Id></Vendor><Descriptions><Devices>
             <Device><Type>EL9011</Type></Device></Devices></Descriptions></EtherCATInfo>"#;
         assert_eq!(EsiFile::parse(none), Err(EsiError::Missing("ProductCode")));
+    }
+
+    /// Early Beckhoff catalogues (incoming/esi_beckhoff_EtherCAT_Terminals)
+    /// give PDOs as `<TxPdo Ref="DigInputBit"/>` to names they never
+    /// define: such a device is skipped with that reason, the rest loads.
+    #[test]
+    fn a_device_whose_pdos_are_references_the_file_does_not_define_is_skipped_saying_so() {
+        let family = TERMINAL.replace(
+            "<Devices>",
+            r##"<Devices><Device><Type ProductCode="#x3ea3052" RevisionNo="#x270b0000">EL1002</Type>
+              <TxPdo Ref="DigInputBit" Chn="0" Fixed="1" Mandatory="1" Sm="0"/></Device>"##,
+        );
+        let f = EsiFile::parse(&family).unwrap();
+        assert_eq!(f.devices.len(), 1);
+        assert_eq!(f.skipped.len(), 1, "{:?}", f.skipped);
+        let why = &f.skipped[0];
+        assert!(why.contains("\"EL1002\"") && why.contains("references to \"DigInputBit\""), "{why}");
+        assert!(why.contains("does not define"), "{why}");
     }
 
     #[test]

@@ -10,6 +10,8 @@
 //! processing_us = 30        # busy time after each packet (INT0 inactive)
 //! firmware_version = 0x24
 //! spi_hz = 20_000_000
+//! strict_lengths = false    # true: refuse a packet whose declared data
+//!                           # length is not its v049 layout's
 //!
 //! [[slave]]
 //! profile = "neuromeka-core" # neuromeka-core | ti-3axis | digital-io | coupler
@@ -59,6 +61,9 @@ pub struct ChipSection {
     pub firmware_version: Option<u8>,
     /// SPI clock, Hz.
     pub spi_hz: Option<u64>,
+    /// Refuse commands whose declared data length is not their layout's.
+    #[serde(default)]
+    pub strict_lengths: bool,
 }
 
 /// `[[slave]]`.
@@ -170,6 +175,7 @@ impl NetworkFile {
         if let Some(hz) = self.chip.spi_hz {
             c.spi_hz = hz;
         }
+        c.strict_lengths = self.chip.strict_lengths;
         c
     }
 

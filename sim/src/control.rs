@@ -56,7 +56,7 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
         "status" => {
             let s = chip.stats;
             Ok(format!(
-                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={} tx_dropped={}",
+                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={} tx_dropped={} length_mismatches={}",
                 chip.now_ns,
                 s.packets,
                 s.not_ready,
@@ -69,7 +69,8 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 chip.ecat_state(),
                 chip.crc_errors,
                 chip.wkc_errors,
-                chip.fifo.tx_dropped
+                chip.fifo.tx_dropped,
+                s.length_mismatches
             ))
         }
         "flip" => {

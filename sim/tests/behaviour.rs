@@ -258,31 +258,195 @@ fn sdo_and_eeprom_requests_fail_when_their_timeout_is_shorter_than_the_work() {
     assert!(after.errors.contains(ErrorFlags::BLOCKING_FAILED), "EEPROM word in 10 us: {after:?}");
 }
 
-/// v049 gives each command's data length ("資料長度"); a packet declaring
-/// another one is laid out differently from what the chip reads. The
-/// vendor's host driver sent PDO_CONFIG_REQ (4 bytes) with 156: the chip
-/// must refuse it (error bit7) and execute nothing, not read the slave and
-/// assign index from the wrong offsets.
+/// Sends one packet whose data section is `data` and whose header declares
+/// `declared` bytes, the way a host that fills one layout and declares
+/// another does; returns the answer (fetched with INFO_UPDATE).
+fn send_declaring(h: &mut Host, code: CommandCode, index: u8, data: &[u8], declared: u16) -> common::Answer {
+    use ecmxf_wire::{CheckType, CommandHeader};
+    let mut header = CommandHeader::new(code, index);
+    header.data_len = declared;
+    let mut buf = vec![0u8; h.packet_len()];
+    ecmxf_wire::encode_command(&header, data, CheckType::Fixed, &mut buf).unwrap();
+    h.exchange_raw(&buf);
+    let (bytes, _) = h.send(&InfoUpdate);
+    let a = h.decode(&bytes).unwrap();
+    assert_eq!(a.header.index, index, "the answer is to the request");
+    a
+}
+
+/// SPI_RECONFIG to `data_size`-byte data sections (v049 command 23).
+fn resize(h: &mut Host, data_size: u16) {
+    use ecmxf_wire::payload::spi::SpiReconfig;
+    let mut buf = vec![0u8; h.packet_len()];
+    let header = ecmxf_wire::CommandHeader::new(CommandCode::SpiReconfig, 0xF0);
+    ecmxf_wire::encode_request(&SpiReconfig { data_size }, header, ecmxf_wire::CheckType::Fixed, &mut buf).unwrap();
+    h.exchange_raw(&buf);
+    h.data_size = data_size.into();
+    h.call(&InfoUpdate);
+}
+
+/// The PDO configuration in the 156-byte shape of the vendor's header 1.52
+/// (`PDO_CONFIG_HEAD`: vendor id u32, product code u32, then v049's fields
+/// with four PDO slots of eight entries), written field by field from that
+/// description: slave, PDO count, assignment, 4 mapping indices, 4 entry
+/// counts, 32 entries of `index << 16 | subindex << 8 | bits`.
+fn vendor_pdo_config(vendor: u32, product: u32, slave: u8, assign: u16, pdos: &[(u16, &[u32])]) -> Vec<u8> {
+    let mut d = Vec::new();
+    d.extend(vendor.to_le_bytes());
+    d.extend(product.to_le_bytes());
+    d.extend([slave, pdos.len() as u8]);
+    d.extend(assign.to_le_bytes());
+    for i in 0..4 {
+        d.extend(pdos.get(i).map_or(0u16, |p| p.0).to_le_bytes());
+    }
+    for i in 0..4 {
+        d.extend(pdos.get(i).map_or(0u16, |p| p.1.len() as u16).to_le_bytes());
+    }
+    for i in 0..4 {
+        for k in 0..8 {
+            let e = pdos.get(i).and_then(|p| p.1.get(k)).copied().unwrap_or(0);
+            d.extend(e.to_le_bytes());
+        }
+    }
+    assert_eq!(d.len(), 156);
+    d
+}
+
+/// v049 gives each command's data length ("資料長度") but never says the
+/// chip refuses a packet declaring another; the vendor's own host driver
+/// declares 0 for DCSYNC's filled 16 bytes and 156 (its `PDO_CONFIG_HEAD`)
+/// for PDO_CONFIG_SET and PDO_CONFIG_REQ, and its calls work on the chip.
+/// So the simulated chip takes the fields from their places, reads the
+/// vendor's 156-byte form by its length, and counts each difference.
 #[test]
-fn a_declared_length_that_does_not_fit_the_command_is_refused_and_not_executed() {
+fn the_vendor_drivers_declared_lengths_are_taken_as_the_chip_takes_them() {
+    use ecmxf_wire::payload::pdo::{PdoConfigForm, PdoConfigGet, PdoConfigReply, RX_PDO_ASSIGN};
+    use ecmxf_wire::payload::state::{StateGet, StateReply, StateSet};
+    let config = ecmxf_sim::ChipConfig { strict_lengths: false, ..Default::default() };
+    let mut h = Host::with_config(Network::demo(), config);
+    bring_up_to_op(&mut h, 4);
+    // The vendor's 156-byte form needs packets larger than the default 112.
+    resize(&mut h, 256);
+    h.blocking(&StateSet { target: SlaveSelector::All, state: EcatState::PreOp });
+    let s: StateReply = h.get(&StateGet(SlaveSelector::All));
+    assert_eq!(s.0, EcatState::PreOp);
+
+    // DCSYNC as the vendor's ECM_EcatSetDCSync sends it: slave 1, reserved,
+    // DC activate 0x0300, SYNC0 500 us, SYNC1 0, shift 0, declared as 0.
+    let mut dc = vec![1u8, 0, 0x00, 0x03];
+    dc.extend(500_000u32.to_le_bytes());
+    dc.extend([0u8; 8]);
+    let a = send_declaring(&mut h, CommandCode::DcSync, 201, &dc, 0);
+    assert!(!a.header.errors.contains(ErrorFlags::COMMAND_ERROR), "{:?}", a.header);
+    let after = h.wait_idle();
+    assert!(!after.errors.contains(ErrorFlags::BLOCKING_FAILED), "{after:?}");
+    assert_eq!(h.chip.net.slaves[1].dc_cycle_ns, 500_000, "the 16 bytes were read whatever the length said");
+    assert_eq!(h.chip.stats.length_mismatches, 1);
+
+    // PDO_CONFIG_SET in the vendor's 156-byte form: the TI drive's outputs
+    // become axis 1's controlword and target position (slave 1).
+    let (vendor, product) = (h.chip.net.slaves[1].sii().vendor_id, h.chip.net.slaves[1].sii().product_code);
+    let entries = [0x6040_0010u32, 0x607A_0020];
+    let set = vendor_pdo_config(vendor, product, 1, RX_PDO_ASSIGN, &[(0x1600, &entries)]);
+    let a = send_declaring(&mut h, CommandCode::PdoConfigSet, 202, &set, 156);
+    assert!(!a.header.errors.contains(ErrorFlags::COMMAND_ERROR), "{:?}", a.header);
+    let after = h.wait_idle();
+    assert!(!after.errors.contains(ErrorFlags::BLOCKING_FAILED), "{after:?}");
+    assert_eq!(h.chip.net.slaves[1].od.int(0x1600, 0), 2);
+    assert_eq!(h.chip.net.slaves[1].od.int(0x1600, 2), 0x607A_0020);
+
+    // PDO_CONFIG_REQ the way the driver sends it (its struct with only
+    // slave and assignment filled, 156 declared): GET answers in that form,
+    // the slave's identity ahead of the fields.
+    let req = vendor_pdo_config(0, 0, 1, RX_PDO_ASSIGN, &[]);
+    let a = send_declaring(&mut h, CommandCode::PdoConfigReq, 203, &req, 156);
+    assert!(!a.header.errors.contains(ErrorFlags::COMMAND_ERROR), "{:?}", a.header);
+    h.wait_idle();
+    let a = h.call(&PdoConfigGet);
+    assert_eq!(a.header.data_len, 156, "answered in the form asked");
+    assert_eq!(&a.data[..8], &[vendor.to_le_bytes(), product.to_le_bytes()].concat()[..]);
+    assert_eq!(a.data[8], 1, "slave");
+    let back = PdoConfigReply::decode(&fields(&a), &a.data).unwrap().0;
+    assert_eq!(back.form, PdoConfigForm::Identified { vendor_id: vendor, product_code: product });
+    assert_eq!(back.used().len(), 1);
+    assert_eq!(back.used()[0].index, 0x1600);
+    assert_eq!(back.used()[0].used().iter().map(|e| e.to_u32()).collect::<Vec<_>>(), entries);
+    // Both vendor-form packets are v049-length mismatches, and counted.
+    assert_eq!(h.chip.stats.length_mismatches, 3);
+    let status = ecmxf_sim::control::execute(&mut h.chip, "status").unwrap();
+    assert!(status.contains("length_mismatches=3"), "{status}");
+}
+
+/// With strict lengths (the daemon's tests), the same packets are refused
+/// whole (error bit7) and nothing runs: ecmxfd's packets must be v049-exact.
+#[test]
+fn strict_lengths_refuse_a_declared_length_that_is_not_the_layouts() {
     use ecmxf_wire::payload::pdo::{PdoConfigReq, TX_PDO_ASSIGN};
     use ecmxf_wire::{CheckType, CommandHeader, encode_request};
-    let mut h = Host::new(Network::demo());
+    let config = ecmxf_sim::ChipConfig { strict_lengths: true, ..Default::default() };
+    let mut h = Host::with_config(Network::demo(), config);
     h.call(&InfoUpdate);
-    let req = PdoConfigReq { slave: 0, assign_index: TX_PDO_ASSIGN };
-    for (index, len, refused) in [(101u8, 156u16, true), (102, 3, true), (103, 4, false)] {
+    resize(&mut h, 256);
+    let req = PdoConfigReq { slave: 0, assign_index: TX_PDO_ASSIGN, ..Default::default() };
+    for (index, len, refused) in [(101u8, 156u16, true), (102, 3, true), (103, 5, true), (104, 4, false)] {
         let executed = h.chip.stats.executed;
         let mut buf = vec![0u8; h.packet_len()];
         encode_request(&req, CommandHeader::new(CommandCode::PdoConfigReq, index), CheckType::Fixed, &mut buf).unwrap();
         buf[14..16].copy_from_slice(&len.to_le_bytes());
+        if len == 156 {
+            // The vendor's form, its fields where it has them: read fine,
+            // and still not v049's length.
+            let mut header = CommandHeader::new(CommandCode::PdoConfigReq, index);
+            header.data_len = len;
+            let form = vendor_pdo_config(0, 0, 0, TX_PDO_ASSIGN, &[]);
+            ecmxf_wire::encode_command(&header, &form, CheckType::Fixed, &mut buf).unwrap();
+        }
         h.exchange_raw(&buf);
         let (bytes, _) = h.send(&InfoUpdate);
         let a = h.decode(&bytes).unwrap();
         assert_eq!(a.header.index, index, "the answer is to the request");
         assert_eq!(a.header.errors.contains(ErrorFlags::COMMAND_ERROR), refused, "{len} bytes: {:?}", a.header);
-        assert_eq!(h.chip.pending.is_some(), !refused, "{len} bytes: the read runs only with its own length");
+        assert_eq!(h.chip.pending.is_some(), !refused, "{len} bytes: the read runs only with a layout's length");
         assert_eq!(h.chip.stats.executed, executed + 2, "the packet was taken (and answered)");
         h.control = ControlFlags::CLEAR_COMMAND_ERROR;
         h.wait_idle();
     }
+    assert_eq!(h.chip.stats.length_mismatches, 0, "a refused packet is not also counted as taken");
+}
+
+/// v049: EEPROM_GET's return value is the operation's error code. After a
+/// request that failed or timed out, GET says so and hands back no data,
+/// never the previous read's word as if it were this one's.
+#[test]
+fn a_failed_request_is_never_answered_with_the_previous_ones_data() {
+    use ecmxf_sim::chip::result_code::{RESULT_FAILED, RESULT_TIMED_OUT};
+    use ecmxf_wire::payload::eeprom::EepromReply;
+    use ecmxf_wire::payload::sdo::{SdoGet, SdoGetReply};
+    let mut h = Host::new(Network::demo());
+    bring_up_to_op(&mut h, 8);
+    h.blocking(&EepromRequest { slave: 0, access: EepromAccess::Read { address: 8 }, timeout_us: 100_000 });
+    let a = h.call(&EepromGet);
+    let ok = EepromReply::decode(&fields(&a), &a.data).unwrap();
+    assert_eq!((ok.error, ok.data.len() >= 2), (0, true));
+
+    let timed_out = EepromRequest { slave: 0, access: EepromAccess::Read { address: 0x0A }, timeout_us: 10 };
+    let after = h.blocking(&timed_out);
+    assert!(after.errors.contains(ErrorFlags::BLOCKING_FAILED));
+    let a = h.call(&EepromGet);
+    let r = EepromReply::decode(&fields(&a), &a.data).unwrap();
+    assert_eq!((r.error, r.data), (RESULT_TIMED_OUT, &[][..]), "no stale word with error 0");
+
+    h.control = ControlFlags::CLEAR_BLOCKING_ERROR;
+    h.blocking(&sdo_read(0, 0x1000));
+    let a = h.call(&SdoGet);
+    let good = SdoGetReply::decode(&fields(&a), &a.data).unwrap();
+    assert_eq!((good.status, good.data.len()), (0, 4));
+    h.control = ControlFlags::CLEAR_BLOCKING_ERROR;
+    h.blocking(&sdo_read(0, 0x5555));
+    let a = h.call(&SdoGet);
+    assert_eq!(
+        (a.header.return_value, a.data.len()),
+        (RESULT_FAILED, 0),
+        "a failed read's GET is empty, with its code"
+    );
 }

@@ -101,7 +101,7 @@ fn power_up_to_op_with_cyclic_fifo_exchange_at_125_us() {
     let cfg = PdoConfig::new(TI, RX_PDO_ASSIGN, &[(0x1600, &entries)]).unwrap();
     let st = h.blocking(&cfg);
     assert!(!st.errors.contains(ErrorFlags::BLOCKING_FAILED));
-    h.blocking(&PdoConfigReq { slave: TI, assign_index: RX_PDO_ASSIGN });
+    h.blocking(&PdoConfigReq { slave: TI, assign_index: RX_PDO_ASSIGN, ..Default::default() });
     let back: PdoConfigReply = h.get(&PdoConfigGet);
     assert_eq!(back.0, cfg);
     let fixed = PdoConfig::new(0, RX_PDO_ASSIGN, &[(0x1600, &entries)]).unwrap();

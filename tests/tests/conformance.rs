@@ -375,7 +375,7 @@ fn check(label: &str, devices: &[&CatalogDevice], per_slave: bool) -> Vec<String
 #[test]
 fn fixture_networks_answer_every_read_command_and_rpc_with_what_their_files_say() {
     let Some(dir) = ecmxf_e2e::fixtures_dir() else { return };
-    let catalog = Catalog::scan(&dir).unwrap();
+    let catalog = Catalog::scan_with_incoming(&dir).unwrap();
     // In catalogue order: a file's devices are together.
     let devices: Vec<CatalogDevice> = catalog.devices.into_iter().filter(|d| d.has_process_data()).collect();
     let mut by_file: Vec<&[CatalogDevice]> = Vec::new();

@@ -11,6 +11,7 @@ use crate::check::{CHECK_NOT_READY, CheckType};
 use crate::error::{DecodeError, EncodeError, PayloadError};
 use crate::framing::{END_WORD, PacketLayout};
 use crate::header::{CommandHeader, HEADER_LEN, ResponseHeader};
+use crate::payload::pdo::{PDO_CONFIG_LEN, PdoConfigForm};
 use crate::payload::{AnyRequest, Reply, ReplyFields, Request, RequestFields};
 
 fn layout_of(len: usize) -> Result<PacketLayout, EncodeError> {
@@ -163,9 +164,40 @@ impl<'a> CommandPacket<'a> {
         R::decode(&self.fields(), self.data_section)
     }
 
-    /// Parses the payload by its code.
+    /// Parses the payload by its code, holding it to the data length v049
+    /// gives the command's layout (what ecmxfd writes).
     pub fn parse(&self) -> Result<AnyRequest<'a>, PayloadError> {
         AnyRequest::decode(self.header.code, &self.fields(), self.data_section)
+    }
+
+    /// Parses the payload by its code, reading a fixed layout's fields from
+    /// their places whatever length the header declares, as the chip does
+    /// with the vendor's driver: DCSYNC declared with 0 bytes and a filled
+    /// 16-byte layout (issue 28). Returns the request and, when the declared
+    /// length differs from the layout's, the [`PayloadError::DataLength`]
+    /// passed over, for the caller to count or refuse.
+    pub fn parse_declared_len_aside(&self) -> Result<(AnyRequest<'a>, Option<PayloadError>), PayloadError> {
+        match self.parse() {
+            Ok(req) => {
+                // The vendor driver's PDO-configuration forms are read as
+                // laid out, and are still not v049's length.
+                let v049 = match &req {
+                    AnyRequest::PdoConfigSet(c) if c.form != PdoConfigForm::Manual => Some(PDO_CONFIG_LEN as u16),
+                    AnyRequest::PdoConfigReq(r) if r.form != PdoConfigForm::Manual => Some(4),
+                    _ => None,
+                };
+                let found = self.header.data_len;
+                let mismatch =
+                    v049.map(|expected| PayloadError::DataLength { command: self.header.code, expected, found });
+                Ok((req, mismatch))
+            }
+            Err(mismatch @ PayloadError::DataLength { expected, .. }) => {
+                let fields = RequestFields { data_len: expected, ..self.fields() };
+                let req = AnyRequest::decode(self.header.code, &fields, self.data_section)?;
+                Ok((req, Some(mismatch)))
+            }
+            Err(e) => Err(e),
+        }
     }
 }
 

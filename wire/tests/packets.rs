@@ -321,3 +321,32 @@ proptest! {
         prop_assert_eq!(out, b);
     }
 }
+
+/// DCSYNC as the vendor's driver sends it: the 16-byte layout filled and a
+/// data length of 0 declared. `parse` holds the packet to v049 and refuses
+/// it; `parse_declared_len_aside` reads the fields from their places, as the
+/// chip does, and hands back the difference for the caller to count.
+#[test]
+fn a_fixed_layout_is_read_from_its_places_whatever_the_length_declares() {
+    use ecmxf_wire::AnyRequest;
+    let mut data = vec![2u8, 0, 0x00, 0x03];
+    data.extend(1_000_000u32.to_le_bytes());
+    data.extend([0u8; 8]);
+    let mut header = CommandHeader::new(CommandCode::DcSync, 9);
+    header.data_len = 0;
+    let mut buf = vec![0u8; 144];
+    encode_command(&header, &data, CheckType::Fixed, &mut buf).unwrap();
+    let cmd = decode_command(&buf, CheckType::Fixed).unwrap();
+    let mismatch = PayloadError::DataLength { command: CommandCode::DcSync, expected: 16, found: 0 };
+    assert_eq!(cmd.parse(), Err(mismatch));
+    let (req, aside) = cmd.parse_declared_len_aside().unwrap();
+    assert_eq!(aside, Some(mismatch));
+    let AnyRequest::DcSync(d) = req else { panic!("{req:?}") };
+    assert_eq!((d.slave, d.dc.assign_activate, d.dc.sync0_ns), (2, 0x0300, 1_000_000));
+
+    // A packet with its own length has nothing set aside.
+    header.data_len = 16;
+    encode_command(&header, &data, CheckType::Fixed, &mut buf).unwrap();
+    let cmd = decode_command(&buf, CheckType::Fixed).unwrap();
+    assert_eq!(cmd.parse_declared_len_aside().unwrap().1, None);
+}

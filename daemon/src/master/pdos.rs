@@ -179,7 +179,7 @@ impl Master {
         let config = self.pdo_config_read(slave, assign, None).await?;
         let mut out = Vec::with_capacity(usize::from(config.pdo_count));
         for n in 0..config.pdo_count {
-            let (index, count, mut entries) = match config.pdos.get(usize::from(n)) {
+            let (index, count, mut entries) = match config.used().get(usize::from(n)) {
                 Some(p) => (p.index, p.entry_count, p.used().to_vec()),
                 None => {
                     let v = self.sdo_read(slave, assign, n + 1, false, None).await?;
@@ -234,7 +234,10 @@ fn from_sii_all(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
 /// Names of PDOs and entries, entry types and sync managers, from
 /// `described` where `list` lacks them and the description's entry is the
 /// same object at the same size. Gaps (object 0) are left alone: several
-/// share 0:00, so which description is whose cannot be told.
+/// share 0:00, so which description is whose cannot be told. The entry at
+/// the same position is taken first: a file may map one object twice under
+/// two names (Beckhoff EL6688's 0x10F4:0F, "Control value update toggle"
+/// and "Time stamp update toggle"), and each place keeps its own.
 fn complete(list: &mut [PdoDescription], described: &[PdoDescription]) {
     for p in list.iter_mut() {
         let Some(known) = described.iter().find(|q| q.index == p.index) else { continue };
@@ -242,9 +245,9 @@ fn complete(list: &mut [PdoDescription], described: &[PdoDescription]) {
             p.name.clone_from(&known.name);
         }
         p.sync_manager = p.sync_manager.or(known.sync_manager);
-        for e in p.entries.iter_mut().filter(|e| e.index != 0) {
+        for (at, e) in p.entries.iter_mut().enumerate().filter(|(_, e)| e.index != 0) {
             let same = |x: &&EntryDescription| (x.index, x.subindex, x.bits) == (e.index, e.subindex, e.bits);
-            if let Some(x) = known.entries.iter().find(same) {
+            if let Some(x) = known.entries.get(at).filter(same).or_else(|| known.entries.iter().find(same)) {
                 if e.name.is_empty() {
                     e.name.clone_from(&x.name);
                 }

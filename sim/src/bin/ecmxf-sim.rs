@@ -32,6 +32,11 @@ enum Command {
         /// Seed for bit-flip fault injection.
         #[arg(long, default_value_t = 1)]
         seed: u64,
+        /// Refuse (error bit7) a command whose declared data length is not
+        /// the one v049 gives its layout; without it such a command runs
+        /// and is counted (`ctl status`: length_mismatches).
+        #[arg(long)]
+        strict_lengths: bool,
     },
     /// Send a control command to a serving simulator (e.g. "unplug 2").
     Ctl {
@@ -61,13 +66,15 @@ fn load(network: Option<&PathBuf>) -> Result<(Network, ChipConfig), String> {
 
 fn run(cli: Cli) -> Result<(), String> {
     match cli.command {
-        Command::Serve { socket, network, seed } => {
-            let (net, config) = load(network.as_ref())?;
+        Command::Serve { socket, network, seed, strict_lengths } => {
+            let (net, mut config) = load(network.as_ref())?;
+            config.strict_lengths |= strict_lengths;
             let slaves = net.slaves.len();
             let mut chip = Chip::new(net, config);
             chip.faults.seed(seed);
             let listener = server::bind(&socket).map_err(|e| format!("{}: {e}", socket.display()))?;
-            eprintln!("ecmxf-sim: {slaves} slaves, serving on {}", socket.display());
+            let lengths = if chip.config.strict_lengths { "strict (v049 only)" } else { "as the chip takes them" };
+            eprintln!("ecmxf-sim: {slaves} slaves, serving on {}, data lengths {lengths}", socket.display());
             let stop = Arc::new(AtomicBool::new(false));
             Arc::new(Server::new(chip)).serve(listener, stop).map_err(|e| e.to_string())
         }

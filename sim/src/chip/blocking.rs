@@ -8,7 +8,7 @@ use ecmxf_wire::flags::ErrorFlags;
 use ecmxf_wire::payload::ecat_init::{DcSync, DcTiming, EcatInit};
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromRequest};
 use ecmxf_wire::payload::foe::{FOE_MAX_CHUNK, FoeRequest};
-use ecmxf_wire::payload::pdo::{ConfigSm, PdoConfig, PdoConfigReq, PdoEntry, PdoMapping};
+use ecmxf_wire::payload::pdo::{ConfigSm, PdoConfig, PdoConfigForm, PdoConfigReq, PdoEntry, PdoMapping};
 use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead};
 use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAccess};
 use ecmxf_wire::payload::state::SlaveSelector;
@@ -74,6 +74,23 @@ fn within(op: BlockingOp, duration: u64, timeout_us: u32, sdo: bool) -> (Blockin
     let limit = u64::from(timeout_us) * 1000;
     if timeout_us != 0 && duration > limit { (BlockingOp::TimedOut { sdo }, limit) } else { (op, duration) }
 }
+
+/// The "operation error code" the GET commands return for the last request
+/// of their kind (v049: EEPROM_GET's return value is 操作錯誤碼; SDO_GET,
+/// RAW_ECAT_FUNC_GET and FOE_FUNC_GET answer the same way here). v049 lists
+/// no values; the model's are: 0 done, [`RESULT_FAILED`], [`RESULT_TIMED_OUT`],
+/// [`RESULT_NOT_DONE`]. A GET never hands back an earlier request's data as
+/// the answer to a later one that failed (issue 28: after a timed-out
+/// EEPROM_REQ the host read the previous word with error code 0).
+pub mod result_code {
+    /// The operation failed: no answer from the slave, or it refused.
+    pub const RESULT_FAILED: u8 = 1;
+    /// The request's own timeout ran out first.
+    pub const RESULT_TIMED_OUT: u8 = 2;
+    /// The request has not finished (or none was made).
+    pub const RESULT_NOT_DONE: u8 = 3;
+}
+use result_code::*;
 
 /// A blocking operation in the slot, with everything it needs owned.
 #[derive(Clone, Debug, PartialEq)]
@@ -277,6 +294,7 @@ impl Chip {
             }
             _ => return Err(CommandError),
         };
+        self.results.forget(&op);
         self.pending = Some((op, self.now_ns + duration));
         Ok(())
     }
@@ -322,8 +340,10 @@ impl Chip {
             BlockingOp::PdoConfigReq(r) => self.pdo_config_req(r),
             BlockingOp::TimedOut { sdo } => {
                 if sdo {
-                    self.results.sdo_data.clear();
+                    self.results.sdo = RESULT_TIMED_OUT;
                     self.results.sdo_abort = SDO_PROTOCOL_TIMED_OUT;
+                } else {
+                    self.results.eeprom = (RESULT_TIMED_OUT, Vec::new());
                 }
                 false
             }
@@ -337,11 +357,12 @@ impl Chip {
                     Ok(mut data) => {
                         data.truncate(self.spi.data_size);
                         self.results.sdo_data = data;
+                        self.results.sdo = 0;
                         self.results.sdo_abort = 0;
                         true
                     }
                     Err(code) => {
-                        self.results.sdo_data.clear();
+                        self.results.sdo = RESULT_FAILED;
                         self.results.sdo_abort = code.0;
                         false
                     }
@@ -365,7 +386,7 @@ impl Chip {
             BlockingOp::Eeprom(r) => {
                 let s = &mut self.net.slaves[usize::from(r.slave)];
                 if !s.present {
-                    self.results.eeprom = (1, Vec::new());
+                    self.results.eeprom = (RESULT_FAILED, Vec::new());
                     return false;
                 }
                 self.results.eeprom = match r.access {
@@ -384,8 +405,16 @@ impl Chip {
             }
             BlockingOp::FifoInit => self.fifo.init(self.master.rx_size, self.master.tx_size),
             BlockingOp::ConfigSm(_) => true,
-            BlockingOp::Raw { head, data } => self.raw_datagram(head, &data),
-            BlockingOp::Foe(f) => self.foe(f),
+            BlockingOp::Raw { head, data } => {
+                let ok = self.raw_datagram(head, &data);
+                self.results.raw_error = if ok { 0 } else { RESULT_FAILED };
+                ok
+            }
+            BlockingOp::Foe(f) => {
+                let ok = self.foe(f);
+                self.results.foe = if ok { 0 } else { RESULT_FAILED };
+                ok
+            }
         }
     }
 
@@ -463,6 +492,10 @@ impl Chip {
         true
     }
 
+    /// Reads the assignment and its mappings into the result GET answers
+    /// with, in the form the request used ([`PdoConfigForm`]): a vendor
+    /// form carries four PDO slots, the 156-byte one the slave's vendor id
+    /// and product code ahead of them.
     fn pdo_config_req(&mut self, r: PdoConfigReq) -> bool {
         let s = &self.net.slaves[usize::from(r.slave)];
         let Ok(count) = s.sdo_upload(r.assign_index, 0, false) else {
@@ -470,9 +503,16 @@ impl Chip {
             return false;
         };
         let count = count.first().copied().unwrap_or(0);
+        let form = match r.form {
+            PdoConfigForm::Identified { .. } => PdoConfigForm::Identified {
+                vendor_id: s.od.int(0x1018, 1) as u32,
+                product_code: s.od.int(0x1018, 2) as u32,
+            },
+            other => other,
+        };
         let mut cfg =
-            PdoConfig { slave: r.slave, pdo_count: count, assign_index: r.assign_index, pdos: Default::default() };
-        for (i, slot) in cfg.pdos.iter_mut().enumerate().take(usize::from(count)) {
+            PdoConfig { slave: r.slave, pdo_count: count, assign_index: r.assign_index, form, ..PdoConfig::default() };
+        for (i, slot) in cfg.pdos.iter_mut().enumerate().take(usize::from(count).min(form.slots())) {
             let idx = s.od.int(r.assign_index, i as u8 + 1) as u16;
             let n = s.od.int(idx, 0) as u16;
             let mut m = PdoMapping { index: idx, entry_count: n, entries: Default::default() };

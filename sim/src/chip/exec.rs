@@ -106,9 +106,23 @@ impl Chip {
         self.last_key = Some(key);
         self.stats.executed += 1;
 
-        let outcome = match cmd.parse() {
-            Err(_) => Err(CommandError),
-            Ok(req) => {
+        // v049 gives each command's data length but never says the chip
+        // refuses a packet that declares another; the vendor's driver
+        // declares 0 for DCSYNC's filled 16 bytes, so the chip takes the
+        // layout from its places and the difference is only counted, or
+        // refused where the simulator is told to be strict (the daemon's
+        // tests, which keep ecmxfd's own packets v049-exact).
+        let parsed = match cmd.parse_declared_len_aside() {
+            Ok((_, Some(_))) if self.config.strict_lengths => None,
+            Ok((req, mismatch)) => {
+                self.stats.length_mismatches += u64::from(mismatch.is_some());
+                Some(req)
+            }
+            Err(_) => None,
+        };
+        let outcome = match parsed {
+            None => Err(CommandError),
+            Some(req) => {
                 if h.control.contains(ControlFlags::REFRESH_ECAT_STATE) && !h.code.is_blocking() {
                     if self.pending.is_some() {
                         self.errors |= ErrorFlags::COMMAND_ERROR;
@@ -174,7 +188,7 @@ impl Chip {
                 (op.op.bits(), data)
             }
             A::PdoConfigGet(_) => reply(&PdoConfigReply(self.results.pdo_config)),
-            A::SdoGet(_) => reply(&SdoGetReply { status: 0, data: &self.results.sdo_data.clone() }),
+            A::SdoGet(_) => reply(&SdoGetReply { status: self.results.sdo, data: &self.results.sdo_data.clone() }),
             A::StateGet(g) => {
                 let state = match g.0 {
                     SlaveSelector::All => self.ecat_state().to_u8(),
@@ -370,9 +384,12 @@ impl Chip {
             }
             A::RawEcatGet(_) => match self.results.raw.clone() {
                 Some((head, wkc, data)) => reply(&RawReply { head, working_counter: wkc, data: &data }),
-                None => value(0),
+                None => value(self.results.raw_error),
             },
-            A::FoeGet(_) => reply(&FoeReply(&self.results.foe_read.clone())),
+            A::FoeGet(_) => match self.results.foe {
+                0 => reply(&FoeReply(&self.results.foe_read.clone())),
+                code => value(code),
+            },
             A::EnableLrw(e) => {
                 self.master.lrw = e.0;
                 value(0)

@@ -23,7 +23,7 @@ use ecmxf_wire::payload::raw::DatagramHead;
 use ecmxf_wire::{CheckType, CommandCode, EcatState, EcmStatus, ResponseHeader, encode_response};
 
 use crate::net::Network;
-pub use blocking::{BlockingOp, Timing};
+pub use blocking::{BlockingOp, Timing, result_code};
 use fifo::Fifos;
 use periph::Peripherals;
 use spi::{Boundary, SpiPort};
@@ -43,6 +43,10 @@ pub struct ChipConfig {
     pub free_run_cycle_ns: u64,
     /// SPI clock the host runs, Hz: it times the bytes of a transfer.
     pub spi_hz: u64,
+    /// Refuse (error bit7) a command whose declared data length differs
+    /// from the length v049 gives its layout, instead of taking the layout
+    /// and counting it: the daemon's tests turn it on.
+    pub strict_lengths: bool,
 }
 
 impl Default for ChipConfig {
@@ -54,8 +58,19 @@ impl Default for ChipConfig {
             warm_reset_ns: 50_000_000,
             free_run_cycle_ns: 1_000_000,
             spi_hz: 20_000_000,
+            strict_lengths: strict_lengths_from_env(),
         }
     }
+}
+
+/// Environment variable that makes every simulated chip strict about data
+/// lengths ([`ChipConfig::strict_lengths`]) when set to `1`; the
+/// workspace's `.cargo/config.toml` sets it for everything cargo runs, so
+/// the daemon's tests hold ecmxfd's packets to v049.
+pub const STRICT_LENGTHS_ENV: &str = "ECMXF_SIM_STRICT_LENGTHS";
+
+fn strict_lengths_from_env() -> bool {
+    std::env::var(STRICT_LENGTHS_ENV).is_ok_and(|v| v == "1")
 }
 
 /// One axis of the chip's internal CiA402 helper (commands 26..30).
@@ -92,9 +107,13 @@ pub struct Slot {
     pub tx_len: usize,
 }
 
-/// Results of blocking operations, fetched with the GET commands.
-#[derive(Clone, Debug, Default)]
+/// Results of blocking operations, fetched with the GET commands: each
+/// kind's error code (`blocking::result_code`) and data, reset when a
+/// request of that kind starts.
+#[derive(Clone, Debug)]
 pub struct Results {
+    /// Error code of the last SDO request (SDO_GET's return value).
+    pub sdo: u8,
     /// Data of the last SDO read.
     pub sdo_data: Vec<u8>,
     /// Abort code of the last failed SDO.
@@ -103,10 +122,56 @@ pub struct Results {
     pub eeprom: (u8, Vec<u8>),
     /// The last PDO configuration read.
     pub pdo_config: PdoConfig,
-    /// The last raw datagram's answer.
+    /// The last raw datagram's answer; `None` until one succeeds.
     pub raw: Option<(DatagramHead, u16, Vec<u8>)>,
+    /// Error code of the last raw datagram (RAW_ECAT_FUNC_GET's return
+    /// value when there is no answer).
+    pub raw_error: u8,
+    /// Error code of the last FoE request (FOE_FUNC_GET's return value).
+    pub foe: u8,
     /// Bytes of the last FoE flash read.
     pub foe_read: Vec<u8>,
+}
+
+impl Default for Results {
+    fn default() -> Self {
+        use blocking::result_code::RESULT_NOT_DONE;
+        Self {
+            sdo: RESULT_NOT_DONE,
+            sdo_data: Vec::new(),
+            sdo_abort: 0,
+            eeprom: (RESULT_NOT_DONE, Vec::new()),
+            pdo_config: PdoConfig::default(),
+            raw: None,
+            raw_error: RESULT_NOT_DONE,
+            foe: RESULT_NOT_DONE,
+            foe_read: Vec::new(),
+        }
+    }
+}
+
+impl Results {
+    /// Forgets the result `op` will replace, so a GET while it runs, or
+    /// after it fails, never answers with an earlier request's data.
+    fn forget(&mut self, op: &BlockingOp) {
+        use blocking::result_code::RESULT_NOT_DONE;
+        match op {
+            BlockingOp::Sdo { .. } | BlockingOp::TimedOut { sdo: true } => {
+                self.sdo = RESULT_NOT_DONE;
+                self.sdo_data.clear();
+            }
+            BlockingOp::Eeprom(_) | BlockingOp::TimedOut { sdo: false } => self.eeprom = (RESULT_NOT_DONE, Vec::new()),
+            BlockingOp::Raw { .. } => {
+                self.raw = None;
+                self.raw_error = RESULT_NOT_DONE;
+            }
+            BlockingOp::Foe(_) => {
+                self.foe = RESULT_NOT_DONE;
+                self.foe_read.clear();
+            }
+            _ => {}
+        }
+    }
 }
 
 /// The master side of the network as the chip runs it.
@@ -207,6 +272,9 @@ pub struct Stats {
     pub executed: u64,
     /// DC cycles run.
     pub cycles: u64,
+    /// Commands whose declared data length differed from their layout's
+    /// (executed anyway unless [`ChipConfig::strict_lengths`]).
+    pub length_mismatches: u64,
 }
 
 /// The simulated chip.

@@ -139,7 +139,11 @@ pub(crate) mod samples {
             A::PdoDataFifoOp(pdo::PdoFifoOp { op: pdo::FifoOpFlags::all(), frames: 2, outputs: &[1, 2, 3, 4] }),
             A::PdoDataOp(pdo::PdoDataOp { op: pdo::PdoDataOpFlags::READ | pdo::PdoDataOpFlags::VALID, outputs: &[] }),
             A::PdoConfigSet(pdo::PdoConfig::new(1, pdo::RX_PDO_ASSIGN, &[(0x1600, entries)]).unwrap()),
-            A::PdoConfigReq(pdo::PdoConfigReq { slave: 1, assign_index: pdo::TX_PDO_ASSIGN }),
+            A::PdoConfigReq(pdo::PdoConfigReq {
+                slave: 1,
+                assign_index: pdo::TX_PDO_ASSIGN,
+                form: pdo::PdoConfigForm::Manual,
+            }),
             A::PdoConfigGet(pdo::PdoConfigGet),
             A::SdoReq(sdo::SdoRequest {
                 slave: 1,
@@ -293,7 +297,10 @@ mod tests {
             let fields = req.encode(&mut data).unwrap();
             let Some(&(code, len)) = fixed.iter().find(|(c, _)| *c == req.code()) else { continue };
             assert_eq!(fields.data_len, len, "{code:?} encodes its layout's length");
-            for wrong in [0, len - 1, len + 1, 156] {
+            // 148 and 156 are the vendor driver's PDO-configuration forms
+            // (pdo::PdoConfigForm), layouts of their own.
+            let vendor_form = matches!(code, C::PdoConfigSet | C::PdoConfigReq);
+            for wrong in [0, len - 1, len + 1, 156].into_iter().filter(|&w| !(vendor_form && w == 156)) {
                 let f = RequestFields { data_len: wrong, ..fields };
                 assert_eq!(
                     AnyRequest::decode(code, &f, &data),

@@ -55,9 +55,73 @@ impl PdoMapping {
     }
 }
 
-/// The 112-byte layout of PDO_CONFIG_SET (7) and PDO_CONFIG_GET's reply (9):
-/// one SyncManager assignment with at most three PDOs of eight entries each.
+/// Which of the chip's PDO-configuration layouts a packet uses. v049 gives
+/// one (112 bytes for PDO_CONFIG_SET and GET's reply, 4 for PDO_CONFIG_REQ);
+/// the vendor's own host driver declares and fills two others, and a chip
+/// that refused them would break the vendor's PDO-configuration calls, so
+/// the chip is taken to tell them apart by the declared data length
+/// (issue 28; the vendor header's `PDO_CONFIG_HEAD`, whose size the driver
+/// puts in the length field of SET and REQ alike):
+///
+/// | form | length | layout |
+/// | --- | --- | --- |
+/// | [`Manual`](Self::Manual) | 112 (REQ: 4) | slave u8, PDO count u8, assignment u16, 3 mapping indices, 3 entry counts, 3 x 8 entries |
+/// | [`FourPdos`](Self::FourPdos) | 148 | the same fields with 4 PDO slots (headers before 1.52) |
+/// | [`Identified`](Self::Identified) | 156 | vendor id u32, product code u32, then the 148-byte form (header 1.52) |
+///
+/// A REQ in a vendor form reads slave and assignment from that form's
+/// offsets, and GET answers in the form its REQ used.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub enum PdoConfigForm {
+    /// v049's layout, the one ecmxfd writes.
+    #[default]
+    Manual,
+    /// Four PDO slots, no identity prefix (148 bytes).
+    FourPdos,
+    /// Vendor id and product code, then four PDO slots (156 bytes).
+    Identified {
+        /// Vendor id (CiA301 0x1018:01).
+        vendor_id: u32,
+        /// Product code (0x1018:02).
+        product_code: u32,
+    },
+}
+
+impl PdoConfigForm {
+    /// The form a declared data length selects; any length but the vendor
+    /// forms' reads v049's layout (the chip takes the fields from their
+    /// places whatever the length says).
+    pub fn of_len(data_len: u16) -> Self {
+        match usize::from(data_len) {
+            PDO_CONFIG_FOUR_LEN => Self::FourPdos,
+            PDO_CONFIG_IDENTIFIED_LEN => Self::Identified { vendor_id: 0, product_code: 0 },
+            _ => Self::Manual,
+        }
+    }
+
+    /// PDO slots the form carries.
+    pub const fn slots(self) -> usize {
+        match self {
+            Self::Manual => 3,
+            Self::FourPdos | Self::Identified { .. } => 4,
+        }
+    }
+
+    /// The whole layout's length.
+    pub const fn data_len(self) -> usize {
+        match self {
+            Self::Manual => PDO_CONFIG_LEN,
+            Self::FourPdos => PDO_CONFIG_FOUR_LEN,
+            Self::Identified { .. } => PDO_CONFIG_IDENTIFIED_LEN,
+        }
+    }
+}
+
+/// PDO_CONFIG_SET (7) and PDO_CONFIG_GET's reply (9): one SyncManager
+/// assignment with at most three PDOs of eight entries each in v049's form.
 /// Larger mappings must be written with SDOs (v049 note under command 7).
+///
+/// v049 layout:
 ///
 /// | off | len | field |
 /// | --- | --- | --- |
@@ -67,20 +131,29 @@ impl PdoMapping {
 /// | 0x04 | 2 x 3 | mapping indices |
 /// | 0x0A | 2 x 3 | entry counts |
 /// | 0x10 | 4 x 8 x 3 | entries |
+///
+/// The vendor driver's forms are in [`PdoConfigForm`].
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct PdoConfig {
     /// Slave position 0..=127.
     pub slave: u8,
-    /// PDOs assigned (0..=127 per the manual; at most 3 are carried).
+    /// PDOs assigned (0..=127 per the manual; at most `form.slots()` are
+    /// carried).
     pub pdo_count: u8,
     /// The assignment object: [`RX_PDO_ASSIGN`] or [`TX_PDO_ASSIGN`].
     pub assign_index: u16,
-    /// The three PDO slots.
-    pub pdos: [PdoMapping; 3],
+    /// The PDO slots; the fourth only in the vendor forms.
+    pub pdos: [PdoMapping; 4],
+    /// The layout on the wire.
+    pub form: PdoConfigForm,
 }
 
-/// Size of the [`PdoConfig`] layout.
+/// Size of the v049 [`PdoConfig`] layout.
 pub const PDO_CONFIG_LEN: usize = 112;
+/// Size of the vendor header's four-PDO form.
+pub const PDO_CONFIG_FOUR_LEN: usize = 148;
+/// Size of the vendor header 1.52's form with vendor id and product code.
+pub const PDO_CONFIG_IDENTIFIED_LEN: usize = 156;
 
 impl PdoConfig {
     /// A configuration from mapping indices and their entries; fails when
@@ -88,7 +161,7 @@ impl PdoConfig {
     pub fn new(slave: u8, assign_index: u16, pdos: &[(u16, &[PdoEntry])]) -> Result<Self, EncodeError> {
         check_range("slave", slave.into(), 0, 127)?;
         check_range("PDO count", pdos.len() as u32, 0, 3)?;
-        let mut out = Self { slave, pdo_count: pdos.len() as u8, assign_index, pdos: Default::default() };
+        let mut out = Self { slave, pdo_count: pdos.len() as u8, assign_index, ..Self::default() };
         for (slot, (index, entries)) in out.pdos.iter_mut().zip(pdos) {
             check_range("PDO entry count", entries.len() as u32, 0, 8)?;
             slot.index = *index;
@@ -100,23 +173,28 @@ impl PdoConfig {
 
     /// The carried PDOs in use.
     pub fn used(&self) -> &[PdoMapping] {
-        &self.pdos[..usize::from(self.pdo_count).min(3)]
+        &self.pdos[..usize::from(self.pdo_count).min(self.form.slots())]
     }
 
     fn write(&self, data: &mut [u8]) -> Result<u16, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
         check_range("PDO count", self.pdo_count.into(), 0, 127)?;
         let mut w = Writer::new(data);
+        if let PdoConfigForm::Identified { vendor_id, product_code } = self.form {
+            w.u32(vendor_id)?;
+            w.u32(product_code)?;
+        }
         w.u8(self.slave)?;
         w.u8(self.pdo_count)?;
         w.u16(self.assign_index)?;
-        for p in &self.pdos {
+        let slots = &self.pdos[..self.form.slots()];
+        for p in slots {
             w.u16(p.index)?;
         }
-        for p in &self.pdos {
+        for p in slots {
             w.u16(p.entry_count)?;
         }
-        for p in &self.pdos {
+        for p in slots {
             for e in &p.entries {
                 w.u32(e.to_u32())?;
             }
@@ -124,26 +202,33 @@ impl PdoConfig {
         Ok(w.len_u16())
     }
 
-    fn read(data: &[u8]) -> Result<Self, PayloadError> {
+    fn read(data: &[u8], form: PdoConfigForm) -> Result<Self, PayloadError> {
         let mut r = Reader::new(data);
+        let form = match form {
+            PdoConfigForm::Identified { .. } => {
+                PdoConfigForm::Identified { vendor_id: r.u32("vendor id")?, product_code: r.u32("product code")? }
+            }
+            other => other,
+        };
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;
         let pdo_count = r.u8("PDO count")?;
         expect_range("PDO count", pdo_count.into(), 0, 127)?;
         let assign_index = r.u16("PDO assign index")?;
-        let mut pdos: [PdoMapping; 3] = Default::default();
-        for p in &mut pdos {
+        let mut pdos: [PdoMapping; 4] = Default::default();
+        let slots = form.slots();
+        for p in &mut pdos[..slots] {
             p.index = r.u16("PDO mapping index")?;
         }
-        for p in &mut pdos {
+        for p in &mut pdos[..slots] {
             p.entry_count = r.u16("PDO entry count")?;
         }
-        for p in &mut pdos {
+        for p in &mut pdos[..slots] {
             for e in &mut p.entries {
                 *e = PdoEntry::from_u32(r.u32("PDO entry")?);
             }
         }
-        Ok(Self { slave, pdo_count, assign_index, pdos })
+        Ok(Self { slave, pdo_count, assign_index, pdos, form })
     }
 }
 
@@ -155,12 +240,16 @@ impl<'a> Request<'a> for PdoConfig {
     }
 
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
-        fixed_len(fields, Self::CODE, PDO_CONFIG_LEN as u16)?;
-        Self::read(data)
+        let form = PdoConfigForm::of_len(fields.data_len);
+        if form == PdoConfigForm::Manual {
+            fixed_len(fields, Self::CODE, PDO_CONFIG_LEN as u16)?;
+        }
+        Self::read(data, form)
     }
 }
 
-/// PDO_CONFIG_GET's reply (9): the configuration requested with 8.
+/// PDO_CONFIG_GET's reply (9): the configuration requested with 8, in the
+/// form the request used.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct PdoConfigReply(pub PdoConfig);
 
@@ -171,19 +260,23 @@ impl<'a> Reply<'a> for PdoConfigReply {
         Ok(ReplyFields { value: 0, data_len: self.0.write(data)? })
     }
 
-    fn decode(_fields: &ReplyFields, data: &'a [u8]) -> Result<Self, PayloadError> {
-        PdoConfig::read(data).map(Self)
+    fn decode(fields: &ReplyFields, data: &'a [u8]) -> Result<Self, PayloadError> {
+        PdoConfig::read(data, PdoConfigForm::of_len(fields.data_len)).map(Self)
     }
 }
 
 /// PDO_CONFIG_REQ (8): read a slave's assignment and mapping (blocking;
-/// fetch with [`PdoConfigGet`]). Data 4 bytes: slave, reserved, assign index.
+/// fetch with [`PdoConfigGet`]). v049 data, 4 bytes: slave, reserved,
+/// assign index; in the vendor forms ([`PdoConfigForm`]) the same fields
+/// sit where that form's [`PdoConfig`] has them.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
 pub struct PdoConfigReq {
     /// Slave position 0..=127.
     pub slave: u8,
     /// [`RX_PDO_ASSIGN`] or [`TX_PDO_ASSIGN`].
     pub assign_index: u16,
+    /// The layout of the request, and so of the answer.
+    pub form: PdoConfigForm,
 }
 
 impl<'a> Request<'a> for PdoConfigReq {
@@ -191,6 +284,15 @@ impl<'a> Request<'a> for PdoConfigReq {
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
+        if self.form != PdoConfigForm::Manual {
+            let config = PdoConfig {
+                slave: self.slave,
+                assign_index: self.assign_index,
+                form: self.form,
+                ..PdoConfig::default()
+            };
+            return Ok(RequestFields { data_len: config.write(data)?, ..RequestFields::default() });
+        }
         let mut w = Writer::new(data);
         w.u8(self.slave)?;
         w.u8(0)?;
@@ -199,12 +301,21 @@ impl<'a> Request<'a> for PdoConfigReq {
     }
 
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError> {
-        fixed_len(fields, Self::CODE, 4)?;
+        let form = PdoConfigForm::of_len(fields.data_len);
+        if form == PdoConfigForm::Manual {
+            fixed_len(fields, Self::CODE, 4)?;
+        }
         let mut r = Reader::new(data);
+        let form = match form {
+            PdoConfigForm::Identified { .. } => {
+                PdoConfigForm::Identified { vendor_id: r.u32("vendor id")?, product_code: r.u32("product code")? }
+            }
+            other => other,
+        };
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;
         let _ = r.u8("reserved")?;
-        Ok(Self { slave, assign_index: r.u16("PDO assign index")? })
+        Ok(Self { slave, assign_index: r.u16("PDO assign index")?, form })
     }
 }
 
@@ -551,8 +662,15 @@ mod tests {
     fn config() -> impl Strategy<Value = PdoConfig> {
         let mapping = (any::<u16>(), any::<u16>(), proptest::array::uniform8(entry()))
             .prop_map(|(index, entry_count, entries)| PdoMapping { index, entry_count, entries });
-        (0u8..=127, 0u8..=127, any::<u16>(), proptest::array::uniform3(mapping))
-            .prop_map(|(slave, pdo_count, assign_index, pdos)| PdoConfig { slave, pdo_count, assign_index, pdos })
+        (0u8..=127, 0u8..=127, any::<u16>(), proptest::array::uniform3(mapping)).prop_map(
+            |(slave, pdo_count, assign_index, [a, b, c])| PdoConfig {
+                slave,
+                pdo_count,
+                assign_index,
+                pdos: [a, b, c, PdoMapping::default()],
+                form: PdoConfigForm::Manual,
+            },
+        )
     }
 
     proptest! {
@@ -574,7 +692,7 @@ mod tests {
 
         #[test]
         fn pdo_config_req_round_trips(slave in 0u8..=127, idx in any::<u16>()) {
-            request_round_trip(&PdoConfigReq { slave, assign_index: idx });
+            request_round_trip(&PdoConfigReq { slave, assign_index: idx, form: PdoConfigForm::Manual });
         }
 
         #[test]
@@ -631,6 +749,47 @@ mod tests {
         for p in [0u8, 4, 255] {
             assert!(PdoWcGet::decode(&RequestFields::parameter(p), &[]).is_err());
         }
+    }
+
+    proptest! {
+        #[test]
+        fn the_vendor_forms_round_trip_by_their_length(
+            c in config(),
+            fourth in proptest::array::uniform8(entry()),
+            vendor_id in any::<u32>(),
+            product_code in any::<u32>(),
+        ) {
+            for form in [PdoConfigForm::FourPdos, PdoConfigForm::Identified { vendor_id, product_code }] {
+                let mut c = c;
+                c.form = form;
+                c.pdos[3] = PdoMapping { index: 0x1603, entry_count: 8, entries: fourth };
+                let (fields, _) = request_round_trip(&c);
+                prop_assert_eq!(usize::from(fields.data_len), form.data_len());
+                reply_round_trip(&PdoConfigReply(c));
+                let req = PdoConfigReq { slave: c.slave, assign_index: c.assign_index, form };
+                let (fields, _) = request_round_trip(&req);
+                prop_assert_eq!(usize::from(fields.data_len), form.data_len());
+            }
+        }
+    }
+
+    /// The vendor header 1.52's `PDO_CONFIG_HEAD`, byte by byte: vendor id,
+    /// product code, slave, count, assignment, 4 indices, 4 counts, 32
+    /// entries.
+    #[test]
+    fn the_identified_form_has_the_vendor_headers_offsets() {
+        let e = PdoEntry { index: 0x6040, subindex: 0, bits: 16 };
+        let mut c = PdoConfig::new(3, RX_PDO_ASSIGN, &[(0x1600, &[e])]).unwrap();
+        c.form = PdoConfigForm::Identified { vendor_id: 0x0000_059D, product_code: 0x1234_5678 };
+        let mut d = [0u8; 200];
+        let f = c.encode(&mut d).unwrap();
+        assert_eq!(f.data_len, 156);
+        assert_eq!(&d[..12], &[0x9D, 0x05, 0, 0, 0x78, 0x56, 0x34, 0x12, 3, 1, 0x12, 0x1C]);
+        assert_eq!(&d[12..14], &[0x00, 0x16], "first mapping index");
+        assert_eq!(&d[20..22], &[1, 0], "first entry count");
+        assert_eq!(&d[28..32], &[0x10, 0x00, 0x40, 0x60], "first entry: bits, subindex, index");
+        let req = PdoConfigReq::decode(&RequestFields { data_len: 156, ..RequestFields::default() }, &d).unwrap();
+        assert_eq!((req.slave, req.assign_index), (3, RX_PDO_ASSIGN));
     }
 
     #[test]

@@ -45,7 +45,7 @@ use ecmxf_wire::payload::ecat_init::StateUpdate;
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
 use ecmxf_wire::payload::emergency::CoeEmergencyGet;
 use ecmxf_wire::payload::foe::{FOE_FLASH_SIZE, FoeRequest, FoeTransfer};
-use ecmxf_wire::payload::pdo::{PdoConfigGet, PdoConfigReq};
+use ecmxf_wire::payload::pdo::{PdoConfigForm, PdoConfigGet, PdoConfigReq};
 use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawReply, RawRequest};
 use ecmxf_wire::payload::sdo::{
     SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest,
@@ -244,7 +244,11 @@ impl Active {
                 );
             }
             SlotRequest::PdoConfigRead { slave, assign_index } => {
-                return self.read_started(port, &PdoConfigReq { slave, assign_index }, now);
+                return self.read_started(
+                    port,
+                    &PdoConfigReq { slave, assign_index, form: PdoConfigForm::Manual },
+                    now,
+                );
             }
             SlotRequest::GetState { .. } => return self.read_started(port, &StateUpdate, now),
             _ => {}
@@ -549,13 +553,20 @@ impl Active {
                 let code = SdoAbortReply::decode(&fields(&a), a.data).map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
-            (SlotRequest::SdoRead { .. }, false) => match self.fetched(port) {
-                Some(a) => Ok(fill(&mut self.buffer, &[a.data])),
-                None => {
-                    let a = port.call(&SdoGet)?;
-                    Ok(fill(&mut self.buffer, &[a.data]))
+            (SlotRequest::SdoRead { slave, index, subindex, .. }, false) => {
+                let a = match self.fetched(port) {
+                    Some(a) => a,
+                    None => port.call(&SdoGet)?,
+                };
+                // SDO_GET's return value is the read's error code: data
+                // with a nonzero code is not this read's value.
+                match a.header.return_value {
+                    0 => Ok(fill(&mut self.buffer, &[a.data])),
+                    code => Err(EngineError::Failed(format!(
+                        "SDO read {index:#06x}:{subindex} of slave {slave}: SDO_GET reports error code {code}"
+                    ))),
                 }
-            },
+            }
             (SlotRequest::SdoWrite { .. }, false) => Ok(Vec::new()),
             (SlotRequest::EepromRead { slave, word } | SlotRequest::EepromWrite { slave, word, .. }, true) => {
                 Err(EngineError::Failed(format!("EEPROM word {word:#06x} of slave {slave}")))
