@@ -130,6 +130,14 @@ impl CliError {
         }
     }
 
+    /// The daemon ended a stream because it is stopping (UNAVAILABLE,
+    /// ErrorInfo reason STOPPING): a following command (`events`, `data
+    /// watch`) ends with exit 0 and says so, instead of failing.
+    pub fn is_stopping(status: &tonic::Status) -> bool {
+        use tonic_types::StatusExt;
+        status.code() == Code::Unavailable && status.get_details_error_info().is_some_and(|i| i.reason == "STOPPING")
+    }
+
     /// Extra detail from the daemon's google.rpc.ErrorInfo (SDO abort code,
     /// the argument at fault), as `key=value` pairs.
     pub fn details(&self) -> Vec<(String, String)> {

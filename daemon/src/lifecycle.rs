@@ -228,6 +228,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         let master = Arc::clone(&master);
         move || master.stop()
     });
+    ctx.stop_streams();
     let _ = stop_api.send(());
     layout_builder.abort();
     if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {

@@ -60,7 +60,10 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
             .unwrap();
         let r = sdo.upload(upload(1, 0x6083, 0, pb::DataType::Unspecified)).await.unwrap().into_inner();
         assert_eq!(r.raw, vec![0x10, 0x27, 0, 0]);
-        assert!(r.value.is_none(), "unknown object without a type: raw only");
+        // Without a type from the client, CiA 402 types 0x6083 (profile
+        // acceleration, UNSIGNED32).
+        assert_eq!(r.value.unwrap().kind, Some(Kind::Unsigned(10_000)));
+        assert_eq!(r.data_type, pb::DataType::Unsigned32 as i32);
 
         // A missing object: ABORTED, with the abort code in the details.
         let e = sdo.upload(upload(1, 0x2FFF, 0, pb::DataType::Unspecified)).await.unwrap_err();
@@ -77,7 +80,7 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
         // Bad arguments name the field and reach nothing.
         for (req, field) in [
             (download(1, 0x6060, 0, pb::DataType::Unspecified, Kind::Integer(300)), "value"),
-            (download(1, 0x6083, 0, pb::DataType::Unspecified, Kind::Integer(1)), "data_type"),
+            (download(1, 0x2FFF, 0, pb::DataType::Unspecified, Kind::Integer(1)), "data_type"),
             (download(1, 0x10000, 0, pb::DataType::Unsigned8, Kind::Unsigned(1)), "index"),
             (download(1, 0x6060, 256, pb::DataType::Unsigned8, Kind::Unsigned(1)), "subindex"),
             (download(300, 0x6060, 0, pb::DataType::Unsigned8, Kind::Unsigned(1)), "slave"),

@@ -206,6 +206,10 @@ pub async fn watch(api: &Api, out: Out, w: &Watch) -> Result<(), CliError> {
         };
         let sample = match sample {
             Some(Ok(s)) => s,
+            Some(Err(st)) if CliError::is_stopping(&st) => {
+                eprintln!("ecmxfctl: the daemon is stopping; no more samples");
+                return Ok(());
+            }
             Some(Err(st)) => return Err(CliError::rpc("watch inputs")(st)),
             None => {
                 return Err(CliError::rpc("watch inputs")(tonic::Status::unavailable("the daemon ended the stream")));

@@ -143,6 +143,10 @@ pub async fn events(
                 out.line(&line, || format!("{:>12.6}  {:<16} {}", line.time_ns as f64 / 1e9, line.kind, line.text))?;
                 n += 1;
             }
+            Some(Err(st)) if CliError::is_stopping(&st) => {
+                eprintln!("ecmxfctl: the daemon is stopping; no more events");
+                return Ok(());
+            }
             Some(Err(st)) => return Err(CliError::rpc("follow events")(st)),
             None => {
                 return Err(CliError::rpc("follow events")(tonic::Status::unavailable("the daemon ended the stream")));

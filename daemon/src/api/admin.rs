@@ -87,7 +87,7 @@ impl FoeApi for FoeService {
                 .await
                 .map(|()| Vec::new())
         };
-        Ok(Response::new(stream_transfer(progress, work)))
+        Ok(Response::new(self.0.until_stopping(stream_transfer(progress, work))))
     }
 
     async fn read(&self, request: Request<pb::FoeReadRequest>) -> Result<Response<ProgressStream>, Status> {
@@ -104,7 +104,7 @@ impl FoeApi for FoeService {
         let work = async move {
             bounded(&caller, ctx.master.foe_read(s, &r.name, r.password, r.max_bytes, Some(p), Some(t))).await
         };
-        Ok(Response::new(stream_transfer(progress, work)))
+        Ok(Response::new(self.0.until_stopping(stream_transfer(progress, work))))
     }
 }
 

@@ -78,35 +78,57 @@ pub fn data_type(v: i32) -> Result<pb::DataType, Status> {
     pb::DataType::try_from(v).map_err(|_| bad_argument("data_type", format!("{v} is not a DataType")))
 }
 
-/// Encodes `value` as `t`; a raw value is taken as it is. Errors name
-/// `value` and say why (out of range, wrong kind, no type).
+/// Encodes `value` as `t`: raw bytes exactly the type's size (any length
+/// for a string or an unknown type), text only to a string type, numbers
+/// within the type. Errors name `value` (or `data_type`) and say why.
 pub fn encode_value(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, Status> {
+    encode(t, value).map_err(|(field, reason)| bad_argument(field, reason))
+}
+
+/// A type's name as users write it: "UNSIGNED16", not "DATA_TYPE_UNSIGNED16".
+pub fn type_name(t: pb::DataType) -> &'static str {
+    t.as_str_name().trim_start_matches("DATA_TYPE_")
+}
+
+/// [`encode_value`] with the failing field and the reason apart, for
+/// callers that put the target in the message (an output entry's name).
+pub fn encode(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, (&'static str, String)> {
     use pb::DataType as T;
     use pb::value::Kind;
-    let kind = value.kind.as_ref().ok_or_else(|| bad_argument("value", "no value given"))?;
+    let kind = value.kind.as_ref().ok_or(("value", "no value given".to_string()))?;
     if let Kind::Raw(b) = kind {
-        return Ok(b.clone());
+        // Raw bytes are the object's own: exactly its size when the type
+        // says one, never silently cut or padded.
+        return match type_size(t) {
+            Some(n) if b.len() != n => {
+                Err(("value", format!("{} raw bytes given for a {} object, which has {n}", b.len(), type_name(t))))
+            }
+            _ => Ok(b.clone()),
+        };
     }
     if let Kind::Text(s) = kind {
         return match t {
-            T::VisibleString | T::OctetString | T::Unspecified => Ok(s.as_bytes().to_vec()),
-            _ => Err(bad_argument("value", format!("text given for a {} object", t.as_str_name()))),
+            T::VisibleString | T::OctetString => Ok(s.as_bytes().to_vec()),
+            T::Unspecified => Err((
+                "value",
+                "text goes only to string objects, and this object's type is not known: \
+                 give data_type VISIBLE_STRING, or a raw value"
+                    .to_string(),
+            )),
+            _ => Err(("value", format!("text given for a {} object", type_name(t)))),
         };
     }
     let Some(size) = type_size(t) else {
-        return Err(bad_argument(
-            "data_type",
-            "the object's type is not known: give data_type, or a raw value".to_string(),
-        ));
+        return Err(("data_type", "the object's type is not known: give data_type, or a raw value".to_string()));
     };
-    let out_of_range = |v: String| bad_argument("value", format!("{v} does not fit {}", t.as_str_name()));
+    let out_of_range = |v: String| ("value", format!("{v} does not fit {}", type_name(t)));
     let bytes: Vec<u8> = match (t, kind) {
         (T::Real32, Kind::Real(f)) => (*f as f32).to_le_bytes().to_vec(),
         (T::Real64, Kind::Real(f)) => f.to_le_bytes().to_vec(),
-        (T::Real32 | T::Real64, Kind::Integer(i)) => return encode_value(t, &real(*i as f64)),
-        (T::Real32 | T::Real64, Kind::Unsigned(u)) => return encode_value(t, &real(*u as f64)),
+        (T::Real32 | T::Real64, Kind::Integer(i)) => return encode(t, &real(*i as f64)),
+        (T::Real32 | T::Real64, Kind::Unsigned(u)) => return encode(t, &real(*u as f64)),
         (_, Kind::Real(f)) => {
-            return Err(bad_argument("value", format!("{f} is a real; {} wants an integer", t.as_str_name())));
+            return Err(("value", format!("{f} is a real; {} wants an integer", type_name(t))));
         }
         (_, Kind::Boolean(v)) => {
             let mut b = vec![0u8; size];

@@ -155,7 +155,7 @@ impl DiagnosticsApi for DiagnosticsService {
                 }
             }
         });
-        Ok(Response::new(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx))))
+        Ok(Response::new(self.0.until_stopping(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))))
     }
 
     async fn get_emergencies(

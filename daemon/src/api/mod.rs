@@ -65,6 +65,9 @@ pub struct Context {
     /// The output image as the API last wrote it (bit-sized entries are
     /// merged into it, so writing one bit keeps its neighbours).
     pub shadow: Mutex<Vec<u8>>,
+    /// Set when the daemon stops: every open server stream ends with
+    /// [`status::stopping`] instead of a connection cut mid-body.
+    stopping: tokio::sync::watch::Sender<bool>,
 }
 
 impl Context {
@@ -81,7 +84,35 @@ impl Context {
             latest: tokio::sync::watch::Sender::new(None),
             shadow: Mutex::new(Vec::new()),
             frame_streams: Arc::default(),
+            stopping: tokio::sync::watch::Sender::new(false),
         })
+    }
+
+    /// Ends every open server stream with UNAVAILABLE "daemon stopping"
+    /// (see [`Context::until_stopping`]); called as shutdown begins.
+    pub fn stop_streams(&self) {
+        self.stopping.send_replace(true);
+    }
+
+    /// `inner` until the daemon stops: then one UNAVAILABLE status with
+    /// reason STOPPING, and the end, so a client (ecmxfctl events, the
+    /// Python package) tells a stopping daemon from a broken connection.
+    /// A stream that ends by itself first ends as it would.
+    pub fn until_stopping<T: Send + 'static>(&self, inner: BoxStream<T>) -> BoxStream<T> {
+        use tokio_stream::StreamExt;
+        let stop = self.stopping.subscribe();
+        Box::pin(futures_util::stream::unfold(Some((inner, stop)), |state| async move {
+            let (mut inner, mut stop) = state?;
+            let next = tokio::select! {
+                biased;
+                _ = stop.wait_for(|s| *s) => None,
+                item = inner.next() => Some(item),
+            };
+            match next {
+                None => Some((Err(status::stopping()), None)),
+                Some(item) => item.map(|i| (i, Some((inner, stop)))),
+            }
+        }))
     }
 
     /// A slave position from a request that must name a slave on the ring

@@ -12,7 +12,7 @@ use tonic::{Request, Response, Status, Streaming};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{encode_value, existing_slave, pb_type};
+use super::convert::{encode, existing_slave, pb_type};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
@@ -94,6 +94,31 @@ fn not_streamed(ctx: &Context, from: usize, to: usize) -> Result<(), Status> {
     }
 }
 
+/// A value for an entry of `bits` bits must be exactly its bytes (a bit
+/// entry: one byte), and an entry narrower than a byte takes no value its
+/// bits cannot hold (a 1-bit entry: 0 or 1). Nothing is cut silently: a
+/// write of 2 bytes to a u8, or 1 MiB to a BOOL, is refused whole.
+fn check_fits(name: &str, bits: u32, bytes: &[u8]) -> Result<(), Status> {
+    let want = bits.div_ceil(8) as usize;
+    if bytes.len() != want {
+        return Err(bad_argument(
+            "writes.value",
+            format!(
+                "{} bytes given for the {bits}-bit entry {name:?}, which takes {want} byte{}",
+                bytes.len(),
+                if want == 1 { "" } else { "s" }
+            ),
+        ));
+    }
+    if bits < 8 && u32::from(bytes[0]) >> bits != 0 {
+        return Err(bad_argument(
+            "writes.value",
+            format!("{} does not fit the {bits}-bit entry {name:?} (0..={})", bytes[0], (1u32 << bits) - 1),
+        ));
+    }
+    Ok(())
+}
+
 /// Applies client writes to the shadow image and sends the touched span as
 /// one write under the lease (so it reaches the slaves in one frame). A bad
 /// write rejects the whole request and changes nothing.
@@ -117,13 +142,9 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
                 if !e.output {
                     return Err(bad_argument("writes.entry", format!("{name:?} is an input")));
                 }
-                let bytes = encode_value(e.data_type, value)?;
-                if (bytes.len() as u32) * 8 < e.bit_length {
-                    return Err(bad_argument(
-                        "writes.value",
-                        format!("{} bytes given for the {}-bit entry {name:?}", bytes.len(), e.bit_length),
-                    ));
-                }
+                let bytes = encode(e.data_type, value)
+                    .map_err(|(_, why)| bad_argument("writes.value", format!("entry {name:?}: {why}")))?;
+                check_fits(name, e.bit_length, &bytes)?;
                 let (b0, b1) = ((e.bit_offset / 8) as usize, (e.bit_offset + e.bit_length).div_ceil(8) as usize);
                 not_streamed(ctx, b0, b1)?;
                 write_bits(&mut staged, e.bit_offset, e.bit_length, &bytes);
@@ -361,7 +382,7 @@ impl ProcessDataApi for ProcessDataService {
             };
             Some(Ok(sample))
         });
-        Ok(Response::new(Box::pin(super::paced::Paced::new(samples))))
+        Ok(Response::new(self.0.until_stopping(Box::pin(super::paced::Paced::new(samples)))))
     }
 
     async fn acquire_lease(&self, request: Request<pb::AcquireLeaseRequest>) -> Result<Response<pb::Lease>, Status> {
@@ -407,7 +428,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<Streaming<pb::FrameBatch>>,
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
         self.0.authorize(&request, Role::Operator)?;
-        Ok(Response::new(super::frames::serve(Arc::clone(&self.0), request.into_inner()).await?))
+        Ok(Response::new(self.0.until_stopping(super::frames::serve(Arc::clone(&self.0), request.into_inner()).await?)))
     }
 
     async fn stream_outputs(
@@ -438,5 +459,29 @@ mod age_tests {
         assert!(g.admit(1_000_000, 101_000_000), "exactly the bound");
         assert!(!g.admit(1_000_000, 101_000_001));
         assert!(g.admit(5_000_000, 1_000_000), "a clock read before the frame is not an age");
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::check_fits;
+
+    /// A bit entry takes one byte holding what its bits can: a 1-bit entry
+    /// 0 or 1, a BIT2 entry 0..=3; a byte entry exactly one byte; nothing
+    /// is cut to fit.
+    #[test]
+    fn a_value_must_be_exactly_its_entrys_bytes_and_fit_its_bits() {
+        assert!(check_fits("2.0x7000:01", 1, &[1]).is_ok());
+        assert!(check_fits("2.0x7000:01", 1, &[0]).is_ok());
+        let e = check_fits("2.0x7000:01", 1, &[2]).unwrap_err();
+        assert!(e.message().contains("2 does not fit the 1-bit entry \"2.0x7000:01\" (0..=1)"), "{e:?}");
+        let e = check_fits("2.0x7000:01", 1, &vec![1; 1 << 20]).unwrap_err();
+        assert!(e.message().contains("1048576 bytes given for the 1-bit entry \"2.0x7000:01\", which takes 1 byte"));
+        assert!(check_fits("1.bits", 2, &[3]).is_ok());
+        assert!(check_fits("1.bits", 2, &[4]).is_err());
+        assert!(check_fits("1.u8", 8, &[0xFF]).is_ok());
+        assert!(check_fits("1.u8", 8, &[1, 2]).unwrap_err().message().contains("2 bytes given for the 8-bit"));
+        assert!(check_fits("1.i16", 16, &[1]).unwrap_err().message().contains("which takes 2 bytes"));
+        assert!(check_fits("1.u24", 24, &[1, 2, 3]).is_ok());
     }
 }

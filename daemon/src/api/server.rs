@@ -70,6 +70,13 @@ const SERVICES: [&str; 12] = [
     <pb::diagnostics_server::DiagnosticsServer<DiagnosticsService> as NamedService>::NAME,
 ];
 
+/// The largest request body the daemon decodes: the largest legitimate
+/// one is a whole FoE file (the chip stages at most `FOE_FLASH_SIZE`, 256
+/// KiB) or an SII image (at most 64 KiB), plus room for the message around
+/// it. A larger body is refused with OUT_OF_RANGE before it is read whole
+/// (proto/README.md lists it).
+pub const MAX_REQUEST_BYTES: usize = ecmxf_wire::payload::foe::FOE_FLASH_SIZE as usize + 64 * 1024;
+
 fn routes(
     ctx: &Arc<Context>,
     health: tonic_health::pb::health_server::HealthServer<impl tonic_health::pb::health_server::Health>,
@@ -88,17 +95,35 @@ fn routes(
     Ok(Routes::new(health)
         .add_service(v1)
         .add_service(v1alpha)
-        .add_service(pb::master_server::MasterServer::new(MasterService(c())))
-        .add_service(pb::slaves_server::SlavesServer::new(SlavesService(c())))
-        .add_service(pb::state_server::StateServer::new(StateService(c())))
-        .add_service(pb::sdo_server::SdoServer::new(SdoService(c())))
-        .add_service(pb::sii_server::SiiServer::new(SiiService(c())))
-        .add_service(pb::process_data_server::ProcessDataServer::new(ProcessDataService(c())))
-        .add_service(pb::cia402_server::Cia402Server::new(Cia402Service(c())))
-        .add_service(pb::peripherals_server::PeripheralsServer::new(PeripheralsService(c())))
-        .add_service(pb::foe_server::FoeServer::new(FoeService(c())))
-        .add_service(pb::registers_server::RegistersServer::new(RegistersService(c())))
-        .add_service(pb::diagnostics_server::DiagnosticsServer::new(DiagnosticsService(c()))))
+        .add_service(
+            pb::master_server::MasterServer::new(MasterService(c())).max_decoding_message_size(MAX_REQUEST_BYTES),
+        )
+        .add_service(
+            pb::slaves_server::SlavesServer::new(SlavesService(c())).max_decoding_message_size(MAX_REQUEST_BYTES),
+        )
+        .add_service(pb::state_server::StateServer::new(StateService(c())).max_decoding_message_size(MAX_REQUEST_BYTES))
+        .add_service(pb::sdo_server::SdoServer::new(SdoService(c())).max_decoding_message_size(MAX_REQUEST_BYTES))
+        .add_service(pb::sii_server::SiiServer::new(SiiService(c())).max_decoding_message_size(MAX_REQUEST_BYTES))
+        .add_service(
+            pb::process_data_server::ProcessDataServer::new(ProcessDataService(c()))
+                .max_decoding_message_size(MAX_REQUEST_BYTES),
+        )
+        .add_service(
+            pb::cia402_server::Cia402Server::new(Cia402Service(c())).max_decoding_message_size(MAX_REQUEST_BYTES),
+        )
+        .add_service(
+            pb::peripherals_server::PeripheralsServer::new(PeripheralsService(c()))
+                .max_decoding_message_size(MAX_REQUEST_BYTES),
+        )
+        .add_service(pb::foe_server::FoeServer::new(FoeService(c())).max_decoding_message_size(MAX_REQUEST_BYTES))
+        .add_service(
+            pb::registers_server::RegistersServer::new(RegistersService(c()))
+                .max_decoding_message_size(MAX_REQUEST_BYTES),
+        )
+        .add_service(
+            pb::diagnostics_server::DiagnosticsServer::new(DiagnosticsService(c()))
+                .max_decoding_message_size(MAX_REQUEST_BYTES),
+        ))
 }
 
 /// Binds the Unix socket: parent folder created if missing, a stale file

@@ -70,6 +70,13 @@ impl From<EngineError> for Status {
     }
 }
 
+/// How every server stream ends when the daemon stops: UNAVAILABLE with
+/// the ErrorInfo reason STOPPING (proto/README.md).
+pub fn stopping() -> Status {
+    let details = ErrorDetails::with_error_info("STOPPING", DOMAIN, HashMap::new());
+    Status::with_error_details(Code::Unavailable, "daemon stopping: the stream ends", details)
+}
+
 /// INVALID_ARGUMENT naming `field`, for checks made in the API layer.
 pub fn bad_argument(field: &'static str, reason: impl Into<String>) -> Status {
     to_status(EngineError::BadArgument { field, reason: reason.into() })

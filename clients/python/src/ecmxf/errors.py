@@ -22,6 +22,7 @@ __all__ = [
     "Timeout",
     "Unavailable",
     "Unreachable",
+    "DaemonStopping",
 ]
 
 
@@ -105,6 +106,15 @@ class Unreachable(Error):
     """No daemon answers at the socket or address."""
 
 
+class DaemonStopping(Unavailable):
+    """The daemon is stopping: a stream (inputs, events, frames) ended for it.
+
+    Raised instead of a broken-connection error, so a loop over a stream can
+    tell a daemon shut down on purpose (ErrorInfo reason ``STOPPING``) from a
+    lost one.
+    """
+
+
 _BY_CODE = {
     grpc.StatusCode.INVALID_ARGUMENT: InvalidArgument,
     grpc.StatusCode.ABORTED: SdoAbort,
@@ -137,7 +147,9 @@ def from_rpc_error(e: grpc.RpcError) -> Error:
         # Details that disagree with the status, or none readable: the
         # status alone still says what failed.
         pass
-    if code == grpc.StatusCode.UNAVAILABLE and reason != "NOT_RUNNING":
+    if code == grpc.StatusCode.UNAVAILABLE and reason == "STOPPING":
+        cls = DaemonStopping
+    elif code == grpc.StatusCode.UNAVAILABLE and reason != "NOT_RUNNING":
         cls = Unreachable
         message = f"cannot reach ecmxfd: {message}"
     elif code == grpc.StatusCode.ABORTED and reason != "SDO_ABORT":
