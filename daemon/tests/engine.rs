@@ -237,6 +237,38 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     );
 }
 
+/// A network that reaches OP again and again but delivers no input frame
+/// (the chip's TxFIFO stalled for 2 s) is one recovery spell: one
+/// RECOVERING event, the attempts counted, and RECOVERED only once input
+/// frames flow again, after the phase says RUNNING (issue 29: it used to
+/// say "network back after a fault" after every attempt while nothing
+/// flowed).
+#[test]
+fn a_stalled_network_stays_recovering_until_input_frames_flow() {
+    let (m, sim, _serial) = start();
+    let before = m.status().recoveries;
+    let mut events = m.events();
+    sim.control("tx-fifo stall").unwrap();
+    std::thread::sleep(Duration::from_secs(2));
+    let attempts = m.status().recoveries - before;
+    assert!(attempts >= 2, "the stall was retried ({attempts} attempts)");
+    assert_ne!(m.status().phase, Phase::Running, "not running while nothing flows");
+    sim.control("tx-fifo resume").unwrap();
+    wait_running(&m, Duration::from_secs(20));
+    std::thread::sleep(Duration::from_millis(100));
+    let mut seen = Vec::new();
+    while let Ok(e) = events.try_recv() {
+        seen.push(e.kind);
+    }
+    let count = |pred: &dyn Fn(&EventKind) -> bool| seen.iter().filter(|k| pred(k)).count();
+    assert_eq!(count(&|k| matches!(k, EventKind::Recovering(_))), 1, "one spell, one event: {seen:?}");
+    assert_eq!(count(&|k| matches!(k, EventKind::Recovered { .. })), 1, "{seen:?}");
+    let at = |pred: &dyn Fn(&EventKind) -> bool| seen.iter().position(pred);
+    let running = at(&|k| *k == EventKind::Phase(Phase::Running)).expect("running again");
+    let recovered = at(&|k| matches!(k, EventKind::Recovered { .. })).unwrap();
+    assert!(running < recovered, "RECOVERED only once frames flow: {seen:?}");
+}
+
 /// EEPROM double words of slave 1, one read each.
 async fn eeprom_words(m: &Master, at: &[u16]) -> Vec<[u8; 4]> {
     let mut out = Vec::new();

@@ -209,6 +209,9 @@ struct Fault {
     detected: bool,
     /// The longest the daemon may take to stop saying "healthy".
     detect_within: Option<Duration>,
+    /// The causes its RECOVERING event may give (`Event.cause`), read
+    /// from what the daemon saw first; empty when it must not recover.
+    causes: &'static [&'static str],
 }
 
 const FAULTS: &[Fault] = &[
@@ -220,6 +223,7 @@ const FAULTS: &[Fault] = &[
         clear: &["tx-fifo resume"],
         detected: true,
         detect_within: Some(Duration::from_millis(100)),
+        causes: &["input_stall"],
     },
     Fault {
         name: "mosi bit errors 1e-4",
@@ -228,6 +232,7 @@ const FAULTS: &[Fault] = &[
         clear: &["flip mosi 0"],
         detected: false,
         detect_within: None,
+        causes: &[],
     },
     Fault {
         name: "mosi bit errors 1e-3",
@@ -236,6 +241,7 @@ const FAULTS: &[Fault] = &[
         clear: &["flip mosi 0"],
         detected: false,
         detect_within: None,
+        causes: &[],
     },
     Fault {
         name: "miso bit errors 1e-4",
@@ -244,6 +250,7 @@ const FAULTS: &[Fault] = &[
         clear: &["flip miso 0"],
         detected: false,
         detect_within: None,
+        causes: &[],
     },
     Fault {
         name: "miso bit errors 1e-3",
@@ -252,6 +259,7 @@ const FAULTS: &[Fault] = &[
         clear: &["flip miso 0"],
         detected: false,
         detect_within: None,
+        causes: &[],
     },
     Fault {
         name: "INT0 stuck low",
@@ -260,6 +268,7 @@ const FAULTS: &[Fault] = &[
         clear: &["int0 stuck off"],
         detected: true,
         detect_within: None,
+        causes: &["chip"],
     },
     Fault {
         name: "INT0 stuck high",
@@ -268,6 +277,7 @@ const FAULTS: &[Fault] = &[
         clear: &["int0 stuck off"],
         detected: true,
         detect_within: None,
+        causes: &["chip"],
     },
     Fault {
         name: "IO slave unplugged",
@@ -275,7 +285,10 @@ const FAULTS: &[Fault] = &[
         hold: MS_800,
         clear: &["replug 2"],
         detected: true,
-        detect_within: None,
+        // Recovering, then degraded ("2 of 3 slaves since start"): never
+        // "healthy" with a slave gone, [[slave]] listed or not.
+        detect_within: Some(Duration::from_millis(100)),
+        causes: &["slave_count", "wkc_streak", "slave_error"],
     },
     Fault {
         name: "AL error 0x001A",
@@ -284,6 +297,7 @@ const FAULTS: &[Fault] = &[
         clear: &[],
         detected: true,
         detect_within: None,
+        causes: &["slave_error"],
     },
     Fault {
         name: "drive fault",
@@ -292,6 +306,7 @@ const FAULTS: &[Fault] = &[
         clear: &["clear-fault 1 0"],
         detected: false,
         detect_within: None,
+        causes: &[],
     },
     Fault {
         name: "warm reset",
@@ -300,6 +315,7 @@ const FAULTS: &[Fault] = &[
         clear: &[],
         detected: true,
         detect_within: None,
+        causes: &["chip_reset"],
     },
 ];
 
@@ -468,6 +484,7 @@ fn after_every_fault_process_data_flows_again() {
                     b.seen.lock().unwrap().after_gap = None;
                 }
                 let before = (b.status().await, sim_counter(&sim, "tx_dropped"));
+                let events_before = events.lock().unwrap().len();
                 for c in f.inject {
                     sim.ctl(c);
                 }
@@ -522,6 +539,7 @@ fn after_every_fault_process_data_flows_again() {
                     recovery.entry(f.name).or_default().push(t0.elapsed());
                     after_recovery(&b, &what, f.name.contains("IO slave")).await;
                 }
+                fault_events(&events.lock().unwrap()[events_before..], f, &what);
                 let frames = b.input_frames().await;
                 b.loopback(&what).await;
                 assert!(b.input_frames().await > frames, "{what}: input frames do not rise");
@@ -607,6 +625,48 @@ fn after_every_fault_process_data_flows_again() {
         assert!(state.contains("state=INIT"), "slaves not in INIT after the stop: {state}");
         reader.abort();
     });
+}
+
+/// What the events during one fault must say: its RECOVERING events (one
+/// per spell) give a cause the fault allows, naming the AL status code for
+/// an AL error; and no RECOVERED comes before process data flows again
+/// (the phase RUNNING, said at the first input frame, precedes it).
+fn fault_events(events: &[pb::Event], f: &Fault, what: &str) {
+    let kind = |e: &pb::Event| pb::EventKind::try_from(e.kind).unwrap_or(pb::EventKind::Unspecified);
+    let recovering: Vec<&pb::Event> = events.iter().filter(|e| kind(e) == pb::EventKind::Recovering).collect();
+    if f.causes.is_empty() {
+        assert!(recovering.is_empty(), "{what}: recovered from a fault it must absorb: {recovering:?}");
+        return;
+    }
+    assert!(!recovering.is_empty(), "{what}: no RECOVERING event");
+    for e in &recovering {
+        assert!(
+            f.causes.contains(&e.cause.as_str()),
+            "{what}: cause {:?} ({}), wanted one of {:?}",
+            e.cause,
+            e.detail,
+            f.causes
+        );
+    }
+    if f.name.starts_with("AL error") {
+        assert!(
+            recovering[0].detail.contains("0x001a"),
+            "{what}: the AL status code is the cause: {}",
+            recovering[0].detail
+        );
+    }
+    // Every RECOVERED follows a RUNNING phase event since its RECOVERING.
+    let mut running_since_recovering = true;
+    for e in events {
+        match kind(e) {
+            pb::EventKind::Recovering => running_since_recovering = false,
+            pb::EventKind::Phase if e.detail.ends_with("RUNNING") => running_since_recovering = true,
+            pb::EventKind::Recovered => {
+                assert!(running_since_recovering, "{what}: RECOVERED before input frames flowed: {events:?}")
+            }
+            _ => {}
+        }
+    }
 }
 
 /// Waits until the daemon's API answers GetStatus with a phase in `phases`.

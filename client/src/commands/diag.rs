@@ -238,9 +238,10 @@ pub async fn diag(api: &Api) -> Result<DiagReport, CliError> {
     if !running {
         let why = if status.last_error.is_empty() { String::new() } else { format!(" ({})", status.last_error) };
         problems.push(format!("the engine is {}{why}", crate::values::phase_name(status.phase)));
-    } else if status.flow_limit_us > 0 && !status.process_data_flowing {
+    } else if (status.flow_limit_us > 0 && !status.process_data_flowing) || status.health.starts_with("degraded") {
         // The daemon's own verdict: OP on paper is not OP when no input
-        // frame arrives.
+        // frame arrives, and a network missing a slave it had at the start
+        // is degraded however well the rest runs.
         problems.push(status.health.clone());
     }
     let slaves: Vec<SlaveDiagReport> = list

@@ -112,6 +112,10 @@ pub struct Engine<L> {
     unplayed_write: Option<Instant>,
     /// What the last snapshot sent to waiters showed, and when it went.
     announced: ((Phase, EcatState, u64, u64), Instant),
+    /// A RECOVERING event went out and its RECOVERED has not: the network
+    /// has not delivered input frames since. Further attempts in the same
+    /// spell are counted (`recoveries`), not announced again.
+    recovery_open: bool,
 }
 
 impl<L> std::fmt::Debug for Engine<L> {
@@ -189,6 +193,7 @@ impl<L: Link> Engine<L> {
             active: None,
             unplayed_write: None,
             announced: (Default::default(), epoch),
+            recovery_open: false,
         }
     }
 
@@ -247,12 +252,10 @@ impl<L: Link> Engine<L> {
                 }
             };
             info!(slaves = layout.slaves.len(), state = %layout.state, rx = layout.rx_size, tx = layout.tx_size, "network up");
+            let slaves = layout.slaves.len() as u64;
+            self.telemetry.slaves.store(slaves, Relaxed);
+            self.telemetry.slaves_seen.fetch_max(slaves, Relaxed);
             backoff = Duration::from_millis(self.config.recovery.backoff_ms);
-            if !first {
-                // Logged with its event (a sentence, with axes_disabled as a field).
-                let (axes, outputs) = (self.config.axes.len(), self.config.outputs.on_last_writer_gone);
-                self.events.emit(EventKind::Recovered { axes_disabled: axes, outputs });
-            }
             first = false;
             let cyclic = (layout.state == EcatState::Op && (layout.rx_size > 0 || layout.tx_size > 0)).then(|| {
                 let cycle = self.config.cycle.dc_cycle();
@@ -274,6 +277,7 @@ impl<L: Link> Engine<L> {
             // delivers nothing is not running.
             if cyclic.is_none() {
                 self.set_phase(Phase::Running);
+                self.recovered();
             }
             let mut cyclic = cyclic;
             let exit = self.running(cyclic.as_mut());
@@ -284,12 +288,23 @@ impl<L: Link> Engine<L> {
             match exit {
                 Exit::Stop => return self.stopped(),
                 Exit::Recover(why) => {
-                    warn!(reason = %why, "recovering");
+                    if matches!(why, RecoverCause::NewConfig | RecoverCause::ReinitRequested) {
+                        // The client accepts the network as the bring-up finds it.
+                        self.telemetry.slaves_seen.store(0, Relaxed);
+                    }
                     self.telemetry.set_error(format!("recovery: {why}"));
                     // Phase first: no one may see "running" while recovering.
                     self.set_phase(Phase::Recovering);
                     self.telemetry.forget_network();
-                    self.events.emit(EventKind::Recovering(why.clone()));
+                    if self.recovery_open {
+                        // Still the same spell: nothing flowed since the
+                        // last RECOVERING. One event, attempts counted.
+                        warn!(reason = %why, attempt = self.telemetry.recoveries.load(Relaxed) + 1, "still recovering");
+                    } else {
+                        warn!(reason = %why, "recovering");
+                        self.events.emit(EventKind::Recovering(why.clone()));
+                        self.recovery_open = true;
+                    }
                     self.count_recovery();
                     self.fail_all(EngineError::Unavailable(NotRunning::Recovering(why.clone())));
                     self.reopen_if_needed(&why);
@@ -340,6 +355,17 @@ impl<L: Link> Engine<L> {
     }
 
     /// A recovery started: counted, and said to waiters at once.
+    /// The network runs again after a fault: process data flows (the
+    /// first input frame), or there is none to exchange. RECOVERED is said
+    /// then and only then, never while nothing arrives.
+    fn recovered(&mut self) {
+        if std::mem::take(&mut self.recovery_open) {
+            // Logged with its event (a sentence, with axes_disabled as a field).
+            let (axes, outputs) = (self.config.axes.len(), self.config.outputs.on_last_writer_gone);
+            self.events.emit(EventKind::Recovered { axes_disabled: axes, outputs });
+        }
+    }
+
     fn count_recovery(&mut self) {
         self.telemetry.recoveries.fetch_add(1, Relaxed);
         self.announce(Instant::now());

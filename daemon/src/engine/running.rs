@@ -13,7 +13,7 @@ use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::CommandCode;
-use ecmxf_wire::flags::ControlFlags;
+use ecmxf_wire::flags::{ControlFlags, StatusFlags};
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
@@ -110,26 +110,48 @@ impl<L: Link> Engine<L> {
 
     /// The cause, with the slaves' AL status codes read and reported where
     /// a slave is at fault.
+    /// A slave that reports an AL status code is the cause of missing
+    /// working counters or a stopped exchange, not their symptom: the
+    /// cause is then `slave_error` naming it and its code. A chip that
+    /// stopped answering intact is asked what it is now: one back at its
+    /// power-up values was reset (`chip_reset`), not merely garbled.
     fn explained(&mut self, why: RecoverCause, slaves: usize) -> RecoverCause {
         match why {
             RecoverCause::SlaveError(_) | RecoverCause::WkcStreak(_) | RecoverCause::ExchangeStopped => {
                 let report = self.al_report(slaves);
                 match why {
-                    RecoverCause::SlaveError(_) => RecoverCause::SlaveError(if report.is_empty() {
-                        "no slave reports an AL status code".into()
-                    } else {
-                        report
-                    }),
-                    other => {
-                        if !report.is_empty() {
-                            warn!(slaves = %report, "AL status");
-                        }
-                        other
+                    RecoverCause::SlaveError(_) if report.is_empty() => {
+                        RecoverCause::SlaveError("no slave reports an AL status code".into())
                     }
+                    _ if !report.is_empty() => {
+                        warn!(symptom = %why, slaves = %report, "AL status");
+                        RecoverCause::SlaveError(report)
+                    }
+                    other => other,
                 }
+            }
+            RecoverCause::Chip(e) if self.chip_was_reset() => {
+                info!(symptom = %e, "the chip answers again with its power-up status: it was reset");
+                RecoverCause::ChipReset
             }
             other => other,
         }
+    }
+
+    /// After a failed exchange: finds the chip's packet boundary again and
+    /// reads its status. True when it is back at its power-up values (a
+    /// NOP answer, ETHERNET_READY gone, or its packet size reset): a
+    /// reset, whose first symptom is answers the host cannot decode. One
+    /// try, within the ready timeout (a reset takes tens of ms); a chip
+    /// that does not answer leaves the cause as it was. Costs nothing
+    /// while the bus runs: only a failed exchange asks.
+    fn chip_was_reset(&mut self) -> bool {
+        let size = self.port.data_size();
+        if self.port.synchronize().is_err() {
+            return false;
+        }
+        let h = self.port.status();
+        h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) || self.port.data_size() != size
     }
 
     /// Runs the network until a fault, a client's action or a stop.
@@ -241,7 +263,9 @@ impl<L: Link> Engine<L> {
     /// Counts the slaves every `supervisor::CENSUS` while the slot is idle:
     /// slaves plugged in or out change the count the chip sees.
     fn count_slaves(&mut self, now: Instant) -> Result<(), Exit> {
-        if self.active.is_none() && self.queue.is_empty() && self.supervisor.census_due(now) {
+        // Between transactions, queued ones or not: a busy slot (16 SDO
+        // clients) must not keep a replugged slave unseen.
+        if self.active.is_none() && self.supervisor.census_due(now) {
             let count = self.port.call(&SlaveCountGet)?.header.return_value;
             self.supervisor.census(usize::from(count), now)?;
         }
@@ -281,8 +305,10 @@ impl<L: Link> Engine<L> {
             return Err(stall.into());
         }
         if cyclic && self.telemetry.phase() != Phase::Running && self.supervisor.flowed() {
-            // Running means process data flows: said at the first frame.
+            // Running means process data flows: said at the first frame,
+            // and so is the end of a recovery.
             self.set_phase(Phase::Running);
+            self.recovered();
         }
         Ok(())
     }

@@ -92,6 +92,11 @@ pub struct Telemetry {
     pub transactions: AtomicU64,
     /// Recoveries started.
     pub recoveries: AtomicU64,
+    /// Slaves in the network that runs (set at each bring-up).
+    pub slaves: AtomicU64,
+    /// The most slaves a running network had since the start (or the last
+    /// re-init or new configuration, which accept the network as it is).
+    pub slaves_seen: AtomicU64,
     /// Longest time between two FIFO exchanges in OP, us: the margin the
     /// RxFIFO needs (a thread stalled by the OS or the hypervisor shows
     /// here).
@@ -243,6 +248,11 @@ pub struct Snapshot {
     pub fifo_alarms: u64,
     /// Recoveries.
     pub recoveries: u64,
+    /// Slaves in the network that runs.
+    pub slaves: u64,
+    /// The most slaves a running network had since the start (or the
+    /// last re-init or new configuration).
+    pub slaves_seen: u64,
     /// Longest gap between FIFO exchanges, us.
     pub max_fifo_gap_us: u64,
     /// The last applied configuration the engine has taken (0: the first).
@@ -366,6 +376,8 @@ impl Telemetry {
             output_frames: self.output_frames.load(Relaxed),
             fifo_alarms: self.fifo_alarms.load(Relaxed),
             recoveries: self.recoveries.load(Relaxed),
+            slaves: self.slaves.load(Relaxed),
+            slaves_seen: self.slaves_seen.load(Relaxed),
             max_fifo_gap_us: self.max_fifo_gap_us.load(Relaxed),
             config_generation: self.config_generation.load(Relaxed),
             output_latency_misses: self.output_latency_misses.load(Relaxed),

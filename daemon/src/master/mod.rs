@@ -83,7 +83,7 @@ pub struct Verdict {
 impl Verdict {
     /// Healthy, with a cyclic exchange that delivers input frames.
     pub fn flowing(&self) -> bool {
-        self.health.is_healthy() && self.input_age.is_some()
+        matches!(self.health, Health::Healthy | Health::SlavesMissing { .. }) && self.input_age.is_some()
     }
 }
 
@@ -109,6 +109,17 @@ pub enum Health {
         /// The limit.
         limit: Duration,
     },
+    /// Running, process data flowing, but with fewer slaves than a network
+    /// that ran since the start had: one was lost (unplugged, powered off)
+    /// and the rest were brought up without it. Degraded, not healthy,
+    /// whether or not the configuration lists slaves; a re-init or a new
+    /// configuration accepts the network as it is.
+    SlavesMissing {
+        /// Slaves now.
+        now: u64,
+        /// The most seen since the start.
+        seen: u64,
+    },
 }
 
 impl Health {
@@ -122,6 +133,7 @@ impl Health {
         }
         match s.input_age(now_ns) {
             Some((age, limit)) if age > limit => Self::Stalled { age, limit },
+            _ if s.slaves < s.slaves_seen => Self::SlavesMissing { now: s.slaves, seen: s.slaves_seen },
             _ => Self::Healthy,
         }
     }
@@ -143,6 +155,11 @@ impl std::fmt::Display for Health {
                 "process data stalled: no input frame for {} ms (limit {} ms)",
                 age.as_millis(),
                 limit.as_millis()
+            ),
+            Self::SlavesMissing { now, seen } => write!(
+                f,
+                "degraded: {now} of {seen} slaves since start (one seen then is missing; a re-init accepts the \
+                 network as it is)"
             ),
         }
     }
@@ -586,5 +603,23 @@ mod tests {
         // No cyclic exchange (target PRE-OP): nothing to flow.
         let p = running(EcatState::PreOp, 0, 0);
         assert_eq!(Health::judge(&p, EcatState::PreOp, ms(10_000)), Health::Healthy);
+    }
+
+    /// A slave a running network had is missing: degraded, not healthy,
+    /// though the rest runs and its data flows; a stall still says stall.
+    #[test]
+    fn a_network_missing_a_slave_seen_at_start_is_degraded() {
+        let ms = |v: u64| v * 1_000_000;
+        let mut s = running(EcatState::Op, 100, 50);
+        (s.slaves, s.slaves_seen) = (2, 3);
+        let h = Health::judge(&s, EcatState::Op, ms(140));
+        assert_eq!(h, Health::SlavesMissing { now: 2, seen: 3 });
+        assert!(!h.is_healthy());
+        assert!(h.to_string().starts_with("degraded: 2 of 3 slaves since start"), "{h}");
+        let v = Verdict { health: h, input_age: s.input_age(ms(140)) };
+        assert!(v.flowing(), "process data still flows for the rest");
+        assert!(matches!(Health::judge(&s, EcatState::Op, ms(151)), Health::Stalled { .. }));
+        (s.slaves, s.slaves_seen) = (3, 3);
+        assert_eq!(Health::judge(&s, EcatState::Op, ms(140)), Health::Healthy);
     }
 }
