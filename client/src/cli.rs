@@ -26,9 +26,12 @@ pub struct Cli {
     /// Print JSON instead of tables (one object; streams: one object per line).
     #[arg(long, global = true)]
     pub json: bool,
-    /// Deadline for each call, e.g. 500ms, 3s, 1m.
-    #[arg(long, global = true, default_value = "5s", value_parser = parse_duration, value_name = "DURATION")]
-    pub timeout: Duration,
+    /// Deadline for the whole command, e.g. 500ms, 3s, 1m [default: 5s,
+    /// longer for what needs it: SII ranges and writes, FoE transfers,
+    /// waiting for states]. Given, it is the deadline, whatever the command
+    /// (following commands, `events` and `watch`, run until stopped).
+    #[arg(long, global = true, value_parser = parse_duration, value_name = "DURATION")]
+    pub timeout: Option<Duration>,
     #[command(subcommand)]
     pub command: Command,
 }

@@ -29,11 +29,17 @@ impl tonic::service::Interceptor for Auth {
 /// The channel every client uses.
 pub type Chan = InterceptedService<Channel, Auth>;
 
+/// The deadline of a call when `--timeout` is not given.
+pub const DEFAULT_TIMEOUT: Duration = Duration::from_secs(5);
+
 /// A connection to the daemon and the deadline for unary calls.
 #[derive(Debug, Clone)]
 pub struct Api {
     chan: Chan,
     timeout: Duration,
+    /// `--timeout` was given: it is the deadline of every call, long
+    /// operations included (a script's bound is never stretched).
+    explicit: bool,
     /// Where it is connected (for messages).
     pub target: String,
 }
@@ -71,26 +77,54 @@ impl Api {
         r
     }
 
-    /// A request with a longer deadline (bring-up, FoE, waiting for states).
+    /// A request that may take `at_least` (an SII range, waiting for
+    /// states): that long unless `--timeout` was given, which wins.
     pub fn req_for<T>(&self, msg: T, at_least: Duration) -> tonic::Request<T> {
         let mut r = tonic::Request::new(msg);
-        r.set_timeout(self.timeout.max(at_least));
+        r.set_timeout(if self.explicit { self.timeout } else { self.timeout.max(at_least) });
         r
     }
 
-    /// A streaming request: no deadline (it runs until stopped).
+    /// A following stream (events, inputs): no deadline, it runs until
+    /// stopped.
     pub fn stream<T>(&self, msg: T) -> tonic::Request<T> {
         tonic::Request::new(msg)
+    }
+
+    /// A stream that is one operation with an end (an FoE transfer and its
+    /// progress): bounded by `--timeout` when given, else by nothing but
+    /// the transfer itself.
+    pub fn transfer<T>(&self, msg: T) -> tonic::Request<T> {
+        let mut r = tonic::Request::new(msg);
+        if self.explicit {
+            r.set_timeout(self.timeout);
+        }
+        r
     }
 
     /// The unary deadline.
     pub fn timeout(&self) -> Duration {
         self.timeout
     }
+
+    /// How long the daemon may wait for something (a state, an axis)
+    /// before answering "not reached", and the deadline of that call: by
+    /// default the timeout and a second more for the answer; with
+    /// `--timeout` given, both within it (the wait a tenth shorter, at
+    /// most 200 ms, so the answer still arrives in time).
+    pub fn wait_and_deadline(&self) -> (u32, Duration) {
+        let (wait, deadline) = if self.explicit {
+            (self.timeout.saturating_sub((self.timeout / 10).min(Duration::from_millis(200))), self.timeout)
+        } else {
+            (self.timeout, self.timeout + Duration::from_secs(1))
+        };
+        (wait.as_millis().min(u128::from(u32::MAX)) as u32, deadline)
+    }
 }
 
 /// Connects as the arguments say.
-pub async fn connect(args: &ConnectArgs, timeout: Duration) -> Result<Api, CliError> {
+pub async fn connect(args: &ConnectArgs, timeout: Option<Duration>) -> Result<Api, CliError> {
+    let (explicit, timeout) = (timeout.is_some(), timeout.unwrap_or(DEFAULT_TIMEOUT));
     let token = token(args)?;
     let (channel, target) = match &args.tcp() {
         Some(url) => tcp(args, url).await?,
@@ -99,7 +133,7 @@ pub async fn connect(args: &ConnectArgs, timeout: Duration) -> Result<Api, CliEr
             (unix(&path).await?, path.display().to_string())
         }
     };
-    Ok(Api { chan: InterceptedService::new(channel, Auth(token)), timeout, target })
+    Ok(Api { chan: InterceptedService::new(channel, Auth(token)), timeout, explicit, target })
 }
 
 fn token(args: &ConnectArgs) -> Result<Option<MetadataValue<Ascii>>, CliError> {

@@ -343,6 +343,22 @@ fn errors_say_what_went_wrong_with_the_documented_exit_code() {
         let c = d.ctl(&["--timeout", "1ms", "upload", "-p", "1", "0x1008"]);
         let err = c.fails(5);
         assert!(err.contains("timed out"), "{err}");
+        // A given --timeout bounds the long operations too (a full SII
+        // range, the object probe, an FoE read): the command ends with
+        // exit 5 within it, not at their own budgets.
+        for args in [
+            &["sii", "read", "-p", "1", "--count", "4096"][..],
+            &["sdos", "-p", "1"],
+            &["foe", "read", "-p", "1", "firmware.bin", "-o", "/dev/null"],
+        ] {
+            let started = std::time::Instant::now();
+            let mut all = vec!["--timeout", "30ms"];
+            all.extend_from_slice(args);
+            let c = d.ctl(&all);
+            let took = started.elapsed();
+            assert_eq!(c.code, 5, "{args:?}: exit {} after {took:?}: {}{}", c.code, c.stdout, c.stderr);
+            assert!(took < std::time::Duration::from_secs(2), "{args:?} took {took:?} with --timeout 30ms");
+        }
         d.stop();
     });
 }

@@ -155,9 +155,9 @@ async fn axis_of(api: &Api, axis: u32) -> Result<(pb::Axis, Vec<pb::Axis>), CliE
 async fn command(api: &Api, a: &AxisCommandArgs, c: pb::AxisCommand, verb: &str) -> Result<AxisReport, CliError> {
     let axis = a.axis.axis;
     let (_, all) = axis_of(api, axis).await?;
-    let timeout_ms = api.timeout().as_millis().min(u128::from(u32::MAX)) as u32;
+    let (timeout_ms, deadline) = api.wait_and_deadline();
     let req = pb::AxisCommandRequest { axis, command: c as i32, wait: !a.no_wait, timeout_ms };
-    let r = api.cia402().command(api.req_for(req, api.timeout() + Duration::from_secs(1))).await;
+    let r = api.cia402().command(api.req_for(req, deadline)).await;
     Ok(report(r.map_err(CliError::rpc(format!("{verb} axis {axis}")))?.into_inner(), &all))
 }
 

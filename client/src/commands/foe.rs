@@ -99,7 +99,7 @@ pub async fn run(api: &Api, out: Out, cmd: &FoeCommand) -> Result<(), CliError> 
             let file = output.clone().unwrap_or_else(|| Path::new(name).file_name().unwrap_or(name.as_ref()).into());
             let action = format!("FoE read {name:?} from slave {slave}");
             let req = pb::FoeReadRequest { slave, name: name.clone(), password: *password, max_bytes: *max_bytes };
-            let s = api.foe().read(api.stream(req)).await.map_err(CliError::rpc(&action))?.into_inner();
+            let s = api.foe().read(api.transfer(req)).await.map_err(CliError::rpc(&action))?.into_inner();
             let b = bar(out);
             b.set_message(format!("reading {name}"));
             let last = follow(s, &b, &action).await?;
@@ -122,7 +122,7 @@ pub async fn run(api: &Api, out: Out, cmd: &FoeCommand) -> Result<(), CliError> 
             let action = format!("FoE write {name:?} to slave {slave}");
             let bytes = data.len() as u32;
             let req = pb::FoeWriteRequest { slave, name: name.clone(), password: *password, data };
-            let s = api.foe().write(api.stream(req)).await.map_err(CliError::rpc(&action))?.into_inner();
+            let s = api.foe().write(api.transfer(req)).await.map_err(CliError::rpc(&action))?.into_inner();
             let b = bar(out);
             b.set_message(format!("writing {name}"));
             follow(s, &b, &action).await?;

@@ -1,8 +1,6 @@
 //! `states [SLAVE] [STATE]`: show the EtherCAT state of the network or a
 //! slave, or request one (State.GetState / SetState with wait).
 
-use std::time::Duration;
-
 use ecmxf_proto::v1 as pb;
 use schemars::JsonSchema;
 use serde::Serialize;
@@ -77,10 +75,10 @@ pub async fn run(api: &Api, args: &[String], no_wait: bool) -> Result<StatesRepo
     if let Some(st) = want {
         let who = slave.map_or("all slaves".to_owned(), |s| format!("slave {s}"));
         let action = format!("request {} for {who}", state_name(st as i32));
-        let timeout_ms = api.timeout().as_millis().min(u128::from(u32::MAX)) as u32;
+        let (timeout_ms, deadline) = api.wait_and_deadline();
         let req = pb::SetStateRequest { slave, state: st as i32, wait: !no_wait, timeout_ms };
-        // The daemon answers at `timeout_ms`; give the call a little more.
-        let r = api.state().set_state(api.req_for(req, api.timeout() + Duration::from_secs(1))).await;
+        // The daemon answers at `timeout_ms`, within the call's deadline.
+        let r = api.state().set_state(api.req_for(req, deadline)).await;
         r.map_err(CliError::rpc(action))?;
         requested = Some(state_name(st as i32).to_owned());
     }
