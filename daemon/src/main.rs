@@ -155,6 +155,25 @@ fn offline_budget(
     Some(ecmxfd::engine::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
 }
 
+/// The simulator's network file, loaded and built as the daemon will
+/// (its ESI and SII files with it): a mistake named by `link.network`.
+#[cfg(feature = "sim")]
+fn check_network(c: &Config, path: &std::path::Path) -> Result<(), ecmxfd::config::ConfigError> {
+    let LinkConfig::Sim { network: Some(p) } = &c.link else { return Ok(()) };
+    let bad = |message: String| ecmxfd::config::ConfigError::Invalid {
+        file: path.into(),
+        key: "link.network".into(),
+        message,
+    };
+    let f = ecmxf_sim::config::NetworkFile::load(p).map_err(|e| bad(e.to_string()))?;
+    f.build(p).map(|_| ()).map_err(|e| bad(e.to_string()))
+}
+
+#[cfg(not(feature = "sim"))]
+fn check_network(_: &Config, _: &std::path::Path) -> Result<(), ecmxfd::config::ConfigError> {
+    Ok(())
+}
+
 #[cfg(not(feature = "sim"))]
 fn offline_budget(
     _: &Config,
@@ -165,8 +184,15 @@ fn offline_budget(
 fn main() -> ExitCode {
     let cli = Cli::parse();
     if let Some(path) = &cli.check_config {
-        return match Config::load(path) {
-            Ok(c) => {
+        return match Config::load(path).and_then(|c| {
+            let notes = c.check_files(path)?;
+            check_network(&c, path)?;
+            Ok((c, notes))
+        }) {
+            Ok((c, notes)) => {
+                for n in &notes {
+                    println!("note: {n}");
+                }
                 let link = match &c.link {
                     LinkConfig::Sim { .. } => "in-process simulator".to_string(),
                     LinkConfig::SimSocket { socket } => format!("simulator socket {}", socket.display()),

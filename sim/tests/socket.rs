@@ -111,10 +111,18 @@ fn check_and_ctl_commands() {
     // A value out of the chip's range, with its line.
     std::fs::write(&bad, "version = 1\n[chip]\nspi_hz = 0\n[[slave]]\nprofile = \"coupler\"\n").unwrap();
     let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim")).args(["check", bad.to_str().unwrap()]).output().unwrap();
-    std::fs::remove_file(&bad).ok();
     assert_eq!(out.status.code(), Some(2));
     let err = String::from_utf8_lossy(&out.stderr);
     assert!(err.contains("chip.spi_hz") && err.contains("line 3"), "{err}");
+    // `serve` says the same of the same file, with the same exit code.
+    let socket = std::env::temp_dir().join(format!("ecmxf-bad-{}.sock", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))
+        .args(["serve", "--socket", socket.to_str().unwrap(), "--network", bad.to_str().unwrap()])
+        .output()
+        .unwrap();
+    std::fs::remove_file(&bad).ok();
+    assert_eq!(out.status.code(), Some(2), "serve and check share exit codes");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("chip.spi_hz"));
 
     let s = serve(&[]);
     let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))

@@ -9,6 +9,7 @@ use std::time::Duration;
 use serde::Deserialize;
 
 pub mod api;
+mod files;
 
 pub use api::{ApiConfig, Role};
 

@@ -54,17 +54,31 @@ enum Command {
     },
 }
 
-fn load(network: Option<&PathBuf>) -> Result<(Network, ChipConfig), String> {
+/// Why a command failed, and so its exit code: a network file that does
+/// not load is a usage error (2) for `serve` and `check` alike, as a bad
+/// configuration is for `ecmxfd --check-config`; anything else is 1.
+enum Failure {
+    BadNetwork(String),
+    Other(String),
+}
+
+impl From<String> for Failure {
+    fn from(s: String) -> Self {
+        Self::Other(s)
+    }
+}
+
+fn load(network: Option<&PathBuf>) -> Result<(Network, ChipConfig), Failure> {
     match network {
         None => Ok((Network::demo(), ChipConfig::default())),
         Some(p) => {
-            let f = NetworkFile::load(p).map_err(|e| e.to_string())?;
-            Ok((f.build(p).map_err(|e| e.to_string())?, f.chip_config()))
+            let f = NetworkFile::load(p).map_err(|e| Failure::BadNetwork(e.to_string()))?;
+            Ok((f.build(p).map_err(|e| Failure::BadNetwork(e.to_string()))?, f.chip_config()))
         }
     }
 }
 
-fn run(cli: Cli) -> Result<(), String> {
+fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
         Command::Serve { socket, network, seed, strict_lengths } => {
             let (net, mut config) = load(network.as_ref())?;
@@ -76,7 +90,7 @@ fn run(cli: Cli) -> Result<(), String> {
             let lengths = if chip.config.strict_lengths { "strict (v049 only)" } else { "as the chip takes them" };
             eprintln!("ecmxf-sim: {slaves} slaves, serving on {}, data lengths {lengths}", socket.display());
             let stop = Arc::new(AtomicBool::new(false));
-            Arc::new(Server::new(chip)).serve(listener, stop).map_err(|e| e.to_string())
+            Ok(Arc::new(Server::new(chip)).serve(listener, stop).map_err(|e| e.to_string())?)
         }
         Command::Ctl { socket, command } => {
             let mut c = SocketClient::connect(&socket).map_err(|e| format!("{}: {e}", socket.display()))?;
@@ -85,7 +99,7 @@ fn run(cli: Cli) -> Result<(), String> {
                     println!("{text}");
                     Ok(())
                 }
-                Err(text) => Err(text),
+                Err(text) => Err(text.into()),
             }
         }
         Command::Check { network } => {
@@ -108,14 +122,15 @@ fn run(cli: Cli) -> Result<(), String> {
 }
 
 fn main() -> ExitCode {
-    let cli = Cli::parse();
-    // A bad network file is a usage error (exit 2), as in `ecmxfd --check-config`.
-    let usage = matches!(cli.command, Command::Check { .. });
-    match run(cli) {
+    match run(Cli::parse()) {
         Ok(()) => ExitCode::SUCCESS,
-        Err(e) => {
+        Err(Failure::BadNetwork(e)) => {
             eprintln!("ecmxf-sim: {e}");
-            if usage { ExitCode::from(2) } else { ExitCode::FAILURE }
+            ExitCode::from(2)
+        }
+        Err(Failure::Other(e)) => {
+            eprintln!("ecmxf-sim: {e}");
+            ExitCode::FAILURE
         }
     }
 }

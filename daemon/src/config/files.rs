@@ -1,0 +1,55 @@
+//! The files a configuration names, opened and read the way the daemon
+//! will read them (`ecmxfd --check-config`): an ESI that does not parse, a
+//! TLS file that is not PEM, a file that cannot be read fails the check
+//! naming the key, so a mistake shows before the service is restarted,
+//! not at its first client. Device nodes (spidev, the GPIO chip) are named
+//! in notes when absent: the check may run on another machine than the
+//! gateway.
+
+use std::path::Path;
+
+use super::{Config, ConfigError, LinkConfig};
+
+impl Config {
+    /// Opens every file the configuration names; returns notes for what
+    /// cannot be checked here (device nodes absent on this machine).
+    pub fn check_files(&self, path: &Path) -> Result<Vec<String>, ConfigError> {
+        let bad = |key: String, message: String| ConfigError::Invalid { file: path.into(), key, message };
+        let mut notes = Vec::new();
+        for (i, s) in self.slaves.iter().enumerate() {
+            if let Some(esi) = &s.esi {
+                let key = format!("slave[{i}].esi");
+                let bytes = std::fs::read(esi).map_err(|e| bad(key.clone(), format!("{}: {e}", esi.display())))?;
+                let text = String::from_utf8_lossy(&bytes);
+                let file = ecmxf_devices::esi::EsiFile::parse(&text)
+                    .map_err(|e| bad(key.clone(), format!("{}: {e}", esi.display())))?;
+                if file.devices.is_empty() {
+                    return Err(bad(key, format!("{}: describes no device", esi.display())));
+                }
+            }
+        }
+        for (key, file, label) in [
+            ("api.tls_cert", &self.api.tls_cert, "CERTIFICATE"),
+            ("api.tls_key", &self.api.tls_key, "PRIVATE KEY"),
+            ("api.client_ca", &self.api.client_ca, "CERTIFICATE"),
+        ] {
+            let Some(file) = file else { continue };
+            let text =
+                std::fs::read_to_string(file).map_err(|e| bad(key.into(), format!("{}: {e}", file.display())))?;
+            if !text.contains("-----BEGIN") || !text.contains(label) {
+                return Err(bad(key.into(), format!("{}: no PEM {label} in it", file.display())));
+            }
+        }
+        if let LinkConfig::Spidev { device, gpio_chip, .. } = &self.link {
+            for (key, node) in [("link.device", Some(device)), ("link.gpio_chip", gpio_chip.as_ref())] {
+                if let Some(node) = node.filter(|n| !n.exists()) {
+                    notes.push(format!(
+                        "{key}: {} is not on this machine (opened when the daemon starts)",
+                        node.display()
+                    ));
+                }
+            }
+        }
+        Ok(notes)
+    }
+}
