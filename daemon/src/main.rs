@@ -157,16 +157,47 @@ fn offline_budget(
 
 /// The simulator's network file, loaded and built as the daemon will
 /// (its ESI and SII files with it): a mistake named by `link.network`.
+/// With it known, each `[[axis]]` must find its slave's controlword
+/// (0x6040, or an axis's at +0x800 x n) at its output offset and the
+/// statusword (0x6041) at its input offset: the chip's CiA 402 helper
+/// drives those bytes.
 #[cfg(feature = "sim")]
 fn check_network(c: &Config, path: &std::path::Path) -> Result<(), ecmxfd::config::ConfigError> {
-    let LinkConfig::Sim { network: Some(p) } = &c.link else { return Ok(()) };
-    let bad = |message: String| ecmxfd::config::ConfigError::Invalid {
-        file: path.into(),
-        key: "link.network".into(),
-        message,
+    let LinkConfig::Sim { network } = &c.link else { return Ok(()) };
+    let bad = |key: String, message: String| ecmxfd::config::ConfigError::Invalid { file: path.into(), key, message };
+    let net = match network {
+        None => ecmxf_sim::Network::demo(),
+        Some(p) => {
+            let f = ecmxf_sim::config::NetworkFile::load(p).map_err(|e| bad("link.network".into(), e.to_string()))?;
+            f.build(p).map_err(|e| bad("link.network".into(), e.to_string()))?
+        }
     };
-    let f = ecmxf_sim::config::NetworkFile::load(p).map_err(|e| bad(e.to_string()))?;
-    f.build(p).map(|_| ()).map_err(|e| bad(e.to_string()))
+    let maps = |entries: &[ecmxf_sim::net::pdo_map::MappedEntry], base: u16, byte: u8| {
+        entries.iter().any(|e| {
+            (0..8u16).any(|k| e.index == base + 0x800 * k) && e.subindex == 0 && e.bit_offset == u32::from(byte) * 8
+        })
+    };
+    for (i, a) in c.axes.iter().enumerate() {
+        let Some(s) = net.slaves.get(usize::from(a.slave)) else {
+            let why = format!("slave {} is not in the simulated network of {}", a.slave, net.slaves.len());
+            return Err(bad(format!("axis[{i}].slave"), why));
+        };
+        if !maps(&s.rx.entries, 0x6040, a.controlword_offset) {
+            let why = format!(
+                "slave {} ({}) maps no controlword (0x6040) at output byte {}",
+                a.slave, s.name, a.controlword_offset
+            );
+            return Err(bad(format!("axis[{i}].controlword_offset"), why));
+        }
+        if !maps(&s.tx.entries, 0x6041, a.statusword_offset) {
+            let why = format!(
+                "slave {} ({}) maps no statusword (0x6041) at input byte {}",
+                a.slave, s.name, a.statusword_offset
+            );
+            return Err(bad(format!("axis[{i}].statusword_offset"), why));
+        }
+    }
+    Ok(())
 }
 
 #[cfg(not(feature = "sim"))]

@@ -77,6 +77,11 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
             "api.tls_cert",
         ),
         ("version = 1\n[link]\nbackend = \"sim\"\nnetwork = \"net.toml\"\n".to_string(), "link.network"),
+        // The demo's IO slave maps no controlword: an [[axis]] there would
+        // have the chip's CiA 402 helper drive its digital outputs.
+        (format!("{sim}[[axis]]\nslave = 2\n"), "axis[0].controlword_offset"),
+        (format!("{sim}[[axis]]\nslave = 1\ncontrolword_offset = 1\n"), "axis[0].controlword_offset"),
+        (format!("{sim}[[axis]]\nslave = 7\n"), "axis[0].slave"),
     ] {
         let file = dir.join("ecmxfd.toml");
         std::fs::write(&file, &text).unwrap();
@@ -85,6 +90,11 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         assert_eq!(out.status.code(), Some(2), "{text}: {err}");
         assert!(err.contains(key), "{text}: wanted {key} in {err}");
     }
+    // The TI drive (slave 1) maps both at byte 0: the check passes.
+    let file = dir.join("ecmxfd.toml");
+    std::fs::write(&file, format!("{sim}[[axis]]\nslave = 1\n")).unwrap();
+    let out = Command::new(BIN).args(["--check-config", file.to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     std::fs::remove_dir_all(&dir).ok();
     std::fs::remove_file(&bad).ok();
     let out = Command::new(BIN).output().unwrap();

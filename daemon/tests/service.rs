@@ -125,6 +125,27 @@ fn notifies_systemd_feeds_the_watchdog_serves_metrics_and_reloads() {
     ] {
         assert!(m.contains(want), "metrics lack {want:?}:\n{m}");
     }
+    // Every counter of the API (proto `message Counters`) is a metric of
+    // the same name, with its help line, and the metrics list in
+    // docs/troubleshooting.md names it: the three say the same.
+    let proto =
+        std::fs::read_to_string(format!("{}/../proto/ecmxf/v1/master.proto", env!("CARGO_MANIFEST_DIR"))).unwrap();
+    let docs = std::fs::read_to_string(format!("{}/../docs/troubleshooting.md", env!("CARGO_MANIFEST_DIR"))).unwrap();
+    let counters = proto.split("message Counters {").nth(1).unwrap().split('}').next().unwrap();
+    let fields: Vec<&str> = counters
+        .lines()
+        .filter_map(|l| l.trim().strip_prefix("uint64 "))
+        .map(|l| l.split(' ').next().unwrap())
+        .collect();
+    assert!(fields.len() >= 15, "{fields:?}");
+    for f in fields {
+        let metric = match f.strip_suffix("_us") {
+            Some(stem) => format!("ecmxf_{stem}_seconds"),
+            None => format!("ecmxf_{f}_total"),
+        };
+        assert!(m.contains(&format!("# HELP {metric} ")), "counter {f}: no metric {metric} with help:\n{m}");
+        assert!(docs.contains(&format!("`{metric}`")), "counter {f}: docs/troubleshooting.md does not list {metric}");
+    }
     let exchanges =
         |m: &str| -> u64 { m.lines().find_map(|l| l.strip_prefix("ecmxf_exchanges_total ")).unwrap().parse().unwrap() };
     let first = exchanges(&m);

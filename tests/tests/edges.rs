@@ -186,3 +186,39 @@ async fn last_error<T>(s: &mut tonic::Streaming<T>) -> Option<tonic::Status> {
     }
     None
 }
+
+/// The chip's CiA 402 helper drives controlword bits 0-3 and 7 of every
+/// `[[axis]]`: a client write that sets them would be overwritten without
+/// a word, so it is refused naming the axis and the bits; the rest of the
+/// controlword (new set-point, halt) stays the client's.
+#[test]
+fn a_write_to_the_bits_the_cia402_helper_drives_is_refused_naming_the_axis() {
+    run(async {
+        let link = "backend = \"sim\"\nnetwork = \"{repo}/config/demo-network.toml\"";
+        let mut d = Daemon::with_config(&ecmxf_e2e::config(link, ecmxf_e2e::TI_AXIS));
+        let ch = d.connect().await;
+        let mut pd = ProcessDataClient::new(ch);
+        let layout = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
+        let cw = layout.entries.iter().find(|e| e.name == "1.controlword").expect("the TI drive's controlword");
+        let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![1], ttl_ms: 5000 }).await.unwrap();
+        let lease = lease.into_inner().id;
+        let e = pd
+            .write_outputs(pb::WriteOutputsRequest {
+                lease_id: lease.clone(),
+                writes: vec![write(&cw.name, Kind::Unsigned(0x000F))],
+            })
+            .await
+            .unwrap_err();
+        assert_eq!(e.code(), Code::FailedPrecondition, "{e:?}");
+        assert!(e.message().contains("axis 0") && e.message().contains("bits 0-3 and 7"), "{}", e.message());
+        let r = pd.read_outputs(pb::ReadOutputsRequest { entries: vec![cw.name.clone()] }).await.unwrap();
+        assert_eq!(r.into_inner().values[0].value.as_ref().and_then(|v| v.kind.clone()), Some(Kind::Unsigned(0)));
+        // Bit 4 (new set-point) is the client's.
+        pd.write_outputs(pb::WriteOutputsRequest {
+            lease_id: lease,
+            writes: vec![write(&cw.name, Kind::Unsigned(0x0010))],
+        })
+        .await
+        .unwrap();
+    });
+}

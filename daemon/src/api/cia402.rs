@@ -233,7 +233,7 @@ impl Cia402Api for Cia402Service {
                     }
                     if Instant::now() >= end {
                         return Err(Status::deadline_exceeded(format!(
-                            "axis {axis} is {now:?}, not {target:?}, at the deadline"
+                            "axis {axis} is {now}, not {target}, at the deadline"
                         )));
                     }
                     self.0.next_inputs(end.saturating_duration_since(Instant::now())).await;

@@ -69,7 +69,15 @@ where
 /// Adds details to the error status in `headers`, if there is one without.
 fn complete(headers: &mut HeaderMap) {
     let failed = headers.get("grpc-status").is_some_and(|code| code.as_bytes() != b"0");
-    if !failed || headers.contains_key("grpc-status-details-bin") {
+    if !failed {
+        return;
+    }
+    if cfg!(debug_assertions) {
+        if let Some(s) = Status::from_header_map(headers) {
+            status::note_message(s.message());
+        }
+    }
+    if headers.contains_key("grpc-status-details-bin") {
         return;
     }
     // No details header, so parsing cannot meet undecodable details.

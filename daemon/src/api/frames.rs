@@ -81,7 +81,8 @@ impl StreamClaims {
         let mut claims = self.lock();
         if claims.iter().any(|c| c.overlaps(start, start + len)) {
             return Err(Status::failed_precondition(format!(
-                "the outputs of slaves {slaves:?} are (partly) fed by another StreamFrames: one stream per set of slaves"
+                "the outputs of slaves {} are (partly) fed by another StreamFrames: one stream per set of slaves",
+                slaves.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
             )));
         }
         if claims.len() >= MAX_STREAMS {

@@ -135,7 +135,7 @@ pub struct SlavesService(pub Arc<Context>);
 async fn number(m: &Master, slave: u8, item: SlaveInfoCode) -> Result<u64, Status> {
     let raw = m.slave_info(slave, item).await.map_err(to_status)?;
     let decoded =
-        SlaveInfo::decode(item, &raw).map_err(|e| Status::internal(format!("slave {slave} {item:?}: {e}")))?;
+        SlaveInfo::decode(item, &raw).map_err(|e| Status::internal(format!("{item} of slave {slave}: {e}")))?;
     Ok(decoded.number().map_or(0, u64::from))
 }
 
@@ -322,9 +322,7 @@ impl StateApi for StateService {
                     return Ok::<_, Status>(now);
                 }
                 if Instant::now() >= end {
-                    return Err(Status::deadline_exceeded(format!(
-                        "{target:?} is {now}, not {state}, at the deadline"
-                    )));
+                    return Err(Status::deadline_exceeded(format!("{target} is {now}, not {state}, at the deadline")));
                 }
                 // Look again when the engine has news (its snapshot).
                 let _ = tokio::time::timeout(left, changes.changed()).await;

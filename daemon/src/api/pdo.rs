@@ -94,6 +94,41 @@ fn not_streamed(ctx: &Context, from: usize, to: usize) -> Result<(), Status> {
     }
 }
 
+/// Controlword bits the chip's CiA 402 helper drives for an `[[axis]]`
+/// (v049 commands 26..30: bits 0-3, and bit 7 for fault resets): the chip
+/// overwrites them every cycle, so a client's value there would be lost
+/// without a word.
+const HELPER_BITS: u16 = 0x008F;
+
+/// Refuses a write that sets a controlword bit the CiA 402 helper owns
+/// (FAILED_PRECONDITION naming the axis and the bits): bits 4-6 and 8-15
+/// (new set-point, halt, ...) stay the client's.
+fn helper_bits_untouched(
+    ctx: &Context,
+    slaves: &[crate::engine::bringup::SlaveSummary],
+    staged: &[u8],
+    lo: usize,
+    hi: usize,
+) -> Result<(), Status> {
+    for (n, a) in ctx.master.axes().iter().enumerate() {
+        let Some(s) = slaves.get(usize::from(a.slave)) else { continue };
+        let at = s.rx_offset + usize::from(a.controlword_offset);
+        if at + 2 > staged.len() || at + 2 <= lo || at >= hi {
+            continue;
+        }
+        let set = u16::from_le_bytes([staged[at], staged[at + 1]]) & HELPER_BITS;
+        if set != 0 {
+            return Err(Status::failed_precondition(format!(
+                "axis {n} (slave {}, controlword at output byte {at}): bits 0-3 and 7 are driven by the chip's \
+                 CiA 402 helper ([[axis]]), and this write sets {set:#06x} of them; use Cia402.Command to change \
+                 the drive's state, and write only bits 4-6 and 8-15 here",
+                a.slave
+            )));
+        }
+    }
+    Ok(())
+}
+
 /// A value for an entry of `bits` bits must be exactly its bytes (a bit
 /// entry: one byte), and an entry narrower than a byte takes no value its
 /// bits cannot hold (a 1-bit entry: 0 or 1). Nothing is cut silently: a
@@ -173,6 +208,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
     if lo >= hi {
         return Ok(());
     }
+    helper_bits_untouched(ctx, &layout.slaves, &staged, lo, hi)?;
     let slave_of =
         |b: usize| layout.slaves.iter().position(|s| b >= s.rx_offset && b < s.rx_offset + s.rx_bytes).map(|p| p as u8);
     ctx.leases.write(lease_id, lo, &staged[lo..hi], slave_of)?;

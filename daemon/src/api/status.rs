@@ -70,6 +70,54 @@ impl From<EngineError> for Status {
     }
 }
 
+/// Whether an error message a user reads shows Rust `{:?}` output (an
+/// `Option`, a struct or enum dump, a path) instead of words: such text
+/// says nothing to a user of grpcurl or Python. Quoted names (`"1.foo"`)
+/// and durations (`100ms`) are words.
+pub fn looks_like_debug(message: &str) -> bool {
+    const MARKS: [&str; 9] = ["Some(", "None", "Ok(", "Err(", "::", " { ", "\\\"", "One(", "All)"];
+    if MARKS.iter().any(|m| message.contains(m)) {
+        return true;
+    }
+    // An enum variant with a payload: a capitalised word right before a
+    // parenthesis, as in `Recovering(` or `SdoRead(`.
+    message.match_indices('(').any(|(at, _)| {
+        let before = &message[..at];
+        let start = before.rfind(|c: char| !c.is_ascii_alphanumeric()).map_or(0, |i| i + 1);
+        let name = &before[start..];
+        name.chars().next().is_some_and(|c| c.is_ascii_uppercase()) && name.chars().any(|c| c.is_ascii_lowercase())
+    })
+}
+
+/// Error messages seen that [`looks_like_debug`] (debug builds: the tests
+/// read them back, [`debug_looking_messages`]; at most 16 are kept).
+#[cfg(debug_assertions)]
+static DEBUG_LOOKING: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec::new());
+
+/// Records `message` if it reads like Rust Debug output: every error the
+/// API answers passes here (`error_details`), so the tests can require
+/// that none did.
+pub fn note_message(message: &str) {
+    #[cfg(debug_assertions)]
+    if looks_like_debug(message) {
+        let mut seen = DEBUG_LOOKING.lock().unwrap_or_else(|e| e.into_inner());
+        if seen.len() < 16 {
+            seen.push(message.to_owned());
+        }
+    }
+    #[cfg(not(debug_assertions))]
+    let _ = message;
+}
+
+/// The error messages answered so far that read like Rust Debug output
+/// (always empty in release builds).
+pub fn debug_looking_messages() -> Vec<String> {
+    #[cfg(debug_assertions)]
+    return DEBUG_LOOKING.lock().unwrap_or_else(|e| e.into_inner()).clone();
+    #[cfg(not(debug_assertions))]
+    Vec::new()
+}
+
 /// How every server stream ends when the daemon stops: UNAVAILABLE with
 /// the ErrorInfo reason STOPPING (proto/README.md).
 pub fn stopping() -> Status {
@@ -80,6 +128,39 @@ pub fn stopping() -> Status {
 /// INVALID_ARGUMENT naming `field`, for checks made in the API layer.
 pub fn bad_argument(field: &'static str, reason: impl Into<String>) -> Status {
     to_status(EngineError::BadArgument { field, reason: reason.into() })
+}
+
+#[cfg(test)]
+mod debug_text_tests {
+    use super::looks_like_debug;
+
+    #[test]
+    fn debug_output_is_told_from_words() {
+        for debug in [
+            "no such slave: One(9)",
+            "SdoRead { slave: 1, index: 4096 }",
+            "value Some(3)",
+            "ecmxfd::engine::Phase",
+            "the network is not running: Recovering(WkcStreak(50ms))",
+        ] {
+            assert!(looks_like_debug(debug), "{debug}");
+        }
+        // What the API answers is recorded for the tests to read back.
+        super::note_message("value Some(7) refused");
+        super::note_message("no entry \"2.foo\"");
+        let seen = super::debug_looking_messages();
+        assert!(seen.iter().any(|m| m == "value Some(7) refused"), "{seen:?}");
+        assert!(!seen.iter().any(|m| m.contains("2.foo")), "{seen:?}");
+        for words in [
+            "no entry \"1.foo\" (see GetLayout for the names)",
+            "chip not ready (INT0) within 100ms",
+            "SDO 0x2fff:00 on slave 1 aborted: 0x06020000 (object does not exist in the object dictionary)",
+            "axis 0 is SWITCH ON DISABLED, not OPERATION ENABLED, at the deadline",
+            "bad value: 204800 raw bytes given for a UNSIGNED8 object, which has 1",
+        ] {
+            assert!(!looks_like_debug(words), "{words}");
+        }
+    }
 }
 
 #[cfg(test)]

@@ -62,6 +62,11 @@ pub enum BringUpError {
     /// cycle (see `link_budget`): no retry can change that, only the
     /// configuration can.
     Refused(super::link_budget::BudgetError),
+    /// An `[[axis]]` names a slave whose process data cannot hold its
+    /// controlword or statusword where the configuration says: the chip's
+    /// CiA 402 helper would drive other bytes. Only the configuration can
+    /// change that.
+    AxisUnmapped(String),
     /// Slaves did not reach the state asked for (STATE_CHECK failed): each
     /// one not there, with its state and AL status code.
     StateRefused {
@@ -76,7 +81,7 @@ pub enum BringUpError {
 impl BringUpError {
     /// Whether trying again can never help (the configuration must change).
     pub fn is_permanent(&self) -> bool {
-        matches!(self, Self::Refused(_))
+        matches!(self, Self::Refused(_) | Self::AxisUnmapped(_))
     }
 }
 
@@ -92,6 +97,7 @@ impl fmt::Display for BringUpError {
                 write!(f, "slave {position} is {found}, the configuration expects {expected}")
             }
             Self::Refused(e) => write!(f, "link budget: {e}"),
+            Self::AxisUnmapped(why) => f.write_str(why),
             Self::StateRefused { asked, slaves } if slaves.is_empty() => {
                 write!(f, "the slaves did not reach {asked} (STATE_CHECK failed; their states could not be read)")
             }
@@ -103,6 +109,25 @@ impl fmt::Display for BringUpError {
 }
 
 impl std::error::Error for BringUpError {}
+
+/// Each `[[axis]]`'s controlword (2 bytes at its offset in the slave's
+/// outputs) and statusword (in its inputs) lie within that slave's process
+/// data; a slave not on the ring is the census's business, not this.
+fn axes_fit(axes: &[crate::config::AxisConfig], slaves: &[SlaveSummary]) -> Result<(), BringUpError> {
+    for (n, a) in axes.iter().enumerate() {
+        let Some(s) = slaves.get(usize::from(a.slave)) else { continue };
+        let (cw, sw) = (usize::from(a.controlword_offset), usize::from(a.statusword_offset));
+        if s.rx_bytes < cw + 2 || s.tx_bytes < sw + 2 {
+            return Err(BringUpError::AxisUnmapped(format!(
+                "axis[{n}]: slave {} ({}) has {} output and {} input bytes: no controlword at output byte {cw} or \
+                 no statusword at input byte {sw} for the chip's CiA 402 helper; fix [[axis]] (or the slave's \
+                 PDO mapping)",
+                a.slave, s.name, s.rx_bytes, s.tx_bytes
+            )));
+        }
+    }
+    Ok(())
+}
 
 impl From<PortError> for BringUpError {
     fn from(e: PortError) -> Self {
@@ -512,6 +537,7 @@ pub fn bring_up<L: Link>(
         ro += s.rx_bytes;
         to += s.tx_bytes;
     }
+    axes_fit(&config.axes, &slaves)?;
 
     let mut state = EcatState::PreOp;
     if c.target_state != "preop" {

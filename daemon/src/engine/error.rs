@@ -152,7 +152,7 @@ impl fmt::Display for NotRunning {
             Self::BringingUp => f.write_str("bringing the network up"),
             Self::Recovering(why) => write!(f, "recovering: {why}"),
             Self::Phase { last_error: Some(why), .. } => write!(f, "the network is not running: {why}"),
-            Self::Phase { phase, last_error: None } => write!(f, "the network is not running: {phase:?}"),
+            Self::Phase { phase, last_error: None } => write!(f, "the network is not running: {}", phase.name()),
         }
     }
 }

@@ -180,21 +180,10 @@ fn outputs_text(a: WriterGoneAction) -> &'static str {
     }
 }
 
-fn phase_text(p: Phase) -> &'static str {
-    match p {
-        Phase::Starting => "starting",
-        Phase::BringUp => "bringing the network up",
-        Phase::Running => "running",
-        Phase::Recovering => "recovering",
-        Phase::Stopping => "stopping",
-        Phase::Stopped => "stopped",
-    }
-}
-
 impl std::fmt::Display for EventKind {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
-            Self::Phase(p) => write!(f, "engine {}", phase_text(*p)),
+            Self::Phase(p) => write!(f, "engine {}", p.name()),
             Self::EcatState { from, to } => write!(f, "network state {from} -> {to}"),
             Self::LinkPin(v) => write!(f, "LINK pin {}", if *v { "high" } else { "low" }),
             Self::DcStable(true) => f.write_str("DC cycle stable"),

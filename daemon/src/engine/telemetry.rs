@@ -38,6 +38,21 @@ pub enum Phase {
 }
 
 impl Phase {
+    /// The phase in words ("bringing the network up"), for events and
+    /// messages a user reads.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Starting => "starting",
+            Self::BringUp => "bringing the network up",
+            Self::Running => "running",
+            Self::Recovering => "recovering",
+            Self::Stopping => "stopping",
+            Self::Stopped => "stopped",
+        }
+    }
+}
+
+impl Phase {
     fn from_u8(v: u8) -> Self {
         match v {
             1 => Self::BringUp,

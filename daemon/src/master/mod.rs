@@ -148,7 +148,7 @@ impl std::fmt::Display for Health {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Healthy => f.write_str("healthy: process data flowing"),
-            Self::NotRunning(p) => write!(f, "engine not running ({p:?})"),
+            Self::NotRunning(p) => write!(f, "engine not running ({})", p.name()),
             Self::WrongState { state, target } => write!(f, "network in {state}, not {target}"),
             Self::Stalled { age, limit } => write!(
                 f,

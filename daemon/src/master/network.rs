@@ -87,6 +87,12 @@ impl Master {
         self.config.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
+    /// The `[[axis]]` entries in force (the chip's CiA 402 helper), without
+    /// copying the rest of the configuration: asked on every output write.
+    pub fn axes(&self) -> Vec<crate::config::AxisConfig> {
+        self.config.lock().unwrap_or_else(|e| e.into_inner()).axes.clone()
+    }
+
     fn running_or_unavailable(&self) -> Result<(), EngineError> {
         if self.status().phase != Phase::Running {
             let (phase, last_error) = (self.status().phase, self.last_error());

@@ -135,7 +135,7 @@ impl Master {
     /// [`SlaveInfo::decode`] for `item`.
     pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
         let d = self.request(SlotRequest::SlaveInfo { slave, item }, None).await?;
-        SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("slave {slave} {item:?}: {e}")))?;
+        SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("{item} of slave {slave}: {e}")))?;
         Ok(d)
     }
 
@@ -178,7 +178,7 @@ impl Master {
             return Err(EngineError::BadArgument { field: "data", reason });
         }
         if !head.command.writes() && !data.is_empty() {
-            let reason = format!("{:?} is a reading datagram and sends no data", head.command);
+            let reason = format!("{} is a reading datagram and sends no data", head.command);
             return Err(EngineError::BadArgument { field: "data", reason });
         }
         let d = self.request(SlotRequest::Raw { head, data }, timeout).await?;
@@ -223,7 +223,7 @@ impl Master {
     pub async fn immediate(&self, command: Immediate, timeout: Option<Duration>) -> Result<(u8, Vec<u8>), EngineError> {
         let mut d = self.request(SlotRequest::Immediate(command), timeout).await?;
         if d.is_empty() {
-            return Err(EngineError::Failed(format!("{command:?}: empty answer")));
+            return Err(EngineError::Failed(format!("{}: empty answer", SlotRequest::Immediate(command))));
         }
         let value = d.remove(0);
         Ok((value, d))

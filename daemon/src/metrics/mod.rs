@@ -92,7 +92,7 @@ pub async fn render(sources: &Sources) -> String {
         let _ = writeln!(out, "ecmxf_engine_phase{{phase=\"{name}\"}} {}", u8::from(p == s.phase));
     }
     // (name, type, help, value): one sample each.
-    let single: [(&str, &str, &str, String); 26] = [
+    let single: [(&str, &str, &str, String); 27] = [
         (
             "ecmxf_network_state",
             "gauge",
@@ -152,9 +152,15 @@ pub async fn render(sources: &Sources) -> String {
             s.input_batches_lost.to_string(),
         ),
         (
+            "ecmxf_fifo_alarms_total",
+            "counter",
+            "Times the RxFIFO ran dry (slaves got repeated outputs); the API's fifo_alarms.",
+            s.fifo_alarms.to_string(),
+        ),
+        (
             "ecmxf_fifo_underruns_total",
             "counter",
-            "Times the RxFIFO ran dry (slaves got repeated outputs).",
+            "Old name of ecmxf_fifo_alarms_total (the same count), kept for existing dashboards.",
             s.fifo_alarms.to_string(),
         ),
         ("ecmxf_recoveries_total", "counter", "Recoveries started.", s.recoveries.to_string()),

@@ -264,6 +264,23 @@ impl<'a> Reply<'a> for StatuswordReply {
     }
 }
 
+/// The state's CiA 402 name ("OPERATION ENABLED"), for messages.
+impl core::fmt::Display for Cia402State {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let name = match self {
+            Self::NotReadyToSwitchOn => "NOT READY TO SWITCH ON",
+            Self::SwitchOnDisabled => "SWITCH ON DISABLED",
+            Self::ReadyToSwitchOn => "READY TO SWITCH ON",
+            Self::SwitchedOn => "SWITCHED ON",
+            Self::OperationEnabled => "OPERATION ENABLED",
+            Self::QuickStopActive => "QUICK STOP ACTIVE",
+            Self::FaultReactionActive => "FAULT REACTION ACTIVE",
+            Self::Fault => "FAULT",
+            Self::Other(v) => return write!(f, "state {v:#04x}"),
+        };
+        f.write_str(name)
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -225,6 +225,26 @@ impl<'a> Reply<'a> for RawReply<'a> {
     }
 }
 
+/// The datagram's ETG.1000.4 name ("FPRD"), for messages.
+impl core::fmt::Display for DatagramCommand {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        let name = match self {
+            Self::Aprd => "APRD",
+            Self::Apwr => "APWR",
+            Self::Fprd => "FPRD",
+            Self::Fpwr => "FPWR",
+            Self::Brd => "BRD",
+            Self::Bwr => "BWR",
+            Self::Lrd => "LRD",
+            Self::Lwr => "LWR",
+            Self::Lrw => "LRW",
+            Self::Armw => "ARMW",
+            Self::Frmw => "FRMW",
+            Self::Other(v) => return write!(f, "datagram command {v}"),
+        };
+        f.write_str(name)
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -232,6 +232,27 @@ value_reply! {
     SlaveCount => SlaveCountGet;
 }
 
+/// What the item is, in words ("product code"), for messages.
+impl core::fmt::Display for SlaveInfoCode {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        f.write_str(match self {
+            Self::VendorId => "vendor id",
+            Self::ProductCode => "product code",
+            Self::Revision => "revision",
+            Self::Name => "name",
+            Self::ConfiguredAddress => "configured address",
+            Self::Alias => "alias",
+            Self::State => "state",
+            Self::AlStatus => "AL status code",
+            Self::OutputBytes => "output bytes",
+            Self::InputBytes => "input bytes",
+            Self::HasDc => "DC support",
+            Self::DcCycle => "DC cycle",
+            Self::DcShift => "DC shift",
+            Self::DcActive => "DC activation",
+        })
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;

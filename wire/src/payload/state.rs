@@ -130,6 +130,15 @@ impl<'a> Reply<'a> for StateReply {
     }
 }
 
+/// "slave 3", "all slaves": as a user says it, in messages.
+impl core::fmt::Display for SlaveSelector {
+    fn fmt(&self, f: &mut core::fmt::Formatter<'_>) -> core::fmt::Result {
+        match self {
+            Self::One(n) => write!(f, "slave {n}"),
+            Self::All => f.write_str("all slaves"),
+        }
+    }
+}
 #[cfg(test)]
 mod tests {
     use super::*;

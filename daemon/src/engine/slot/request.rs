@@ -154,6 +154,45 @@ pub enum Immediate {
     Emergencies(u8),
 }
 
+/// The request in words, for errors a client reads.
+impl std::fmt::Display for SlotRequest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::SdoRead { slave, index, subindex, .. } => {
+                write!(f, "SDO read {index:#06x}:{subindex:02x} of slave {slave}")
+            }
+            Self::SdoWrite { slave, index, subindex, .. } => {
+                write!(f, "SDO write {index:#06x}:{subindex:02x} to slave {slave}")
+            }
+            Self::EepromRead { slave, word } => write!(f, "EEPROM read of word {word:#06x} of slave {slave}"),
+            Self::EepromWrite { slave, word, .. } => write!(f, "EEPROM write of word {word:#06x} of slave {slave}"),
+            Self::SetState { target, state } => write!(f, "{state} for {target}"),
+            Self::GetState { target } => write!(f, "state of {target}"),
+            Self::SlaveInfo { slave, item } => write!(f, "{item} of slave {slave}"),
+            Self::PdoConfigRead { slave, assign_index } => {
+                write!(f, "PDO assignment {assign_index:#06x} of slave {slave}")
+            }
+            Self::Raw { head, .. } => {
+                write!(f, "{} datagram ADP {:#06x} ADO {:#06x}", head.command, head.adp, head.ado)
+            }
+            Self::FoeWrite { slave, name, .. } => write!(f, "FoE write of {name:?} to slave {slave}"),
+            Self::FoeRead { slave, name, .. } => write!(f, "FoE read of {name:?} from slave {slave}"),
+            Self::Immediate(i) => f.write_str(match i {
+                Immediate::GpioConfig(_) => "GPIO configuration",
+                Immediate::Gpio(_) => "GPIO operation",
+                Immediate::Qei(_) => "encoder (QEI) operation",
+                Immediate::Dac(_) => "DAC operation",
+                Immediate::Adc(_) => "ADC read",
+                Immediate::Cia402StateSet(_) => "CiA 402 helper state",
+                Immediate::Cia402CtlSet(_) => "CiA 402 helper control",
+                Immediate::Cia402StateGet(_) => "CiA 402 helper state read",
+                Immediate::Cia402Statusword(_) => "CiA 402 statusword read",
+                Immediate::Emergencies(_) => "emergency read",
+            }),
+        }
+    }
+}
+
 /// A request in flight.
 #[derive(Debug)]
 pub struct Job {

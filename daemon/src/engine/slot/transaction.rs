@@ -470,14 +470,7 @@ impl Active {
 
     /// The request in words, for errors.
     fn describe(&self) -> String {
-        match &self.request {
-            SlotRequest::Raw { head, .. } => {
-                format!("{:?} datagram ADP {:#06x} ADO {:#06x}", head.command, head.adp, head.ado)
-            }
-            SlotRequest::FoeWrite { slave, name, .. } => format!("FoE write of {name:?} to slave {slave}"),
-            SlotRequest::FoeRead { slave, name, .. } => format!("FoE read of {name:?} from slave {slave}"),
-            other => format!("{other:?}"),
-        }
+        self.request.to_string()
     }
 
     fn report(&self) {
@@ -617,7 +610,7 @@ impl Active {
                 let a = port.call(&StateGet(*target))?;
                 if refused(&a) {
                     port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-                    Err(EngineError::BadArgument { field: "slave", reason: format!("no such slave: {target:?}") })
+                    Err(EngineError::BadArgument { field: "slave", reason: format!("no such slave: {target}") })
                 } else {
                     Ok(fill(&mut self.buffer, &[&[a.header.return_value]]))
                 }
