@@ -6,8 +6,8 @@ use std::sync::atomic::{AtomicU32, Ordering};
 use std::sync::mpsc::{SyncSender, TrySendError};
 use std::sync::{Arc, Mutex};
 
-use crate::engine::bringup::NetworkLayout;
 use crate::engine::error::{EngineError, NotRunning};
+use crate::engine::layout::NetworkLayout;
 use crate::engine::output_writes::{OUTPUT_CHUNK, OutputWrite, Writers};
 
 /// A client's lease on the outputs (see [`Master::output_writer`](crate::master::Master::output_writer)).

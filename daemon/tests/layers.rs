@@ -93,3 +93,122 @@ fn no_import_circle_between_the_daemons_modules() {
         assert!(!graph[low].contains(high), "{low} uses {high}: layers point one way");
     }
 }
+
+/// Front ends reach the engine through the master alone (issue 30): no
+/// file under `api/` names `crate::engine`; what it needs, the master
+/// re-exports. A second front end (MQTT, a mailbox gateway) gets the same
+/// one door.
+#[test]
+fn the_api_imports_the_master_not_the_engine() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
+    let mut files = Vec::new();
+    rust_files(&src.join("api"), &mut files);
+    assert!(files.len() >= 10, "the api files were not found");
+    let offenders: Vec<String> = files
+        .iter()
+        .filter(|f| uses(&std::fs::read_to_string(f).unwrap()).contains("engine"))
+        .map(|f| f.strip_prefix(&src).unwrap().display().to_string())
+        .collect();
+    assert!(offenders.is_empty(), "api files that import crate::engine (use crate::master): {offenders:?}");
+}
+
+/// The file-level modules of one folder (`engine/`, the wire crate) and
+/// which of them each names: `super::x` from a file directly in it,
+/// `prefix x` (`crate::engine::x`) from anywhere in it. A subfolder is one
+/// module; `mod.rs` / `lib.rs` only declare the others and are left out.
+fn file_graph(dir: &Path, prefix: &str) -> BTreeMap<String, BTreeSet<String>> {
+    let mut nodes: BTreeMap<String, String> = BTreeMap::new();
+    for e in std::fs::read_dir(dir).unwrap().flatten() {
+        let p = e.path();
+        let name = p.file_stem().unwrap().to_string_lossy().into_owned();
+        if matches!(name.as_str(), "mod" | "lib" | "main") {
+            continue;
+        }
+        let text = if p.is_dir() {
+            let mut files = Vec::new();
+            rust_files(&p, &mut files);
+            // Inside a subfolder, `super::` is that subfolder itself:
+            // only `super::super::x` and the prefix reach out.
+            files
+                .iter()
+                .map(|f| {
+                    std::fs::read_to_string(f).unwrap().replace("super::super::", "@@::").replace("super::", "self::")
+                })
+                .collect::<Vec<_>>()
+                .join("\n")
+                .replace("@@::", "super::")
+        } else if p.extension().is_some_and(|x| x == "rs") {
+            std::fs::read_to_string(&p).unwrap()
+        } else {
+            continue;
+        };
+        nodes.insert(name, text);
+    }
+    let mut graph = BTreeMap::new();
+    for (name, text) in &nodes {
+        let code: String = text.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n");
+        let deps: BTreeSet<String> = nodes
+            .keys()
+            .filter(|other| *other != name)
+            .filter(|other| {
+                [
+                    format!("super::{other}::"),
+                    format!("super::{other}}}"),
+                    format!("{prefix}{other}::"),
+                    format!("{prefix}{other}}}"),
+                ]
+                .iter()
+                .any(|pat| code.contains(pat.as_str()))
+                    || code.contains(&format!("super::{{{other}"))
+                    || code.contains(&format!("super::{other};"))
+            })
+            .cloned()
+            .collect();
+        graph.insert(name.clone(), deps);
+    }
+    graph
+}
+
+fn first_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
+    fn visit(
+        m: &str,
+        graph: &BTreeMap<String, BTreeSet<String>>,
+        path: &mut Vec<String>,
+        done: &mut BTreeSet<String>,
+    ) -> Option<Vec<String>> {
+        if let Some(i) = path.iter().position(|p| p == m) {
+            let mut cycle = path[i..].to_vec();
+            cycle.push(m.to_string());
+            return Some(cycle);
+        }
+        if done.contains(m) {
+            return None;
+        }
+        path.push(m.to_string());
+        for d in graph.get(m).into_iter().flatten() {
+            if let Some(c) = visit(d, graph, path, done) {
+                return Some(c);
+            }
+        }
+        path.pop();
+        done.insert(m.to_string());
+        None
+    }
+    let mut done = BTreeSet::new();
+    graph.keys().find_map(|m| visit(m, graph, &mut Vec::new(), &mut done))
+}
+
+/// No circle between the files of the engine, nor of the wire crate
+/// (issue 30: bring-up and the held outputs used each other; framing and
+/// header too).
+#[test]
+fn no_import_circle_inside_the_engine_or_the_wire_crate() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR"));
+    for (dir, prefix) in [(root.join("src/engine"), "crate::engine::"), (root.join("../wire/src"), "crate::")] {
+        let graph = file_graph(&dir, prefix);
+        assert!(graph.len() >= 8, "{}: files not found: {graph:?}", dir.display());
+        if let Some(c) = first_circle(&graph) {
+            panic!("{}: import circle: {}\n{graph:#?}", dir.display(), c.join(" -> "));
+        }
+    }
+}

@@ -10,9 +10,8 @@
 
 use crate::error::EncodeError;
 use crate::header::HEADER_LEN;
+pub use crate::header::START_WORD;
 
-/// The start word, first four bytes of every packet.
-pub const START_WORD: u32 = 0xA1A2_A3A4;
 /// The end word, last four bytes of every packet.
 pub const END_WORD: u32 = 0x5657_5859;
 /// Smallest data section (v049 封包格式 item 7).

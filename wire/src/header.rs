@@ -3,7 +3,10 @@
 use crate::command::CommandCode;
 use crate::error::DecodeError;
 use crate::flags::{ControlFlags, EcatState, EcmStatus, ErrorFlags, HeaderOptions, InterruptFlags};
-use crate::framing::START_WORD;
+
+/// The start word, first four bytes of every packet (the header's first
+/// field; `framing` re-exports it with the end word).
+pub const START_WORD: u32 = 0xA1A2_A3A4;
 
 /// Header length in bytes, both directions.
 pub const HEADER_LEN: usize = 24;

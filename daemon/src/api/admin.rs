@@ -14,7 +14,7 @@ use super::auth::{Caller, Role};
 use super::bounded;
 use super::status::bad_argument;
 use super::{BoxStream, Context};
-use crate::engine::slot::TransferProgress;
+use crate::master::TransferProgress;
 
 /// FoE transfers may take long: the default deadline when the client sets none.
 const FOE_TIMEOUT: Duration = Duration::from_secs(120);

@@ -18,7 +18,7 @@ use super::objects::axis_index;
 use super::status::{bad_argument, to_status};
 use super::{Context, wait_budget};
 use crate::config::AxisConfig;
-use crate::engine::error::EngineError;
+use crate::master::EngineError;
 use crate::master::Master;
 use crate::master::transactions::Immediate;
 

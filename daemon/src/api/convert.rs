@@ -6,7 +6,7 @@ use ecmxf_wire::EcatState;
 use tonic::Status;
 
 use super::status::bad_argument;
-use crate::engine::telemetry::Phase;
+use crate::master::Phase;
 
 /// Wire state to API state.
 pub fn state_to_pb(s: EcatState) -> pb::EcatState {

@@ -16,9 +16,9 @@ use super::convert::{phase_to_pb, state_to_pb};
 use super::master::{counters_pb, list_slaves};
 use super::status::{bad_argument, to_status};
 use super::{BoxStream, Context};
-use crate::engine::events::{Event, EventKind};
 use crate::master::Master;
 use crate::master::transactions::Immediate;
+use crate::master::{Event, EventKind};
 
 /// The `Diagnostics` service.
 #[derive(Debug, Clone)]

@@ -107,7 +107,7 @@ mod tests {
         let full = tonic_types::pb::Status::decode(s.details()).unwrap();
         assert_eq!((full.code, full.message.as_str()), (7, s.message()));
 
-        let own = status::to_status(crate::engine::error::EngineError::Timeout);
+        let own = status::to_status(crate::master::EngineError::Timeout);
         let mut h = HeaderMap::new();
         own.add_header(&mut h).unwrap();
         complete(&mut h);

@@ -21,8 +21,8 @@ use tonic::{Status, Streaming};
 
 use super::status::{bad_argument, to_status};
 use super::{BoxStream, Context};
-use crate::engine::frames::{FrameError, FrameProducer, MAX_STREAMS, Played};
 use crate::master::InputFrame;
+use crate::master::{FrameError, FrameProducer, MAX_STREAMS, Played};
 
 /// How often the daemon reports credits and progress.
 pub const REPORT_EVERY: Duration = Duration::from_millis(5);

@@ -23,11 +23,11 @@ use tokio::sync::{Notify, watch};
 
 use super::convert::{decode_value, pb_type, type_for_bits};
 use super::objects::{entry_name, lookup};
-use crate::engine::bringup::SlaveSummary;
-use crate::engine::error::{EngineError, NotRunning};
-use crate::engine::telemetry::Phase;
+use crate::master::Phase;
+use crate::master::SlaveSummary;
 use crate::master::pdos::{PdoDescription, SlavePdos};
 use crate::master::{DAEMON_CLIENT, Master, as_client};
+use crate::master::{EngineError, NotRunning};
 
 /// Slaves whose PDOs are read at once: each read waits for the chip, so
 /// with a few in flight the next request is always queued when the slot

@@ -57,7 +57,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
 }
 
 /// The counters from the engine's snapshot.
-pub fn counters_pb(s: &crate::engine::telemetry::Snapshot) -> pb::Counters {
+pub fn counters_pb(s: &crate::master::Snapshot) -> pb::Counters {
     pb::Counters {
         crc_errors: s.crc_errors,
         wkc_errors: s.wkc_errors,
@@ -165,9 +165,9 @@ pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::List
     // slaves, so none is "missing"; the reason is bring-up's (which names
     // the slave that refused, issue 27).
     let phase = m.status().phase;
-    if layout.slaves.is_empty() && phase != crate::engine::telemetry::Phase::Running {
-        let why = crate::engine::error::NotRunning::Phase { phase, last_error: m.last_error() };
-        return Err(to_status(crate::engine::error::EngineError::Unavailable(why)));
+    if layout.slaves.is_empty() && phase != crate::master::Phase::Running {
+        let why = crate::master::NotRunning::Phase { phase, last_error: m.last_error() };
+        return Err(to_status(crate::master::EngineError::Unavailable(why)));
     }
     let mut slaves = Vec::with_capacity(layout.slaves.len());
     for (i, s) in layout.slaves.iter().enumerate() {

@@ -16,7 +16,7 @@ use super::convert::{encode, existing_slave, pb_type};
 use super::image::{Entry, Image, entry_value, write_bits};
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
-use crate::engine::error::EngineError;
+use crate::master::EngineError;
 use crate::master::pdos::{PdoDescription, PdoSource};
 
 /// The `ProcessData` service.
@@ -105,7 +105,7 @@ const HELPER_BITS: u16 = 0x008F;
 /// (new set-point, halt, ...) stay the client's.
 fn helper_bits_untouched(
     ctx: &Context,
-    slaves: &[crate::engine::bringup::SlaveSummary],
+    slaves: &[crate::master::SlaveSummary],
     staged: &[u8],
     lo: usize,
     hi: usize,
@@ -347,7 +347,7 @@ impl ProcessDataApi for ProcessDataService {
         if image.input_bytes == 0 {
             // No input frame will ever come: say so instead of a stream
             // that never yields (an output-only network).
-            return Err(EngineError::WrongState(crate::engine::error::WrongState::NoInputs).into());
+            return Err(EngineError::WrongState(crate::master::WrongState::NoInputs).into());
         }
         let mut selected: Vec<Entry> = Vec::with_capacity(r.entries.len());
         for name in &r.entries {

@@ -12,7 +12,7 @@ use super::bounded;
 use super::convert::{data_type, decode_value, encode_value, index, subindex, type_size};
 use super::objects::{KNOWN, axis_index, lookup};
 use super::status::to_status;
-use crate::engine::error::EngineError;
+use crate::master::EngineError;
 use crate::master::Master;
 
 /// The `Sdo` service.

@@ -7,7 +7,7 @@ use std::collections::HashMap;
 use tonic::{Code, Status};
 use tonic_types::{ErrorDetails, StatusExt};
 
-use crate::engine::error::EngineError;
+use crate::master::EngineError;
 
 /// The `google.rpc.ErrorInfo` domain of every error the daemon answers.
 pub const DOMAIN: &str = "ecmxf";
@@ -173,7 +173,7 @@ mod tests {
     fn every_engine_error_maps_to_its_code() {
         let cases = [
             (EngineError::BadArgument { field: "index", reason: "x".into() }, Code::InvalidArgument),
-            (EngineError::WrongState(crate::engine::error::WrongState::NoInputs), Code::FailedPrecondition),
+            (EngineError::WrongState(crate::master::WrongState::NoInputs), Code::FailedPrecondition),
             (
                 EngineError::SdoAbort { slave: 1, index: 0x6060, subindex: 0, code: SdoAbortCode(0x0602_0000) },
                 Code::Aborted,
@@ -182,7 +182,7 @@ mod tests {
             (EngineError::Refused("x".into()), Code::FailedPrecondition),
             (EngineError::Timeout, Code::DeadlineExceeded),
             (EngineError::QueueFull, Code::ResourceExhausted),
-            (EngineError::Unavailable(crate::engine::error::NotRunning::Stopped), Code::Unavailable),
+            (EngineError::Unavailable(crate::master::NotRunning::Stopped), Code::Unavailable),
             (EngineError::BadDeviceData("x".into()), Code::FailedPrecondition),
         ];
         for (e, code) in cases {

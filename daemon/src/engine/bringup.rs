@@ -135,52 +135,10 @@ impl From<PortError> for BringUpError {
     }
 }
 
+use super::layout::{NetworkLayout, SlaveSummary};
+
 fn step(step: &'static str, detail: impl Into<String>) -> BringUpError {
     BringUpError::Step { step, detail: detail.into() }
-}
-
-/// What bring-up found and set up.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct NetworkLayout {
-    /// Firmware version.
-    pub firmware: u8,
-    /// Slaves in ring order.
-    pub slaves: Vec<SlaveSummary>,
-    /// Output frame size.
-    pub rx_size: usize,
-    /// Input frame size.
-    pub tx_size: usize,
-    /// State reached.
-    pub state: EcatState,
-    /// RxFIFO depth in force (configured, fitted to the FIFO memory).
-    pub fifo_rx_depth: u8,
-    /// TxFIFO depth in force.
-    pub fifo_tx_depth: u8,
-    /// Low mark in force.
-    pub fifo_low: u8,
-    /// High mark in force.
-    pub fifo_high: u8,
-}
-
-/// One slave as found.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
-pub struct SlaveSummary {
-    /// Vendor id.
-    pub vendor_id: u32,
-    /// Product code.
-    pub product_code: u32,
-    /// Revision.
-    pub revision: u32,
-    /// Name.
-    pub name: String,
-    /// Output bytes.
-    pub rx_bytes: usize,
-    /// Input bytes.
-    pub tx_bytes: usize,
-    /// Offset of its outputs in the output frame.
-    pub rx_offset: usize,
-    /// Offset of its inputs in the input frame.
-    pub tx_offset: usize,
 }
 
 fn reply<'a, R: Reply<'a>>(h: &ecmxf_wire::ResponseHeader, data: &'a [u8]) -> Option<R> {

@@ -8,7 +8,7 @@
 //! every slave gets back what was written for it, whatever else changed;
 //! a slave never seen before starts at zero.
 
-use super::bringup::SlaveSummary;
+use super::layout::SlaveSummary;
 
 /// Which slave: identity, and the how-manieth of that identity on the ring.
 type Key = (u32, u32, u32, usize);

@@ -20,14 +20,11 @@ use std::time::{Duration, Instant};
 use tokio::sync::{broadcast, oneshot};
 
 use crate::config::{Config, LinkConfig};
-use crate::engine::bringup::NetworkLayout;
-use crate::engine::error::{EngineError, NotRunning};
-use crate::engine::events::Event;
 use crate::engine::inputs::read_record;
 use crate::engine::network_action::PendingAction;
 use crate::engine::output_writes::Writers;
-use crate::engine::slot::{Job, SlotRequest, TransferProgress};
-use crate::engine::telemetry::{Phase, Snapshot, Telemetry};
+use crate::engine::slot::{Job, SlotRequest};
+use crate::engine::telemetry::Telemetry;
 use crate::engine::{Command, Engine, Parts};
 use crate::link::SimHandle;
 use crate::link::{Link, LinkError};
@@ -69,6 +66,16 @@ pub struct InputFrame {
 }
 
 pub use crate::engine::slot::{DAEMON_CLIENT, as_client};
+
+// What front ends (the gRPC API, and any other) need of the engine, named
+// here so that they import the master alone (issue 30): errors, phases and
+// snapshots, events, the layout, frame streams and transfer progress.
+pub use crate::engine::error::{EngineError, NotRunning, WrongState};
+pub use crate::engine::events::{Event, EventKind};
+pub use crate::engine::frames::{FrameError, FrameProducer, MAX_STREAMS, Played};
+pub use crate::engine::layout::{NetworkLayout, SlaveSummary};
+pub use crate::engine::slot::TransferProgress;
+pub use crate::engine::telemetry::{Phase, Snapshot};
 
 /// [`Master::verdict`]: the health, and the input age it was judged on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
