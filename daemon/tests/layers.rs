@@ -55,36 +55,8 @@ fn no_import_circle_between_the_daemons_modules() {
         deps.extend(uses(&text).into_iter().filter(|d| *d != m));
     }
     assert!(graph.len() >= 10, "the modules were not found: {graph:?}");
-    // Depth-first search for a cycle; the path names it.
-    fn visit(
-        m: &str,
-        graph: &BTreeMap<String, BTreeSet<String>>,
-        path: &mut Vec<String>,
-        done: &mut BTreeSet<String>,
-    ) -> Option<Vec<String>> {
-        if let Some(i) = path.iter().position(|p| p == m) {
-            let mut cycle = path[i..].to_vec();
-            cycle.push(m.to_string());
-            return Some(cycle);
-        }
-        if done.contains(m) {
-            return None;
-        }
-        path.push(m.to_string());
-        for d in graph.get(m).into_iter().flatten() {
-            if let Some(c) = visit(d, graph, path, done) {
-                return Some(c);
-            }
-        }
-        path.pop();
-        done.insert(m.to_string());
-        None
-    }
-    let mut done = BTreeSet::new();
-    for m in graph.keys() {
-        if let Some(cycle) = visit(m, &graph, &mut Vec::new(), &mut done) {
-            panic!("import circle: {}\n(the module graph: {graph:#?})", cycle.join(" -> "));
-        }
+    if let Some(cycle) = first_circle(&graph) {
+        panic!("import circle: {}\n(the module graph: {graph:#?})", cycle.join(" -> "));
     }
     // The layers the brief names, checked as edges that must not exist.
     for (low, high) in
@@ -169,6 +141,7 @@ fn file_graph(dir: &Path, prefix: &str) -> BTreeMap<String, BTreeSet<String>> {
     graph
 }
 
+/// The first import circle found by a depth-first search, as a path.
 fn first_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String>> {
     fn visit(
         m: &str,
