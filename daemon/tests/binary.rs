@@ -44,6 +44,10 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         ("version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 100\n", "cycle.sync0_us"),
         ("version = 1\n[link]\nbackend = \"sim\"\n[chip]\ndatasize = 1\n", "line 5"),
         ("version = 1\n", "link"),
+        (
+            "version = 1\n[link]\nbackend = \"sim\"\n[cycle]\ntarget_state = \"opp\"\n",
+            "expected one of `preop`, `safeop`, `op`",
+        ),
         ("version = 1\n[link]\nbackend = \"sim\"\n[log]\nlevel = \"info,=[\"\n", "log.level"),
         ("version = 1\n[link]\nbackend = \"sim\"\n[metrics]\nlisten = \"localhost\"\n", "line 5"),
         (

@@ -299,7 +299,7 @@ pub struct CycleConfig {
     /// Consecutive WKC errors that stop exchange (255 = never).
     pub wkc_error_limit: u8,
     /// State to bring the network to: "preop", "safeop" or "op".
-    pub target_state: String,
+    pub target_state: TargetState,
     /// The output latency budget, us: how long a client's write may take
     /// to reach the wire (the frame the chip plays). The engine keeps the
     /// RxFIFO at the shallowest level that meets it (never deeper than
@@ -322,12 +322,35 @@ impl CycleConfig {
         self.output_latency_us.map(|us| std::time::Duration::from_micros(u64::from(us)))
     }
 
-    /// `target_state` as a state (validated to be preop, safeop or op).
+    /// `target_state` as a state.
     pub fn target(&self) -> ecmxf_wire::EcatState {
-        match self.target_state.as_str() {
-            "preop" => ecmxf_wire::EcatState::PreOp,
-            "safeop" => ecmxf_wire::EcatState::SafeOp,
-            _ => ecmxf_wire::EcatState::Op,
+        self.target_state.state()
+    }
+}
+
+/// `cycle.target_state`: the state bring-up drives the network to. A
+/// closed set, so a typo is refused by the parser with the key and line.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum TargetState {
+    /// PRE-OP: mailboxes only, no process data.
+    #[serde(rename = "preop")]
+    PreOp,
+    /// SAFE-OP: inputs flow, outputs held safe.
+    #[serde(rename = "safeop")]
+    SafeOp,
+    /// OP: process data both ways.
+    #[default]
+    Op,
+}
+
+impl TargetState {
+    /// The EtherCAT state.
+    pub fn state(self) -> ecmxf_wire::EcatState {
+        match self {
+            Self::PreOp => ecmxf_wire::EcatState::PreOp,
+            Self::SafeOp => ecmxf_wire::EcatState::SafeOp,
+            Self::Op => ecmxf_wire::EcatState::Op,
         }
     }
 }
@@ -343,7 +366,7 @@ impl Default for CycleConfig {
             fifo_low: 8,
             fifo_high: 20,
             wkc_error_limit: 255,
-            target_state: "op".into(),
+            target_state: TargetState::Op,
             output_latency_us: None,
         }
     }
@@ -652,9 +675,6 @@ impl Config {
             );
         }
         self.api.validate(path)?;
-        if !matches!(c.target_state.as_str(), "preop" | "safeop" | "op") {
-            return bad("cycle.target_state", format!("{:?} is not one of preop, safeop, op", c.target_state));
-        }
         if let LinkConfig::Spidev { int0_line: None, idle_us, .. } = &self.link {
             if *idle_us < 100 {
                 return bad(

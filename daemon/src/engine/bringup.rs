@@ -25,7 +25,7 @@ use ecmxf_wire::{CheckType, EcatState, Reply, ReplyFields, Request};
 
 use tracing::warn;
 
-use crate::config::Config;
+use crate::config::{Config, TargetState};
 use crate::link::Link;
 use crate::port::{Port, PortError};
 
@@ -316,18 +316,56 @@ pub fn check_identity(config: &Config, slaves: &[SlaveSummary]) -> Result<(), Br
     Ok(())
 }
 
-/// Brings the network up as `config` says. `held` are the outputs clients
-/// wrote before a recovery (none at the first bring-up): the RxFIFO is
-/// prefilled with them, slave by slave, so the slaves enter OP with what
-/// the lease holders last wrote, not zeros.
+/// Blocking commands get this long to finish.
+const SLOW: Duration = Duration::from_secs(5);
+
+/// Brings the network up as `config` says, phase by phase (the manual's
+/// figure 7). `held` are the outputs clients wrote before a recovery (none
+/// at the first bring-up): the RxFIFO is prefilled with them, slave by
+/// slave, so the slaves enter OP with what the lease holders last wrote,
+/// not zeros.
 pub fn bring_up<L: Link>(
     port: &mut Port<L>,
     config: &Config,
     held: &super::held::HeldOutputs,
 ) -> Result<NetworkLayout, BringUpError> {
-    const SLOW: Duration = Duration::from_secs(5);
+    let firmware = link_setup(port, config)?;
+    // 1. Init network with DC; identity check.
+    let count = init_network(port, config)?;
+    let mut slaves = identify(port, count)?;
+    check_identity(config, &slaves)?;
+    if config.cycle.wkc_error_limit != 255 {
+        port.call(&WkcErrorLimitSet(WkcErrorLimit(config.cycle.wkc_error_limit.max(1))))?;
+    }
+    // 2. PRE-OP.
+    enter(port, EcatState::PreOp, usize::from(count))?;
+    // 3. PDO mapping and per-slave DC; 4. start-up SDOs; 5./6. CiA402 helper.
+    map_pdos(port, config)?;
+    slave_dc(port, config)?;
+    startup_sdos(port, config)?;
+    cia402_helper(port, config)?;
+    // 7. FIFO plan, then where each slave's data sits in the frames.
+    let fifo = fifo_plan(port, config)?;
+    place_slaves(port, &mut slaves)?;
+    axes_fit(&config.axes, &slaves)?;
+    // 8. SAFE-OP and OP as the target says.
+    let state = reach_target(port, config.cycle.target_state, &slaves, &fifo, held)?;
+    Ok(NetworkLayout {
+        firmware,
+        slaves,
+        rx_size: fifo.rx_size,
+        tx_size: fifo.tx_size,
+        state,
+        fifo_rx_depth: fifo.rx_depth,
+        fifo_tx_depth: fifo.tx_depth,
+        fifo_low: fifo.low,
+        fifo_high: fifo.high,
+    })
+}
 
-    // Link: find where the chip is, then CRC-32 and the packet size.
+/// Link: finds where the chip is, then CRC-32, the packet size and the
+/// interrupt polarity; returns the firmware version.
+fn link_setup<L: Link>(port: &mut Port<L>, config: &Config) -> Result<u8, BringUpError> {
     if port.call(&InfoUpdate).is_err() {
         port.synchronize()?;
     }
@@ -343,20 +381,11 @@ pub fn bring_up<L: Link>(
     polarity.set(IntPolarity::INT1_ACTIVE_HIGH, config.chip.int1_active_high);
     port.call(&IntSetEnable(IntConfig { polarity, ..IntConfig::default() }))?;
     port.link_mut().set_polarity(config.chip.int0_active_high, config.chip.int1_active_high);
+    Ok(firmware)
+}
 
-    // 1. Init network with DC; identity check.
-    let count = init_network(port, config)?;
-    let mut slaves = identify(port, count)?;
-    check_identity(config, &slaves)?;
-    let c = &config.cycle;
-    if c.wkc_error_limit != 255 {
-        port.call(&WkcErrorLimitSet(WkcErrorLimit(c.wkc_error_limit.max(1))))?;
-    }
-
-    // 2. PRE-OP.
-    enter(port, EcatState::PreOp, usize::from(count))?;
-
-    // 3. PDO mapping, then RECONFIG.
+/// 3. The `[[slave]]` PDO mappings (PDO_CONFIG_SET each), then RECONFIG.
+fn map_pdos<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
     let mut remapped = false;
     for (i, s) in config.slaves.iter().enumerate() {
         for (assign, pdos) in [(RX_PDO_ASSIGN, &s.rx_pdos), (TX_PDO_ASSIGN, &s.tx_pdos)] {
@@ -374,8 +403,12 @@ pub fn bring_up<L: Link>(
     if remapped {
         blocking(port, &EcatReconfig, SLOW)?;
     }
+    Ok(())
+}
 
-    // 3b. Per-slave DC settings (DCSYNC each, then ECAT_INIT_DC applies them).
+/// 3b. Per-slave DC settings (DCSYNC each, then ECAT_INIT_DC applies them).
+fn slave_dc<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
+    let c = &config.cycle;
     let mut dc_changed = false;
     for (i, s) in config.slaves.iter().enumerate() {
         if s.dc_assign_activate.is_none() && s.dc_shift_ns.is_none() {
@@ -395,8 +428,11 @@ pub fn bring_up<L: Link>(
     if dc_changed {
         blocking(port, &EcatInitDc, SLOW).map_err(|e| step("ECAT_INIT_DC", e.to_string()))?;
     }
+    Ok(())
+}
 
-    // 4. Start-up SDOs.
+/// 4. Start-up SDOs, in the order the configuration lists them.
+fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
     for (i, s) in config.slaves.iter().enumerate() {
         for sdo in &s.sdos {
             let data = sdo.payload();
@@ -414,9 +450,11 @@ pub fn bring_up<L: Link>(
             }
         }
     }
+    Ok(())
+}
 
-    // 5./6. CiA402 helper.
-    let op = c.target_state == "op";
+/// 5./6. The chip's CiA402 helper for each `[[axis]]`, every axis disabled.
+fn cia402_helper<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
     for (n, a) in config.axes.iter().enumerate() {
         let mut control = Cia402Control::ENABLE;
         control.set(Cia402Control::AUTO_FAULT_RESET, a.auto_fault_reset);
@@ -440,8 +478,24 @@ pub fn bring_up<L: Link>(
         // moves with whatever setpoint it last had.
         port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::SwitchOnDisabled })?;
     }
+    Ok(())
+}
 
-    // 7. FIFO sizes.
+/// The FIFO plan bring-up set: frame sizes, depths and marks in force.
+struct FifoPlan {
+    rx_size: usize,
+    tx_size: usize,
+    rx_depth: u8,
+    tx_depth: u8,
+    low: u8,
+    high: u8,
+}
+
+/// Step 7: frame sizes from the chip, the link budget for them (a network
+/// the link can never carry is refused for good), depths fitted to the
+/// FIFO memory, FIFO_INIT.
+fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, BringUpError> {
+    let c = &config.cycle;
     let rx = port.call(&FifoPackSizeGet(PdoDirection::Outputs))?;
     let rx_size = reply::<FifoPackSize>(&rx.header, rx.data).map_or(0, |r| usize::from(r.0));
     let tx = port.call(&FifoPackSizeGet(PdoDirection::Inputs))?;
@@ -486,6 +540,11 @@ pub fn bring_up<L: Link>(
     port.call(&FifoSetTxCount(tx_depth))?;
     blocking(port, &FifoInit, SLOW)
         .map_err(|e| step("FIFO_INIT", format!("{e}: {rx_depth} x {rx_size} + {tx_depth} x {tx_size} bytes")))?;
+    Ok(FifoPlan { rx_size, tx_size, rx_depth, tx_depth, low, high })
+}
+
+/// Each slave's bytes and where they sit in the output and input frames.
+fn place_slaves<L: Link>(port: &mut Port<L>, slaves: &mut [SlaveSummary]) -> Result<(), BringUpError> {
     let (mut ro, mut to) = (0, 0);
     for (i, s) in slaves.iter_mut().enumerate() {
         s.rx_bytes = number(port, i as u8, SlaveInfoCode::OutputBytes)? as usize;
@@ -495,38 +554,39 @@ pub fn bring_up<L: Link>(
         ro += s.rx_bytes;
         to += s.tx_bytes;
     }
-    axes_fit(&config.axes, &slaves)?;
+    Ok(())
+}
 
-    let mut state = EcatState::PreOp;
-    if c.target_state != "preop" {
-        enter(port, EcatState::SafeOp, slaves.len())?;
-        state = EcatState::SafeOp;
+/// Step 8: SAFE-OP unless the target is PRE-OP; for OP, the RxFIFO prefilled
+/// with the held outputs to its high mark first (outputs must be waiting
+/// when the slaves enter OP), then OP and the FIFO output on. Returns the
+/// state reached.
+fn reach_target<L: Link>(
+    port: &mut Port<L>,
+    target: TargetState,
+    slaves: &[SlaveSummary],
+    fifo: &FifoPlan,
+    held: &super::held::HeldOutputs,
+) -> Result<EcatState, BringUpError> {
+    if target == TargetState::PreOp {
+        return Ok(EcatState::PreOp);
     }
-    if op {
-        // Outputs must be waiting when the slaves enter OP.
-        let per_packet = port.data_size().checked_div(rx_size).unwrap_or(0);
-        let mut left = usize::from(high);
-        let frames = held.image_for(&slaves, rx_size).repeat(per_packet.max(1));
-        while left > 0 && per_packet > 0 {
-            let n = left.min(per_packet);
-            port.call(&PdoFifoOp { op: FifoOpFlags::WRITE, frames: n as u8, outputs: &frames[..n * rx_size] })?;
-            left -= n;
-        }
-        enter(port, EcatState::Op, slaves.len())?;
-        port.call(&FifoEnable(true))?;
-        state = EcatState::Op;
+    enter(port, EcatState::SafeOp, slaves.len())?;
+    if target == TargetState::SafeOp {
+        return Ok(EcatState::SafeOp);
     }
-    Ok(NetworkLayout {
-        firmware,
-        slaves,
-        rx_size,
-        tx_size,
-        state,
-        fifo_rx_depth: rx_depth,
-        fifo_tx_depth: tx_depth,
-        fifo_low: low,
-        fifo_high: high,
-    })
+    let rx_size = fifo.rx_size;
+    let per_packet = port.data_size().checked_div(rx_size).unwrap_or(0);
+    let mut left = usize::from(fifo.high);
+    let frames = held.image_for(slaves, rx_size).repeat(per_packet.max(1));
+    while left > 0 && per_packet > 0 {
+        let n = left.min(per_packet);
+        port.call(&PdoFifoOp { op: FifoOpFlags::WRITE, frames: n as u8, outputs: &frames[..n * rx_size] })?;
+        left -= n;
+    }
+    enter(port, EcatState::Op, slaves.len())?;
+    port.call(&FifoEnable(true))?;
+    Ok(EcatState::Op)
 }
 
 /// The time one packet takes on this link, as measured: the median of five
