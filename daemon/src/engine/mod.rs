@@ -51,19 +51,36 @@ use error::{EngineError, NotRunning};
 use events::{Event, EventKind, EventSink};
 use inputs::InputPublisher;
 use layout::NetworkLayout;
-use network_action::PendingAction;
+use network_action::NetworkAction;
 use output_writes::{OutputAssembler, OutputWrite, Writers};
 use slot::{Active, FairQueue, Job};
 use supervisor::RecoverCause;
 use telemetry::{CounterTotal, Phase, Telemetry};
 
-/// Messages to the engine.
+/// Messages to the engine: its one way in besides the output writes (the
+/// hot path, lock-free) and the stop flag that ends a wait at once.
 #[derive(Debug)]
 pub enum Command {
-    /// A request.
+    /// A request for the blocking slot.
     Job(Job),
+    /// A new configuration to bring the network up with, and its number
+    /// (published in the telemetry once taken).
+    Reconfigure(u64, Box<Config>),
+    /// A per-cycle output frame stream opens.
+    FrameStream(frames::FrameConsumer),
+    /// A re-init or warm reset (asking twice is asking once; a warm reset
+    /// wins).
+    Network(NetworkAction),
     /// Safe stop, then exit.
     Stop,
+}
+
+/// What a command leaves for the loop that took it: a job to queue (or
+/// refuse), a stop, or nothing (the rest is kept for the running loop).
+enum Taken {
+    Job(Job),
+    Stop,
+    Kept,
 }
 
 /// Why the running loop left.
@@ -100,10 +117,10 @@ pub struct Engine<L> {
     distributor: Option<Thread>,
     writers: Arc<Writers>,
     events: EventSink,
-    action: Arc<PendingAction>,
-    reconfigure: Receiver<(u64, Config)>,
-    /// New per-cycle frame streams.
-    frame_streams: Receiver<frames::FrameConsumer>,
+    /// A re-init or warm reset a client asked for, not yet done.
+    action: Option<NetworkAction>,
+    /// A configuration a client sent, not yet taken.
+    new_config: Option<(u64, Config)>,
     /// The streams in force (room for [`frames::MAX_STREAMS`] from the
     /// start: attaching one never allocates).
     frames: Vec<frames::FrameConsumer>,
@@ -149,15 +166,8 @@ pub struct Parts<L> {
     pub writers: Arc<Writers>,
     /// Supervision events out.
     pub events: rtrb::Producer<Event>,
-    /// Re-init or warm reset asked for by a client.
-    pub action: Arc<PendingAction>,
     /// Set when the daemon stops: bring-up and recovery waits end at once.
     pub stop: Arc<AtomicBool>,
-    /// A new configuration to bring the network up with, and its number
-    /// (published in the telemetry once taken).
-    pub reconfigure: Receiver<(u64, Config)>,
-    /// Per-cycle output frame streams clients open.
-    pub frame_streams: Receiver<frames::FrameConsumer>,
 }
 
 impl<L: Link> Engine<L> {
@@ -185,9 +195,8 @@ impl<L: Link> Engine<L> {
             distributor: p.distributor,
             held_below_target: false,
             writers: p.writers,
-            action: p.action,
-            reconfigure: p.reconfigure,
-            frame_streams: p.frame_streams,
+            action: None,
+            new_config: None,
             frames: Vec::with_capacity(frames::MAX_STREAMS),
             assembler: OutputAssembler::default(),
             events,
@@ -388,7 +397,7 @@ impl<L: Link> Engine<L> {
     /// Takes a configuration a client sent, if any. Only what bring-up
     /// applies changes; the link and the thread stay as they are.
     fn take_new_config(&mut self) -> bool {
-        let Ok((generation, config)) = self.reconfigure.try_recv() else {
+        let Some((generation, config)) = self.new_config.take() else {
             return false;
         };
         // Phase first: a caller waiting for "running with my configuration"
@@ -411,12 +420,12 @@ impl<L: Link> Engine<L> {
             if self.take_new_config() {
                 return true;
             }
-            match self.commands.recv_timeout(left.min(Duration::from_millis(20))) {
-                Ok(Command::Job(j)) => {
+            match self.commands.recv_timeout(left.min(Duration::from_millis(20))).map(|c| self.take(c)) {
+                Ok(Taken::Job(j)) => {
                     let _ = j.reply.send(Err(EngineError::Unavailable(NotRunning::BringingUp)));
                 }
-                Ok(Command::Stop) | Err(RecvTimeoutError::Disconnected) => return false,
-                Err(RecvTimeoutError::Timeout) => {}
+                Ok(Taken::Stop) | Err(RecvTimeoutError::Disconnected) => return false,
+                Ok(Taken::Kept) | Err(RecvTimeoutError::Timeout) => {}
             }
         }
         true
@@ -430,10 +439,39 @@ impl<L: Link> Engine<L> {
             let _ = j.reply.send(Err(e.clone()));
         }
         while let Ok(c) = self.commands.try_recv() {
-            if let Command::Job(j) = c {
-                let _ = j.reply.send(Err(e.clone()));
+            match self.take(c) {
+                Taken::Job(j) => {
+                    let _ = j.reply.send(Err(e.clone()));
+                }
+                // A stop stays the engine's next thing to do.
+                Taken::Stop => self.stop.store(true, Relaxed),
+                Taken::Kept => {}
             }
         }
+    }
+
+    /// Takes one command: a new configuration, a network action or a frame
+    /// stream is kept for the running loop; a job or a stop is the caller's.
+    fn take(&mut self, c: Command) -> Taken {
+        match c {
+            Command::Job(j) => return Taken::Job(j),
+            Command::Stop => return Taken::Stop,
+            Command::Reconfigure(generation, config) => self.new_config = Some((generation, *config)),
+            Command::Network(a) => self.action = self.action.max(Some(a)),
+            Command::FrameStream(mut f) => {
+                f.on_dry = match self.config.outputs.on_last_writer_gone {
+                    WriterGoneAction::Zero => frames::DryAction::Zero,
+                    _ => frames::DryAction::Hold,
+                };
+                if self.frames.len() < self.frames.capacity() {
+                    self.frames.push(f);
+                } else {
+                    // The API opens no more than MAX_STREAMS; never grow.
+                    warn!("a frame stream beyond {} was refused", frames::MAX_STREAMS);
+                }
+            }
+        }
+        Taken::Kept
     }
 
     /// Publishes the last header and the port's counters; waiters get a
@@ -469,9 +507,10 @@ impl<L: Link> Engine<L> {
     /// Takes new requests; false when told to stop.
     fn take_commands(&mut self) -> bool {
         loop {
-            match self.commands.try_recv() {
-                Ok(Command::Job(j)) => self.queue.push(j),
-                Ok(Command::Stop) | Err(TryRecvError::Disconnected) => return false,
+            match self.commands.try_recv().map(|c| self.take(c)) {
+                Ok(Taken::Job(j)) => self.queue.push(j),
+                Ok(Taken::Kept) => {}
+                Ok(Taken::Stop) | Err(TryRecvError::Disconnected) => return false,
                 Err(TryRecvError::Empty) => return true,
             }
         }

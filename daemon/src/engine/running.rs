@@ -28,7 +28,7 @@ use super::network_action::NetworkAction;
 use super::slot::{Active, Progress, SlotRequest};
 use super::supervisor::{RecoverCause, RunShape, Supervisor, flow_limit};
 use super::telemetry::{Phase, Telemetry};
-use super::{Command, Engine, Exit};
+use super::{Command, Engine, Exit, Taken};
 use crate::config::WriterGoneAction;
 use crate::link::Link;
 use crate::port::PortError;
@@ -230,18 +230,6 @@ impl<L: Link> Engine<L> {
                 self.unplayed_write.get_or_insert(written);
             }
         }
-        while let Ok(mut f) = self.frame_streams.try_recv() {
-            f.on_dry = match self.config.outputs.on_last_writer_gone {
-                WriterGoneAction::Zero => super::frames::DryAction::Zero,
-                _ => super::frames::DryAction::Hold,
-            };
-            if self.frames.len() < self.frames.capacity() {
-                self.frames.push(f);
-            } else {
-                // The API opens no more than MAX_STREAMS; never grow.
-                warn!("a frame stream beyond {} was refused", super::frames::MAX_STREAMS);
-            }
-        }
         self.frames.retain(|f| !f.finished());
         if self.writers.take_gone() {
             self.last_writer_gone(cyclic.as_deref_mut());
@@ -347,10 +335,12 @@ impl<L: Link> Engine<L> {
             Some(a) => wake.min(a.next_poll()),
             None => wake.min(emergency),
         };
-        match self.idle_until(until) {
-            Some(Command::Job(j)) => self.queue.push(j),
-            Some(Command::Stop) => return Err(self.safe_stop(cyclic.as_deref_mut())),
-            None => {}
+        if let Some(c) = self.idle_until(until) {
+            match self.take(c) {
+                Taken::Job(j) => self.queue.push(j),
+                Taken::Stop => return Err(self.safe_stop(cyclic.as_deref_mut())),
+                Taken::Kept => {}
+            }
         }
         Ok(())
     }

@@ -21,7 +21,6 @@ use tokio::sync::{broadcast, oneshot};
 
 use crate::config::{Config, LinkConfig};
 use crate::engine::inputs::read_record;
-use crate::engine::network_action::PendingAction;
 use crate::engine::output_writes::Writers;
 use crate::engine::slot::{Job, SlotRequest};
 use crate::engine::telemetry::Telemetry;
@@ -212,9 +211,6 @@ pub struct Master {
     stop_engine: Arc<AtomicBool>,
     stop_distributor: Arc<AtomicBool>,
     writers: Arc<Writers>,
-    action: Arc<PendingAction>,
-    reconfigure: SyncSender<(u64, Config)>,
-    frame_streams: SyncSender<crate::engine::frames::FrameConsumer>,
     config: Mutex<Config>,
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
@@ -281,9 +277,6 @@ impl Master {
         let telemetry = Arc::new(Telemetry::default());
         let layout = Arc::new(Mutex::new(NetworkLayout::default()));
         let writers = Arc::new(Writers::default());
-        let action = Arc::new(PendingAction::default());
-        let (reconfigure, reconfigure_rx) = sync_channel(1);
-        let (frame_streams, frame_streams_rx) = sync_channel(4);
         let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
         let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
         let (events, _) = broadcast::channel(EVENT_BACKLOG);
@@ -321,10 +314,7 @@ impl Master {
             distributor: Some(distributor.thread().clone()),
             writers: Arc::clone(&writers),
             events: event_producer,
-            action: Arc::clone(&action),
             stop: Arc::clone(&stop_engine),
-            reconfigure: reconfigure_rx,
-            frame_streams: frame_streams_rx,
         };
         let rt = config.realtime.clone();
         let engine = std::thread::Builder::new()
@@ -345,9 +335,6 @@ impl Master {
             stop_engine,
             stop_distributor,
             writers,
-            action,
-            reconfigure,
-            frame_streams,
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
@@ -520,7 +507,7 @@ impl Master {
             return Err(EngineError::BadArgument { field: "range", reason });
         }
         let (producer, consumer) = crate::engine::frames::channel(start, len, capacity);
-        self.frame_streams.try_send(consumer).map_err(|e| match e {
+        self.commands.try_send(Command::FrameStream(consumer)).map_err(|e| match e {
             TrySendError::Full(_) => EngineError::QueueFull,
             TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
         })?;

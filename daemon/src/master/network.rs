@@ -8,6 +8,7 @@ use std::time::Duration;
 
 use super::Master;
 use crate::config::Config;
+use crate::engine::Command;
 use crate::engine::error::{EngineError, NotRunning};
 use crate::engine::events::EventKind;
 use crate::engine::network_action::NetworkAction;
@@ -54,7 +55,7 @@ impl Master {
         }
         let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
         let mut events = self.events();
-        self.reconfigure.try_send((generation, config.clone())).map_err(|e| match e {
+        self.commands.try_send(Command::Reconfigure(generation, Box::new(config.clone()))).map_err(|e| match e {
             TrySendError::Full(_) => EngineError::QueueFull,
             TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
         })?;
@@ -104,7 +105,10 @@ impl Master {
     async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
         self.running_or_unavailable()?;
         let before = self.status().recoveries;
-        self.action.request(action);
+        self.commands.try_send(Command::Network(action)).map_err(|e| match e {
+            TrySendError::Full(_) => EngineError::QueueFull,
+            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
+        })?;
         self.until(timeout, |s| s.recoveries > before && s.phase == Phase::Running).await
     }
 
