@@ -15,6 +15,12 @@
 //! disagree) is not clamped: such samples are counted and said as an error.
 //! Prints medians, p99 and max from this one run. `--secs N` sets each
 //! phase's length (default 5).
+//!
+//! `--soak N` runs instead, for N seconds: 4 subscribers taking every
+//! input frame plus 16 SDO clients each writing a value of its own and
+//! reading it back (clients that share an object take turns on it), and
+//! reports wrong values, FIFO alarms per minute, lost samples and the
+//! daemon's CPU (issue 26's five-minute run: `--soak 300`).
 #![forbid(unsafe_code)]
 
 use std::time::{Duration, Instant};
@@ -113,7 +119,116 @@ async fn streams(d: &Daemon, clients: usize, secs: u64, label: &str) {
     );
 }
 
+/// Writable CiA 402 objects of the demo's drives (slave, index), checked
+/// to answer before the soak uses them.
+const SOAK_OBJECTS: [(u32, u32); 8] =
+    [(1, 0x6083), (1, 0x6084), (1, 0x6085), (1, 0x6081), (1, 0x6883), (1, 0x6884), (1, 0x7083), (1, 0x7084)];
+
+/// One client of the soak: writes `client`-tagged values to its object and
+/// reads each back; (pairs done, wrong read-backs, errors).
+async fn write_read_back(
+    ch: Channel,
+    client: u32,
+    object: (u32, u32),
+    turn: std::sync::Arc<tokio::sync::Mutex<()>>,
+    until: Instant,
+) -> (u64, u64, u64) {
+    let mut sdo = SdoClient::new(ch);
+    let (mut pairs, mut wrong, mut errors) = (0u64, 0u64, 0u64);
+    let mut n = 0u32;
+    while Instant::now() < until {
+        n = n.wrapping_add(1);
+        let value = (client << 24) | (n & 0x00FF_FFFF);
+        let _mine = turn.lock().await;
+        let w = pb::SdoDownloadRequest {
+            slave: object.0,
+            index: object.1,
+            subindex: 0,
+            complete_access: false,
+            data_type: 0,
+            value: Some(pb::Value { kind: Some(pb::value::Kind::Raw(value.to_le_bytes().to_vec())) }),
+        };
+        if sdo.download(w).await.is_err() {
+            errors += 1;
+            continue;
+        }
+        let r = pb::SdoUploadRequest {
+            slave: object.0,
+            index: object.1,
+            subindex: 0,
+            complete_access: false,
+            data_type: 0,
+        };
+        match sdo.upload(r).await {
+            Ok(a) if a.get_ref().raw == value.to_le_bytes() => pairs += 1,
+            Ok(_) => wrong += 1,
+            Err(_) => errors += 1,
+        }
+    }
+    (pairs, wrong, errors)
+}
+
+async fn soak(d: &Daemon, ch: Channel, secs: u64) {
+    let mut sdo = SdoClient::new(ch.clone());
+    let mut objects = Vec::new();
+    for o in SOAK_OBJECTS {
+        let r = pb::SdoUploadRequest { slave: o.0, index: o.1, subindex: 0, complete_access: false, data_type: 0 };
+        if sdo.upload(r).await.is_ok_and(|a| a.get_ref().raw.len() == 4) {
+            objects.push((o, std::sync::Arc::new(tokio::sync::Mutex::new(()))));
+        }
+    }
+    assert!(!objects.is_empty(), "no writable 32-bit object answered");
+    let master = || pb::master_client::MasterClient::new(ch.clone());
+    let before = master().get_status(pb::GetStatusRequest {}).await.unwrap().into_inner().counters.unwrap();
+    let cpu0 = cpu_seconds(d.pid());
+    let until = Instant::now() + Duration::from_secs(secs);
+    let t = Instant::now();
+    let subs: Vec<_> = channels(d, 4).await.into_iter().map(|c| tokio::spawn(subscriber(c, until))).collect();
+    let clients: Vec<_> = channels(d, CLIENTS)
+        .await
+        .into_iter()
+        .enumerate()
+        .map(|(i, c)| {
+            let (o, turn) = objects[i % objects.len()].clone();
+            tokio::spawn(write_read_back(c, i as u32 + 1, o, turn, until))
+        })
+        .collect();
+    let (mut pairs, mut wrong, mut errors) = (0, 0, 0);
+    for c in clients {
+        let (p, w, e) = c.await.expect("client");
+        (pairs, wrong, errors) = (pairs + p, wrong + w, errors + e);
+    }
+    let (mut samples, mut lost) = (0, 0);
+    for s in subs {
+        let (l, k, _) = s.await.expect("subscriber");
+        samples += l.len();
+        lost += k;
+    }
+    let wall = t.elapsed().as_secs_f64();
+    let after = master().get_status(pb::GetStatusRequest {}).await.unwrap().into_inner().counters.unwrap();
+    let alarms = after.fifo_alarms - before.fifo_alarms;
+    println!(
+        "soak {wall:.0} s: {pairs} SDO write/read-back pairs on {} objects, {wrong} wrong values, {errors} errors",
+        objects.len()
+    );
+    println!(
+        "soak: 4 subscribers {samples} samples, {lost} lost; FIFO alarms {alarms} ({:.2}/min); inputs dropped by the chip {}",
+        alarms as f64 * 60.0 / wall,
+        after.inputs_dropped_by_chip - before.inputs_dropped_by_chip
+    );
+    println!("soak: daemon process CPU {:.1} % of one core", (cpu_seconds(d.pid()) - cpu0) * 100.0 / wall);
+}
+
+fn cpu_seconds(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    let f: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
+    let ticks: f64 =
+        f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0) + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    ticks / 100.0
+}
+
 fn main() {
+    let soak_secs: Option<u64> = std::env::args().skip_while(|a| a != "--soak").nth(1).and_then(|v| v.parse().ok());
     let secs: u64 = std::env::args().skip_while(|a| a != "--secs").nth(1).and_then(|v| v.parse().ok()).unwrap_or(5);
     let daemon = ecmxf_e2e::daemon_binary();
     if !daemon.exists() {
@@ -140,6 +255,11 @@ fn main() {
         );
         // Warm-up.
         sdo_load(ch.clone(), Instant::now() + Duration::from_millis(300)).await;
+        if let Some(n) = soak_secs {
+            soak(&d, ch, n).await;
+            d.stop();
+            return;
+        }
 
         let t = Instant::now();
         let one = sdo_load(ch.clone(), Instant::now() + Duration::from_secs(secs)).await;
@@ -172,12 +292,7 @@ fn main() {
             "engine: fifo_alarms={} input_batches_lost={} max_fifo_gap_us={} (the longest the engine thread itself stalled)",
             c.fifo_alarms, c.input_batches_lost, c.max_fifo_gap_us
         );
-        let cpu = |pid: u32| -> f64 {
-            let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
-            let f: Vec<&str> = stat.rsplit(')').next().unwrap_or("").split_whitespace().collect();
-            let ticks: f64 = f.get(11).and_then(|v| v.parse().ok()).unwrap_or(0.0) + f.get(12).and_then(|v| v.parse().ok()).unwrap_or(0.0);
-            ticks / 100.0
-        };
+        let cpu = cpu_seconds;
         println!(
             "cpu seconds: daemon process {:.1}, bench clients (this process) {:.1}, wall {:.1} s on {} cores",
             cpu(d.pid()),
