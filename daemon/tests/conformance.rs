@@ -226,3 +226,42 @@ fn every_fixture_device_alone_reaches_op_with_the_pdos_its_file_describes() {
     assert!(failed.is_empty(), "{} devices disagree with their files:\n{}", failed.len(), failed.join("\n"));
     assert!(passed > 0, "no device was checked");
 }
+
+/// A PDO numbered where another object is (a TxPDO at 0x1018, the identity
+/// object's index; seen in two-channel drives' ESI files): the simulated
+/// device maps with it while CoE reads the identity object there, and the
+/// daemon takes that PDO's entries from the device's description instead
+/// of the identity values CoE returns (issue 27). The same checks as every
+/// fixture: OP, process data, the file's PDO entries.
+#[test]
+fn a_pdo_numbered_at_a_standard_objects_index_is_described_from_the_file() {
+    let tmp = std::env::temp_dir().join(format!("ecmxf-pdo-at-1018-{}", std::process::id()));
+    std::fs::create_dir_all(&tmp).unwrap();
+    let esi = r##"<EtherCATInfo><Vendor><Id>#x0000ABCD</Id></Vendor><Descriptions><Devices>
+        <Device Physics="YY"><Type ProductCode="#x00001018" RevisionNo="1">TWO-CHANNEL</Type><Name>Two-channel drive</Name>
+          <Sm ControlByte="#x26" Enable="1" StartAddress="#x1000" DefaultSize="128">MBoxOut</Sm>
+          <Sm ControlByte="#x22" Enable="1" StartAddress="#x1080" DefaultSize="128">MBoxIn</Sm>
+          <Sm ControlByte="#x64" Enable="1" StartAddress="#x1100">Outputs</Sm>
+          <Sm ControlByte="#x20" Enable="1" StartAddress="#x1180">Inputs</Sm>
+          <RxPdo Sm="2" Fixed="1"><Index>#x1600</Index><Name>Outputs</Name>
+            <Entry><Index>#x7000</Index><SubIndex>1</SubIndex><BitLen>16</BitLen><Name>Command</Name><DataType>UINT</DataType></Entry>
+          </RxPdo>
+          <TxPdo Sm="3" Fixed="1"><Index>#x1a00</Index><Name>Channel 1</Name>
+            <Entry><Index>#x6000</Index><SubIndex>1</SubIndex><BitLen>32</BitLen><Name>Position 1</Name><DataType>DINT</DataType></Entry>
+          </TxPdo>
+          <TxPdo Sm="3" Fixed="1"><Index>#x1018</Index><Name>Channel 2</Name>
+            <Entry><Index>#x6010</Index><SubIndex>1</SubIndex><BitLen>32</BitLen><Name>Position 2</Name><DataType>DINT</DataType></Entry>
+            <Entry><Index>#x6010</Index><SubIndex>2</SubIndex><BitLen>16</BitLen><Name>Status 2</Name><DataType>UINT</DataType></Entry>
+          </TxPdo>
+          <Mailbox DataLinkLayer="true"><CoE SdoInfo="true" PdoAssign="false" PdoConfig="false"/></Mailbox>
+          <Eeprom><ByteSize>2048</ByteSize><ConfigData>0C0D</ConfigData></Eeprom>
+        </Device></Devices></Descriptions></EtherCATInfo>"##;
+    std::fs::write(tmp.join("two-channel.xml"), esi).unwrap();
+    let catalog = Catalog::scan(&tmp).unwrap();
+    assert_eq!(catalog.devices.len(), 1, "{:?}", catalog.skipped);
+    let d = &catalog.devices[0];
+    assert_eq!(d.tx_bytes(), 10, "both TxPDOs are assigned: 4 + 4 + 2 bytes");
+    let failures = check(&tmp, std::slice::from_ref(d));
+    let _ = std::fs::remove_dir_all(&tmp);
+    assert!(failures.is_empty(), "{failures:#?}");
+}

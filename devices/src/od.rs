@@ -306,6 +306,10 @@ pub struct ObjectDictionary {
     /// `<CoE CompleteAccess="0">`, SII CoE details bit 5 clear): every
     /// complete access is refused with 0x06010004.
     pub no_complete_access: bool,
+    /// PDO mappings numbered where another object is (a TxPDO at 0x1018
+    /// beside the identity object): the device maps with them, CoE reads
+    /// the other object. See [`ObjectDictionary::mapping`].
+    pub mappings_aside: BTreeMap<u16, Object>,
 }
 
 impl ObjectDictionary {
@@ -322,6 +326,12 @@ impl ObjectDictionary {
     /// An object.
     pub fn object(&self, index: u16) -> Option<&Object> {
         self.objects.get(&index)
+    }
+
+    /// The PDO mapping at `index`: one kept aside for a PDO numbered where
+    /// another object is, else the object there.
+    pub fn mapping(&self, index: u16) -> Option<&Object> {
+        self.mappings_aside.get(&index).or_else(|| self.objects.get(&index))
     }
 
     /// All objects in index order.

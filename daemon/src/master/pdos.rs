@@ -127,11 +127,20 @@ impl Master {
             Ok((mut rx, mut tx)) => {
                 // Without an ESI, the SII's PDO categories (when it has
                 // them) are what names and types the entries.
+                let foreign = rx.iter().chain(&tx).any(|p| !is_mapping_index(p.index));
+                if let Some(d) = esi_device.filter(|_| foreign) {
+                    from_description(&mut rx, &esi_described(d.rx_pdos.iter()));
+                    from_description(&mut tx, &esi_described(d.tx_pdos.iter()));
+                }
                 if esi_device.is_none() {
                     match self.sii_described(slave, PDO_CATEGORIES).await {
                         Ok(image) => {
-                            complete(&mut rx, &from_sii_all(&image, &image.rx_pdos));
-                            complete(&mut tx, &from_sii_all(&image, &image.tx_pdos));
+                            let (all_rx, all_tx) =
+                                (from_sii_all(&image, &image.rx_pdos), from_sii_all(&image, &image.tx_pdos));
+                            from_description(&mut rx, &all_rx);
+                            from_description(&mut tx, &all_tx);
+                            complete(&mut rx, &all_rx);
+                            complete(&mut tx, &all_tx);
                         }
                         Err(e) if source_lacks(&e) => tracing::debug!(slave, "PDO names from the SII: {e}"),
                         Err(e) => return Err(e),
@@ -229,6 +238,30 @@ fn from_sii(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
 /// Every PDO of an SII list, assigned or not (to name what CoE assigned).
 fn from_sii_all(image: &Sii, list: &[PdoRecord]) -> Vec<PdoDescription> {
     described(image, list.iter())
+}
+
+/// Whether a PDO index is where CiA 301 puts PDO mapping objects
+/// (0x1600-0x17FF outputs, 0x1A00-0x1BFF inputs; ETG.1000.6 5.6.7.4).
+/// Devices number PDOs elsewhere too (a two-channel drive's TxPDO at
+/// 0x1018): read over CoE, such an index is the other object (the identity
+/// object), not the mapping.
+fn is_mapping_index(index: u16) -> bool {
+    (0x1600..=0x17FF).contains(&index) || (0x1A00..=0x1BFF).contains(&index)
+}
+
+/// A PDO assigned at an index outside the mapping objects' range takes its
+/// entries from the device's description (SII or ESI), which has them;
+/// CoE would have read another object's values as entries (issue 27).
+fn from_description(list: &mut [PdoDescription], described: &[PdoDescription]) {
+    for p in list.iter_mut().filter(|p| !is_mapping_index(p.index)) {
+        match described.iter().find(|d| d.index == p.index) {
+            Some(d) => p.entries.clone_from(&d.entries),
+            None => tracing::warn!(
+                pdo = format_args!("{:#06x}", p.index),
+                "a PDO outside 0x1600-0x17FF/0x1A00-0x1BFF that no description lists: its entries as read over CoE"
+            ),
+        }
+    }
 }
 
 /// Names of PDOs and entries, entry types and sync managers, from

@@ -32,7 +32,22 @@ impl SimulatedDevice for EsiDevice {
             for p in first.iter().chain(&rest) {
                 add_entry_objects(&mut od, rx, &p.entries);
                 let entries: Vec<PdoEntry> = p.entries.iter().map(|(e, _, _)| *e).collect();
-                pdo_map::add_mapping(&mut od, p.index, &p.name, &entries, p.fixed || !self.pdo_config);
+                let fixed = p.fixed || !self.pdo_config;
+                // A PDO numbered where another object is, or in the
+                // communication area the identity object is added to
+                // below (a two-channel drive's TxPDO at 0x1018): its
+                // mapping is kept aside, so CoE reads the other object and
+                // the process image follows the mapping.
+                let standard = (0x1600..=0x17FF).contains(&p.index) || (0x1A00..=0x1BFF).contains(&p.index);
+                if !standard && (od.object(p.index).is_some() || (0x1000..0x2000).contains(&p.index)) {
+                    let mut scratch = ObjectDictionary::default();
+                    pdo_map::add_mapping(&mut scratch, p.index, &p.name, &entries, fixed);
+                    if let Some(m) = scratch.object(p.index) {
+                        od.mappings_aside.insert(p.index, m.clone());
+                    }
+                } else {
+                    pdo_map::add_mapping(&mut od, p.index, &p.name, &entries, fixed);
+                }
             }
             let index = if rx { RX_ASSIGN } else { TX_ASSIGN };
             pdo_map::add_assignment(&mut od, index, &assign, pdos.len().max(assign.len()), !self.pdo_assign);

@@ -62,10 +62,10 @@ pub fn layout(od: &ObjectDictionary, rx: bool) -> Result<Layout, u16> {
     let count = a.entries.get(&0).map_or(0, Entry::int) as u8;
     for sub in 1..=count {
         let pdo = od.int(assign, sub) as u16;
-        let map = od.object(pdo).ok_or(pdo)?;
+        let map = od.mapping(pdo).ok_or(pdo)?;
         let n = map.entries.get(&0).map_or(0, Entry::int) as u8;
         for s in 1..=n {
-            let e = PdoEntry::from_u32(od.int(pdo, s) as u32);
+            let e = PdoEntry::from_u32(map.entries.get(&s).map_or(0, Entry::int) as u32);
             out.entries.push(MappedEntry { index: e.index, subindex: e.subindex, bit_offset: out.bits, bits: e.bits });
             out.bits += u32::from(e.bits);
         }
