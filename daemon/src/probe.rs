@@ -156,11 +156,10 @@ pub fn open(config: &Config) -> Result<Box<dyn Link>, Verdict> {
     open_link(config).map(|(link, _handle)| link).map_err(|e| device_failure(config, &e))
 }
 
-/// The cause and fix of a link that does not open, from the error's words
-/// (the GPIO crate's errors arrive as text) and the configuration.
+/// The cause and fix of a link that does not open, from the error's cause
+/// (the errno the link kept, not its words) and the configuration.
 fn device_failure(config: &Config, e: &StartError) -> Verdict {
     let what = e.to_string();
-    let text = what.to_lowercase();
     let (cause, fix) = match (e, &config.link) {
         (StartError::Network(_), _) => (
             "the simulator's network file has a mistake".to_string(),
@@ -170,19 +169,23 @@ fn device_failure(config: &Config, e: &StartError) -> Verdict {
             "this ecmxfd was built without the simulator".into(),
             "set link.backend = \"spidev\" for the chip, or build with the `sim` feature".into(),
         ),
-        (StartError::Link(_), LinkConfig::SimSocket { socket }) => (
-            if text.contains("refused") {
+        (StartError::Link(e), LinkConfig::SimSocket { socket }) => (
+            if matches!(e, LinkError::Io { source, .. } if source.kind() == std::io::ErrorKind::ConnectionRefused) {
                 "the socket file is left from a simulator that is no longer running".into()
             } else {
                 "no simulator serves this socket".into()
             },
             format!("start one: `ecmxf-sim serve --socket {}`", socket.display()),
         ),
-        (StartError::Link(LinkError::Io { what: op, .. }), LinkConfig::Spidev { device, gpio_chip, .. }) => {
+        (StartError::Link(LinkError::Io { what: op, source }), LinkConfig::Spidev { device, gpio_chip, .. }) => {
             let device = device.display();
             let chip = gpio_chip.as_ref().map_or("the GPIO chip".into(), |c| c.display().to_string());
             let gpio = op.starts_with("request ");
-            if text.contains("permission denied") {
+            // From the cause the link kept (the errno, or a path that is no
+            // GPIO chip), not from the message's words.
+            let errno = source.raw_os_error();
+            let not_chip = source.get_ref().is_some_and(|e| e.is::<crate::link::hardware::NotGpioChip>());
+            if errno == Some(nix::libc::EACCES) || errno == Some(nix::libc::EPERM) {
                 (
                     format!("this user may not open {}", if gpio { chip.as_str() } else { "the SPI device" }),
                     "run as root, or as a member of the group the .deb's udev rule (60-ecmxfd.rules) gives the \
@@ -190,31 +193,31 @@ fn device_failure(config: &Config, e: &StartError) -> Verdict {
                      must show group ecmxfd (else `sudo udevadm trigger`)"
                         .to_string(),
                 )
-            } else if text.contains("busy") {
+            } else if errno == Some(nix::libc::EBUSY) {
                 (
                     format!("another program holds the line ({op}): a running ecmxfd, or a GPIO tool"),
                     "stop it (`sudo systemctl stop ecmxfd`); `gpioinfo` names the line's consumer".to_string(),
                 )
-            } else if gpio && text.contains("no such file") {
+            } else if gpio && errno == Some(nix::libc::ENOENT) {
                 (
                     format!("{chip} does not exist"),
                     "`gpiodetect` lists the GPIO chips; set link.gpio_chip to the one the lines are on \
                      (Raspberry Pi 5: the RP1 chip, docs/raspberry-pi.md)"
                         .to_string(),
                 )
-            } else if gpio && text.contains("not a") && text.contains("character device") {
+            } else if gpio && not_chip {
                 (
                     format!("{chip} is not a GPIO chip"),
                     "`gpiodetect` lists the GPIO chips; set link.gpio_chip to one of them".to_string(),
                 )
-            } else if gpio && text.contains("invalid argument") {
+            } else if gpio && errno == Some(nix::libc::EINVAL) {
                 (
                     format!("{chip} has no such line"),
                     format!(
                         "`gpioinfo {chip}` lists its lines; set link.int0_line/int1_line to the offsets the pins are on"
                     ),
                 )
-            } else if text.contains("no such file") {
+            } else if errno == Some(nix::libc::ENOENT) {
                 (
                     format!(
                         "the kernel has no SPI device {device}: SPI is not enabled, or the device names another bus or chip select"
@@ -224,7 +227,7 @@ fn device_failure(config: &Config, e: &StartError) -> Verdict {
                      `ls /dev/spidev*` lists the devices; link.device must name one"
                         .to_string(),
                 )
-            } else if text.contains("inappropriate ioctl") {
+            } else if errno == Some(nix::libc::ENOTTY) {
                 (
                     format!("{device} is not an SPI device (spidev)"),
                     "set link.device to a /dev/spidevB.C node (`ls /dev/spidev*`)".to_string(),
@@ -830,25 +833,29 @@ mod tests {
         std::fs::remove_file(&file).unwrap();
         assert!(f.cause.contains("is not an SPI device"), "{f:?}");
 
-        // GPIO errors arrive as the gpiocdev crate's text.
-        let gpio = |text: &str| {
-            let e = StartError::Link(LinkError::io(
-                "request int0 line 24 on /dev/gpiochip0",
-                std::io::Error::other(text.to_string()),
-            ));
+        // GPIO errors keep the kernel's errno (or that the path is no GPIO
+        // chip); the diagnosis comes from it, whatever the words.
+        let gpio = |source: std::io::Error| {
+            let e = StartError::Link(LinkError::io("request int0 line 24 on /dev/gpiochip0", source));
             failed(device_failure(&config, &e))
         };
-        let f = gpio("uAPI GetLineRequest returned: Device or resource busy (os error 16)");
+        let os = std::io::Error::from_raw_os_error;
+        let f = gpio(os(nix::libc::EBUSY));
         assert!(f.cause.contains("another program holds the line"), "{f:?}");
         assert!(f.fix.contains("systemctl stop ecmxfd"), "{f:?}");
-        let f = gpio("No such file or directory (os error 2)");
+        let f = gpio(os(nix::libc::ENOENT));
         assert!(f.cause.contains("/dev/gpiochip0 does not exist") && f.fix.contains("gpiodetect"), "{f:?}");
-        let f = gpio("\"/dev/gpiochip0\" is not a character device.");
+        let not_chip = crate::link::hardware::NotGpioChip("/dev/gpiochip0".into(), "is not a character device".into());
+        let f = gpio(std::io::Error::other(not_chip));
         assert!(f.cause.contains("is not a GPIO chip"), "{f:?}");
-        let f = gpio("uAPI GetLineRequest returned: Invalid argument (os error 22)");
+        let f = gpio(os(nix::libc::EINVAL));
         assert!(f.cause.contains("has no such line") && f.fix.contains("gpioinfo /dev/gpiochip0"), "{f:?}");
-        let f = gpio("Permission denied (os error 13)");
+        let f = gpio(os(nix::libc::EACCES));
         assert!(f.cause.contains("may not open /dev/gpiochip0") && f.fix.contains("usermod -aG ecmxfd"), "{f:?}");
+        // Words alone no longer decide: a message that says "busy" with
+        // another cause is not taken for a held line.
+        let f = gpio(std::io::Error::other("the bus is busy"));
+        assert!(!f.cause.contains("another program holds the line"), "{f:?}");
     }
 
     #[cfg(feature = "sim")]

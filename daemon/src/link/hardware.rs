@@ -61,9 +61,32 @@ fn read_int0_edge(req: &Request, line: u32, last_ns: &mut u64, count: &mut u64) 
     Ok(())
 }
 
+/// A GPIO error as an `io::Error` that keeps what the kernel said: the
+/// errno of a failed system call (EACCES, EBUSY, ENOENT, EINVAL...), or
+/// [`NotGpioChip`] for a path that is no GPIO chip, so `ecmxfd probe`
+/// diagnoses from the cause, not from the text (issue 30).
 fn gpio_err(what: String, e: gpiocdev::Error) -> LinkError {
-    LinkError::io(what, std::io::Error::other(e.to_string()))
+    use gpiocdev::Error as G;
+    let source = match &e {
+        G::Os(errno) | G::Uapi(_, gpiocdev_uapi::Error::Os(errno)) => std::io::Error::from_raw_os_error(errno.0),
+        G::GpioChip(path, _) => std::io::Error::other(NotGpioChip(path.display().to_string(), e.to_string())),
+        _ => std::io::Error::other(e.to_string()),
+    };
+    LinkError::io(what, source)
 }
+
+/// The path configured as the GPIO chip is not one (not a character
+/// device, or not a GPIO one): the path, and gpiocdev's words for it.
+#[derive(Debug)]
+pub struct NotGpioChip(pub String, pub String);
+
+impl std::fmt::Display for NotGpioChip {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(&self.1)
+    }
+}
+
+impl std::error::Error for NotGpioChip {}
 
 impl HardwareLink {
     /// Opens and configures the SPI device and requests the lines.
