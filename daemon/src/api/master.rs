@@ -8,7 +8,7 @@ use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::master_server::Master as MasterApi;
 use ecmxf_proto::v1::slaves_server::Slaves as SlavesApi;
 use ecmxf_proto::v1::state_server::State as StateApi;
-use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
+use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::payload::state::SlaveSelector;
 use ecmxf_wire::{EcatState, al_status_text};
 use tonic::{Request, Response, Status};
@@ -133,10 +133,7 @@ pub struct SlavesService(pub Arc<Context>);
 
 /// One numeric item of slave information, read live (SLV_INFO_GET 15).
 async fn number(m: &Master, slave: u8, item: SlaveInfoCode) -> Result<u64, Status> {
-    let raw = m.slave_info(slave, item).await.map_err(to_status)?;
-    let decoded =
-        SlaveInfo::decode(item, &raw).map_err(|e| Status::internal(format!("{item} of slave {slave}: {e}")))?;
-    Ok(decoded.number().map_or(0, u64::from))
+    m.slave_number(slave, item).await.map(u64::from).map_err(to_status)
 }
 
 /// What differs between a found slave and its expectation ("" if nothing).
@@ -175,13 +172,12 @@ pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::List
         let state = EcatState::from_u8(number(m, p, SlaveInfoCode::State).await? as u8);
         let al = number(m, p, SlaveInfoCode::AlStatus).await? as u16;
         let (vendor_id, product_code, revision, name) = if fresh_identity {
-            let name = m.slave_info(p, SlaveInfoCode::Name).await.map_err(to_status)?;
-            let end = name.iter().position(|&c| c == 0).unwrap_or(name.len());
+            let name = m.slave_name(p).await.map_err(to_status)?;
             (
                 number(m, p, SlaveInfoCode::VendorId).await? as u32,
                 number(m, p, SlaveInfoCode::ProductCode).await? as u32,
                 number(m, p, SlaveInfoCode::Revision).await? as u32,
-                String::from_utf8_lossy(&name[..end]).into_owned(),
+                name,
             )
         } else {
             (s.vendor_id, s.product_code, s.revision, s.name.clone())

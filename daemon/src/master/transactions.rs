@@ -131,12 +131,33 @@ impl Master {
         Ok(EcatState::from_u8(d.first().copied().unwrap_or(0)))
     }
 
-    /// One item of slave information, as the chip answers it; decode with
-    /// [`SlaveInfo::decode`] for `item`.
+    /// One item of slave information, as the chip answers it (checked to
+    /// decode as `item`); [`Master::slave_number`] and
+    /// [`Master::slave_name`] decode it for callers.
     pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
         let d = self.request(SlotRequest::SlaveInfo { slave, item }, None).await?;
         SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("{item} of slave {slave}: {e}")))?;
         Ok(d)
+    }
+
+    /// A numeric item of slave information (state, AL status code,
+    /// identity, sizes, DC), decoded here once for every caller (the API,
+    /// the metrics).
+    pub async fn slave_number(&self, slave: u8, item: SlaveInfoCode) -> Result<u32, EngineError> {
+        let d = self.slave_info(slave, item).await?;
+        SlaveInfo::decode(item, &d)
+            .ok()
+            .and_then(|i| i.number())
+            .ok_or_else(|| EngineError::Failed(format!("{item} of slave {slave} is not a number")))
+    }
+
+    /// The slave's name as the chip reads it (up to the first NUL).
+    pub async fn slave_name(&self, slave: u8) -> Result<String, EngineError> {
+        let d = self.slave_info(slave, SlaveInfoCode::Name).await?;
+        match SlaveInfo::decode(SlaveInfoCode::Name, &d) {
+            Ok(SlaveInfo::Name(n)) => Ok(String::from_utf8_lossy(n).into_owned()),
+            _ => Err(EngineError::Failed(format!("the name of slave {slave} does not decode"))),
+        }
     }
 
     /// A slave's PDO assignment (`assign_index` 0x1C12 for RxPDOs, 0x1C13

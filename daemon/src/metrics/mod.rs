@@ -17,7 +17,7 @@ use std::sync::Arc;
 use std::time::Duration;
 
 use ecmxf_wire::EcatState;
-use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
+use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::watch;
@@ -58,16 +58,9 @@ fn state_value(s: EcatState) -> u8 {
 
 /// A slave's state and AL status code, read from the chip.
 async fn slave_state(master: &Master, slave: u8) -> Option<(EcatState, u16)> {
-    let read = |item| master.slave_info(slave, item);
-    let state = match SlaveInfo::decode(SlaveInfoCode::State, &read(SlaveInfoCode::State).await.ok()?) {
-        Ok(SlaveInfo::State(s)) => s,
-        _ => return None,
-    };
-    let code = match SlaveInfo::decode(SlaveInfoCode::AlStatus, &read(SlaveInfoCode::AlStatus).await.ok()?) {
-        Ok(SlaveInfo::AlStatus(c)) => c,
-        _ => return None,
-    };
-    Some((state, code))
+    let state = master.slave_number(slave, SlaveInfoCode::State).await.ok()?;
+    let code = master.slave_number(slave, SlaveInfoCode::AlStatus).await.ok()?;
+    Some((EcatState::from_u8(state as u8), code as u16))
 }
 
 /// One metric with a single sample.
