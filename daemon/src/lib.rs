@@ -7,7 +7,12 @@
 //!   fresh indices, retries that never execute a command twice.
 //! - [`engine`]: the thread that owns the chip: bring-up, cyclic FIFO
 //!   exchange, the blocking-slot transactions, supervision and recovery.
-//! - [`master`]: the async handle to the engine ([`master::Master`]).
+//! - [`master`]: the async handle to the engine ([`master::Master`]), and
+//!   the one door front ends use: it re-exports what they need of the
+//!   engine (errors, phases, events, layout, frame streams).
+//! - [`api`]: the gRPC front end (tonic): protobuf to and from the master's
+//!   domain, errors to status codes, authentication; imports the master
+//!   only (daemon/tests/layers.rs checks it).
 //! - [`outputs`]: client writes into the output image, and writer leases.
 //! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
 //! - [`config`]: the configuration file.

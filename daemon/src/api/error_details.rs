@@ -1,6 +1,6 @@
 //! A tower layer under the whole API that gives every error answer a full
 //! `google.rpc.Status` in `grpc-status-details-bin` (see
-//! [`status::with_details`](super::status::with_details)). Engine errors
+//! [`status::with_details`]). Engine errors
 //! already carry theirs ([`to_status`](super::status::to_status)); this
 //! covers the rest — the services' own checks, the authentication
 //! interceptor and tonic itself — in one place, for unary answers (the

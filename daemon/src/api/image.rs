@@ -76,7 +76,7 @@ pub struct Image {
 }
 
 impl Image {
-    /// Reads the PDOs of every slave with process data, [`BUILDERS`] slaves
+    /// Reads the PDOs of every slave with process data, `BUILDERS` slaves
     /// at a time, and lays them out as bring-up placed them (`key`).
     pub async fn build(master: &Arc<Master>, key: &LayoutKey) -> Result<Self, EngineError> {
         let mut image = Image {

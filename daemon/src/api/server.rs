@@ -1,8 +1,8 @@
 //! Serving: the Unix socket (created with the configured mode and group;
 //! a stale socket file from a crash is replaced, a live one is an error),
 //! optional TCP with TLS, health and reflection, and the background tasks
-//! the services rely on (lease expiry, newest inputs, emergency polling,
-//! health from bus state).
+//! the services rely on (the newest inputs for CiA 402 values, gRPC health
+//! from the bus state).
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;

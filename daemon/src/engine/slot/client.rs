@@ -1,7 +1,7 @@
 //! Whose turn a request is: the API runs each caller's work inside
 //! [`as_client`], and the master stamps every [`Job`](super::Job) it
 //! builds with that client's number ([`current_client`]), so the
-//! [`FairQueue`](super::FairQueue) can give clients turns.
+//! `FairQueue` can give clients turns.
 
 tokio::task_local! {
     /// The client the current task works for (see [`as_client`]).

@@ -6,11 +6,13 @@
 //!   travels ([`Job`]: deadline, one-shot reply, client).
 //! - [`client`]: whose turn a request is ([`as_client`]).
 //! - `fair`: the queue in front of the slot, round-robin between clients.
-//! - `transaction`: the one job on the slot, advanced one guarded call at a
-//!   time between FIFO exchanges (FoE transfers in `transaction/foe.rs`).
+//! - `transaction`: the one job on the slot (`Active`), advanced a step
+//!   at a time between FIFO exchanges (FoE transfers in
+//!   `transaction/foe.rs`).
 //!
-//! The running loop owns one [`Slot`] and asks it for the next job when the
-//! slot is free (see `engine::running`).
+//! The running loop owns the queue (`FairQueue`) and at most one
+//! `Active` transaction, and takes the next job when the slot is free
+//! (see `engine::running`).
 
 pub mod client;
 mod fair;
