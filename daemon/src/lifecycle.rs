@@ -42,8 +42,8 @@ pub enum DaemonError {
     Api(ServeError),
     /// The API server ended by itself.
     ApiEnded,
-    /// A task of the daemon panicked or was cancelled.
-    Task(String),
+    /// A task of the daemon panicked or was cancelled: which, and how.
+    Task(&'static str, tokio::task::JoinError),
     /// The engine stopped by itself (recovery disabled or given up); why it
     /// last failed, if it said.
     EngineStopped(Option<String>),
@@ -78,7 +78,7 @@ impl std::fmt::Display for DaemonError {
             Self::Start(e) => write!(f, "{e}"),
             Self::Api(e) => write!(f, "{e}"),
             Self::ApiEnded => f.write_str("the API server ended"),
-            Self::Task(e) => write!(f, "a daemon task failed: {e}"),
+            Self::Task(what, e) => write!(f, "{what} failed: {e}"),
             Self::EngineStopped(Some(why)) => write!(f, "the engine stopped: {why}"),
             Self::EngineStopped(None) => f.write_str("the engine stopped"),
             Self::Signals(e) => write!(f, "cannot listen for signals: {e}"),
@@ -184,12 +184,12 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
                 let why = match r {
                     Ok(Ok(())) => DaemonError::ApiEnded,
                     Ok(Err(e)) => DaemonError::Api(e),
-                    Err(e) => DaemonError::Task(format!("the API server: {e}")),
+                    Err(e) => DaemonError::Task("the API server", e),
                 };
                 notifier.send(&format!("STOPPING=1\nSTATUS=failed: {why}"));
                 layout_builder.abort();
                 let m = Arc::clone(&master);
-                tokio::task::spawn_blocking(move || m.stop()).await.map_err(|e| DaemonError::Task(e.to_string()))?;
+                tokio::task::spawn_blocking(move || m.stop()).await.map_err(|e| DaemonError::Task("stopping the engine", e))?;
                 return Err(why);
             }
             () = &mut shutdown => break,
@@ -234,7 +234,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
         server.abort();
     }
-    bus.await.map_err(|e| DaemonError::Task(e.to_string()))?;
+    bus.await.map_err(|e| DaemonError::Task("stopping the engine", e))?;
     info!(took_ms = started.elapsed().as_millis() as u64, "stopped");
     Ok(())
 }

@@ -36,18 +36,31 @@ use crate::master::Master;
 pub enum ServeError {
     /// The socket could not be set up; what and why.
     Socket(PathBuf, String),
-    /// TLS files unreadable or invalid.
-    Tls(String),
-    /// The server failed.
-    Transport(String),
+    /// A TLS file `api.tcp` needs is not configured (the key).
+    TlsNotSet(&'static str),
+    /// A TLS file could not be read: its key, path and the OS error.
+    TlsFile {
+        /// The configuration key, e.g. `tls_cert`.
+        key: &'static str,
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        source: std::io::Error,
+    },
+    /// The reflection service could not be built.
+    Reflection(tonic_reflection::server::Error),
+    /// The server (or its TLS configuration) failed.
+    Transport(tonic::transport::Error),
 }
 
 impl std::fmt::Display for ServeError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Socket(p, why) => write!(f, "API socket {}: {why}", p.display()),
-            Self::Tls(why) => write!(f, "API TLS: {why}"),
-            Self::Transport(why) => write!(f, "API server: {why}"),
+            Self::TlsNotSet(key) => write!(f, "API TLS: api.{key} is not set"),
+            Self::TlsFile { key, path, source } => write!(f, "API TLS: api.{key} {}: {source}", path.display()),
+            Self::Reflection(e) => write!(f, "API server: reflection: {e}"),
+            Self::Transport(e) => write!(f, "API server: {e}"),
         }
     }
 }
@@ -85,12 +98,12 @@ fn routes(
         .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1()
-        .map_err(|e| ServeError::Transport(format!("reflection: {e}")))?;
+        .map_err(ServeError::Reflection)?;
     let v1alpha = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1alpha()
-        .map_err(|e| ServeError::Transport(format!("reflection: {e}")))?;
+        .map_err(ServeError::Reflection)?;
     let c = || Arc::clone(ctx);
     Ok(Routes::new(health)
         .add_service(v1)
@@ -178,9 +191,9 @@ fn describe(t: &std::fs::FileType) -> &'static str {
 }
 
 fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
-    let read = |p: &Option<PathBuf>, what: &str| -> Result<Vec<u8>, ServeError> {
-        let p = p.as_ref().ok_or_else(|| ServeError::Tls(format!("api.{what} is not set")))?;
-        std::fs::read(p).map_err(|e| ServeError::Tls(format!("api.{what} {}: {e}", p.display())))
+    let read = |p: &Option<PathBuf>, what: &'static str| -> Result<Vec<u8>, ServeError> {
+        let p = p.as_ref().ok_or(ServeError::TlsNotSet(what))?;
+        std::fs::read(p).map_err(|source| ServeError::TlsFile { key: what, path: p.clone(), source })
     };
     let mut tls = ServerTlsConfig::new()
         .identity(Identity::from_pem(read(&config.tls_cert, "tls_cert")?, read(&config.tls_key, "tls_key")?));
@@ -271,7 +284,7 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
     let result = if let Some(addr) = config.tcp {
         let tcp = Server::builder()
             .tls_config(tls(&config)?)
-            .map_err(|e| ServeError::Tls(e.to_string()))?
+            .map_err(ServeError::Transport)?
             .layer(ErrorDetailsLayer)
             .add_routes(routes)
             .serve_with_shutdown(addr, async move {
@@ -284,7 +297,7 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
     };
     tasks.abort_all();
     let _ = std::fs::remove_file(&path);
-    result.map_err(|e| ServeError::Transport(e.to_string()))
+    result.map_err(ServeError::Transport)
 }
 
 #[cfg(test)]

@@ -176,8 +176,8 @@ impl std::fmt::Display for Health {
 pub enum StartError {
     /// The link could not be opened.
     Link(LinkError),
-    /// The simulator's network file is wrong.
-    Network(String),
+    /// The simulator's network file is wrong (file, line and key in it).
+    Network(crate::config::ConfigError),
     /// The configuration asks for the simulator, and this daemon was built
     /// without it.
     NoSimulator,
@@ -233,8 +233,8 @@ pub fn open_link(config: &Config) -> Result<(Box<dyn Link>, Option<SimHandle>), 
             let (net, chip_config) = match network {
                 None => (ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()),
                 Some(p) => {
-                    let f = ecmxf_sim::config::NetworkFile::load(p).map_err(|e| StartError::Network(e.to_string()))?;
-                    (f.build(p).map_err(|e| StartError::Network(e.to_string()))?, f.chip_config())
+                    let f = ecmxf_sim::config::NetworkFile::load(p).map_err(StartError::Network)?;
+                    (f.build(p).map_err(StartError::Network)?, f.chip_config())
                 }
             };
             let (link, handle) = SimLink::new(ecmxf_sim::Chip::new(net, chip_config));
