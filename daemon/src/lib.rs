@@ -5,7 +5,7 @@
 //!   simulator socket).
 //! - [`port`]: packet exchange with the chip's rules: one-behind answers,
 //!   fresh indices, retries that never execute a command twice.
-//! - [`engine`]: the thread that owns the chip: bring-up, cyclic FIFO
+//! - `engine` (private): the thread that owns the chip: bring-up, cyclic FIFO
 //!   exchange, the blocking-slot transactions, supervision and recovery.
 //! - [`master`]: the async handle to the engine ([`master::Master`]), and
 //!   the one door front ends use: it re-exports what they need of the
@@ -27,7 +27,7 @@
 
 pub mod api;
 pub mod config;
-pub mod engine;
+pub(crate) mod engine;
 pub mod lifecycle;
 pub mod link;
 pub mod master;

@@ -139,7 +139,7 @@ fn probe(config: &Config, path: Option<&std::path::Path>, force: bool) -> ExitCo
 #[cfg(feature = "sim")]
 fn offline_budget(
     c: &Config,
-) -> Option<Result<ecmxfd::engine::link_budget::LinkBudget, ecmxfd::engine::link_budget::BudgetError>> {
+) -> Option<Result<ecmxfd::master::link_budget::LinkBudget, ecmxfd::master::link_budget::BudgetError>> {
     let LinkConfig::Sim { network } = &c.link else { return None };
     let (net, chip) = match network {
         None => (ecmxf_sim::Network::demo(), ecmxf_sim::ChipConfig::default()),
@@ -151,8 +151,8 @@ fn offline_budget(
     let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
     let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();
     let data_size = c.chip.data_size;
-    let packet_ns = ecmxfd::engine::link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
-    Some(ecmxfd::engine::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
+    let packet_ns = ecmxfd::master::link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
+    Some(ecmxfd::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
 }
 
 /// The simulator's network file, loaded and built as the daemon will
@@ -208,7 +208,7 @@ fn check_network(_: &Config, _: &std::path::Path) -> Result<(), ecmxfd::config::
 #[cfg(not(feature = "sim"))]
 fn offline_budget(
     _: &Config,
-) -> Option<Result<ecmxfd::engine::link_budget::LinkBudget, ecmxfd::engine::link_budget::BudgetError>> {
+) -> Option<Result<ecmxfd::master::link_budget::LinkBudget, ecmxfd::master::link_budget::BudgetError>> {
     None
 }
 

@@ -8,10 +8,10 @@ use ecmxf_sim::Chip;
 use ecmxf_wire::payload::cia402::Cia402State;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
-use ecmxfd::engine::slot::Immediate;
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::SimLink;
+use ecmxfd::master::Immediate;
 use ecmxfd::master::Master;
+use ecmxfd::master::Phase;
 
 /// Asks the chip's CiA402 helper to enable axis 0, as Cia402.Command ENABLE does.
 async fn enable(m: &Master) {
@@ -293,7 +293,7 @@ fn a_new_configuration_is_applied_while_running() {
         let mut other = new.clone();
         other.link = ecmxfd::config::LinkConfig::SimSocket { socket: "/tmp/x.sock".into() };
         let e = m.apply_config(other, None).await.unwrap_err();
-        assert!(matches!(e, ecmxfd::engine::error::EngineError::BadArgument { field: "link", .. }), "{e}");
+        assert!(matches!(e, ecmxfd::master::EngineError::BadArgument { field: "link", .. }), "{e}");
         let mut other = new.clone();
         other.cycle.sync0_us = 100;
         let e = m.apply_config(other, None).await.unwrap_err();

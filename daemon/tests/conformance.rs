@@ -23,8 +23,8 @@ use std::time::{Duration, Instant};
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice, CatalogEntry};
 use ecmxf_sim::config::SlaveSection;
 use ecmxfd::config::{Config, LinkConfig, SlaveConfig};
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::master::Master;
+use ecmxfd::master::Phase;
 use ecmxfd::master::pdos::{PdoSource, SlavePdos};
 
 fn fixtures() -> Option<PathBuf> {

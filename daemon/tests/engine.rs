@@ -9,11 +9,11 @@ use ecmxf_wire::EcatState;
 use ecmxf_wire::payload::sdo::SdoAbortCode;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
-use ecmxfd::engine::error::EngineError;
-use ecmxfd::engine::events::EventKind;
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::{SimHandle, SimLink};
+use ecmxfd::master::EngineError;
+use ecmxfd::master::EventKind;
 use ecmxfd::master::Master;
+use ecmxfd::master::Phase;
 
 /// One engine at a time: each runs a simulated chip in real time, and four
 /// of them on two cores would measure the machine, not the engine.
@@ -376,7 +376,7 @@ fn raw_datagrams_reach_the_slaves_registers() {
 
 #[test]
 fn foe_files_go_to_a_slave_and_come_back() {
-    use ecmxfd::engine::slot::TransferProgress;
+    use ecmxfd::master::TransferProgress;
     let (m, sim, _serial) = start();
     // Larger than one chunk and not a multiple of it.
     let file: Vec<u8> = (0..5000u32).map(|i| (i * 7 + i / 251) as u8).collect();

@@ -11,9 +11,9 @@ use std::time::{Duration, Instant};
 
 use ecmxf_sim::Chip;
 use ecmxfd::config::Config;
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::SimLink;
 use ecmxfd::master::Master;
+use ecmxfd::master::Phase;
 
 /// (slave, index, size): writable objects no PDO maps, one per task.
 fn owned_objects() -> Vec<(u8, u16, usize)> {

@@ -16,10 +16,10 @@ use std::time::{Duration, Instant};
 
 use ecmxf_sim::Chip;
 use ecmxfd::config::Config;
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::sim::SimLink;
 use ecmxfd::link::{Link, LinkError};
 use ecmxfd::master::Master;
+use ecmxfd::master::Phase;
 
 /// Counts allocations made on the engine thread while [`WINDOW`] is open.
 struct Counting;

@@ -54,7 +54,7 @@ fn main() -> Result<(), String> {
     let config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
     let sim_config = ecmxf_sim::ChipConfig::default();
     let data_size = config.chip.data_size;
-    let modelled_ns = ecmxfd::engine::link_budget::clocked_ns(data_size, sim_config.spi_hz) + sim_config.processing_ns;
+    let modelled_ns = ecmxfd::master::link_budget::clocked_ns(data_size, sim_config.spi_hz) + sim_config.processing_ns;
     let modelled_rate = 1e9 / modelled_ns as f64;
 
     // 1. Raw port rate: guarded INFO_UPDATEs back to back.
@@ -199,7 +199,7 @@ fn main() -> Result<(), String> {
 fn plan_minimum(master: &Master, data_size: usize, packet_ns: u64) -> f64 {
     let l = master.layout();
     let cycle_ns = u64::from(master.config().cycle.sync0_us) * 1000;
-    ecmxfd::engine::link_budget::check(data_size, l.rx_size, l.tx_size, packet_ns, cycle_ns)
+    ecmxfd::master::link_budget::check(data_size, l.rx_size, l.tx_size, packet_ns, cycle_ns)
         .map_or(f64::NAN, |b| b.min_exchanges_per_s())
 }
 

@@ -147,11 +147,6 @@ impl Cyclic {
         (now.saturating_duration_since(t).as_nanos() / self.cycle.as_nanos().max(1)) as u64
     }
 
-    /// The levels kept.
-    pub fn levels(&self) -> Levels {
-        self.levels
-    }
-
     /// Whether the RxFIFO is below its floor (plus a margin of two
     /// frames): never for a network without outputs, which has none to keep.
     pub fn outputs_low(&self, now: Instant) -> bool {
@@ -197,11 +192,6 @@ impl Cyclic {
         };
         let cap = since + (self.cycle * self.levels.cap_cycles).min(MAX_EXCHANGE_INTERVAL);
         now.checked_add(by_level).unwrap_or(cap).min(by_inputs).min(cap)
-    }
-
-    /// The bytes of `n` output frames, each the current image.
-    pub fn push_bytes(&mut self, n: u8) -> &[u8] {
-        self.push_frames(n, &mut [])
     }
 
     /// The bytes of `n` output frames: each the current image, after the
@@ -416,7 +406,7 @@ mod tests {
     fn push_bytes_repeat_the_image() {
         let (mut cy, _) = cyclic();
         cy.outputs.copy_from_slice(&[1, 2, 3, 4]);
-        assert_eq!(cy.push_bytes(2), &[1, 2, 3, 4, 1, 2, 3, 4]);
+        assert_eq!(cy.push_frames(2, &mut []), &[1, 2, 3, 4, 1, 2, 3, 4]);
     }
 
     #[test]

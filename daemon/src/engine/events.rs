@@ -109,7 +109,7 @@ pub enum EventKind {
     Emergency(EmergencyRecord),
     /// A client's write reached the wire later than
     /// `cycle.output_latency_us` allows (told at most every
-    /// [`COUNTER_QUIET`]): the host stalled longer than the FIFO's margin.
+    /// `COUNTER_QUIET`): the host stalled longer than the FIFO's margin.
     OutputLate {
         /// The budget, us.
         budget_us: u32,

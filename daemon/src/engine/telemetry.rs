@@ -290,7 +290,7 @@ impl Snapshot {
     }
 
     /// What a waiter may be waiting for: when it changes, the engine sends
-    /// a snapshot at once (see [`Telemetry::announce`]).
+    /// a snapshot at once (see `Telemetry::announce`).
     pub fn key(&self) -> (Phase, EcatState, u64, u64) {
         (self.phase, self.ecat_state, self.config_generation, self.recoveries)
     }

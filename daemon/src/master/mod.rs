@@ -73,7 +73,8 @@ pub use crate::engine::error::{EngineError, NotRunning, WrongState};
 pub use crate::engine::events::{Event, EventKind};
 pub use crate::engine::frames::{FrameError, FrameProducer, MAX_STREAMS, Played};
 pub use crate::engine::layout::{NetworkLayout, SlaveSummary};
-pub use crate::engine::slot::TransferProgress;
+pub use crate::engine::link_budget;
+pub use crate::engine::slot::{Immediate, TransferProgress};
 pub use crate::engine::telemetry::{Phase, Snapshot};
 
 /// [`Master::verdict`]: the health, and the input age it was judged on.

@@ -7,9 +7,9 @@ use std::process::{Child, Command};
 use std::time::{Duration, Instant};
 
 use ecmxfd::config::Config;
-use ecmxfd::engine::telemetry::Phase;
 use ecmxfd::link::socket::SocketLink;
 use ecmxfd::master::Master;
+use ecmxfd::master::Phase;
 
 /// A simulator process, killed on drop.
 pub struct Sim {

@@ -39,11 +39,6 @@ impl FlowWatch {
         Self { limit, newest: now, flowed: false, empty_after_limit: 0 }
     }
 
-    /// The limit in force.
-    pub fn limit(&self) -> Duration {
-        self.limit
-    }
-
     /// Whether any frame arrived in this run.
     pub fn flowed(&self) -> bool {
         self.flowed

@@ -24,7 +24,9 @@ use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 use ecmxf_wire::{EcatState, ResponseHeader};
 
 pub use cause::RecoverCause;
-pub use flow::{FlowWatch, STALL_ANSWERS, flow_limit};
+#[cfg(test)]
+use flow::STALL_ANSWERS;
+pub use flow::{FlowWatch, flow_limit};
 
 /// Working-counter errors this long in a row mean a slave left the
 /// exchange (lost, or dropped to a lower state): recover.
@@ -94,11 +96,6 @@ impl Supervisor {
             last_census: now,
             stall: None,
         }
-    }
-
-    /// The shape of this run.
-    pub fn shape(&self) -> &RunShape {
-        &self.shape
     }
 
     /// Judges the header of an answer at `now`. `held`: a client holds
