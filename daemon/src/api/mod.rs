@@ -51,8 +51,9 @@ pub struct Context {
     pub sdo_latency: Arc<crate::metrics::Histogram>,
     /// The process image, named.
     pub image: image::ImageCache,
-    /// Output leases.
-    pub leases: leases::Leases,
+    /// Output leases: the master's table (domain state), shown through
+    /// [`leases`].
+    pub leases: crate::master::Leases,
     /// Default lease time-to-live.
     pub lease_ttl: Duration,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
@@ -78,7 +79,7 @@ impl Context {
             auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
             sdo_latency: Arc::default(),
             image: image::ImageCache::default(),
-            leases: leases::Leases::default(),
+            leases: crate::master::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             latest: tokio::sync::watch::Sender::new(None),

@@ -14,6 +14,7 @@ use super::auth::Role;
 use super::bounded;
 use super::convert::{encode, existing_slave, pb_type};
 use super::image::{Entry, Image, entry_value, write_bits};
+use super::leases;
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
 use crate::master::EngineError;
@@ -211,7 +212,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
     helper_bits_untouched(ctx, &layout.slaves, &staged, lo, hi)?;
     let slave_of =
         |b: usize| layout.slaves.iter().position(|s| b >= s.rx_offset && b < s.rx_offset + s.rx_bytes).map(|p| p as u8);
-    ctx.leases.write(lease_id, lo, &staged[lo..hi], slave_of)?;
+    ctx.leases.write(lease_id, lo, &staged[lo..hi], slave_of).map_err(leases::status)?;
     *shadow = staged;
     Ok(())
 }
@@ -429,12 +430,16 @@ impl ProcessDataApi for ProcessDataService {
             100..=60_000 => Duration::from_millis(r.ttl_ms.into()),
             v => return Err(bad_argument("ttl_ms", format!("{v} ms is outside 100..=60000"))),
         };
-        Ok(Response::new(self.0.leases.acquire(&self.0.master, &r.slaves, ttl, &caller.who)?))
+        let count = self.0.master.layout().slaves.len();
+        let slaves = r.slaves.iter().map(|&s| existing_slave(s, count, "slaves")).collect::<Result<Vec<u8>, _>>()?;
+        let lease = self.0.leases.acquire(&self.0.master, &slaves, ttl, &caller.who).map_err(leases::status)?;
+        Ok(Response::new(leases::to_pb(&lease)))
     }
 
     async fn keep_alive(&self, request: Request<pb::KeepAliveRequest>) -> Result<Response<pb::Lease>, Status> {
         self.0.authorize(&request, Role::Operator)?;
-        Ok(Response::new(self.0.leases.keep_alive(&request.get_ref().lease_id)?))
+        let lease = self.0.leases.keep_alive(&request.get_ref().lease_id).map_err(leases::status)?;
+        Ok(Response::new(leases::to_pb(&lease)))
     }
 
     async fn release_lease(
@@ -442,7 +447,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::ReleaseLeaseRequest>,
     ) -> Result<Response<pb::ReleaseLeaseResponse>, Status> {
         self.0.authorize(&request, Role::Operator)?;
-        self.0.leases.release(&request.get_ref().lease_id)?;
+        self.0.leases.release(&request.get_ref().lease_id).map_err(leases::status)?;
         Ok(Response::new(pb::ReleaseLeaseResponse {}))
     }
 

@@ -33,6 +33,7 @@ use ecmxf_wire::EcatState;
 pub use transactions::RawAnswer;
 
 pub mod esi;
+mod leases;
 pub mod mailbox;
 mod network;
 pub mod pdos;
@@ -76,6 +77,7 @@ pub use crate::engine::layout::{NetworkLayout, SlaveSummary};
 pub use crate::engine::link_budget;
 pub use crate::engine::slot::{Immediate, TransferProgress};
 pub use crate::engine::telemetry::{Phase, Snapshot};
+pub use leases::{Lease, LeaseError, Leases};
 
 /// [`Master::verdict`]: the health, and the input age it was judged on.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
