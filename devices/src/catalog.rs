@@ -215,8 +215,8 @@ impl Catalog {
     pub fn scan(dir: &Path) -> std::io::Result<Self> {
         let mut out = Catalog::default();
         for file in files(dir, "xml")? {
-            let text = match std::fs::read(&file) {
-                Ok(b) => String::from_utf8_lossy(&b).into_owned(),
+            let text = match crate::esi::read_xml(&file) {
+                Ok(t) => t,
                 Err(e) => {
                     out.failed.push(format!("{}: {e}", file.display()));
                     continue;

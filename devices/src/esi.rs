@@ -211,6 +211,13 @@ pub struct EsiFile {
     pub skipped: Vec<String>,
 }
 
+/// An ESI file's text, as every reader of one takes it: vendors' files are
+/// not always UTF-8 (Latin-1 umlauts in names), and a byte that is not is
+/// replaced, never a reason to refuse the file.
+pub fn read_xml(path: &std::path::Path) -> std::io::Result<String> {
+    std::fs::read(path).map(|b| String::from_utf8_lossy(&b).into_owned())
+}
+
 impl EsiFile {
     /// Parses ESI XML.
     pub fn parse(xml: &str) -> Result<Self, EsiError> {

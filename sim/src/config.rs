@@ -246,7 +246,7 @@ impl SlaveSection {
             (None, Some(esi)) => {
                 let path = base.join(esi);
                 let text =
-                    std::fs::read_to_string(&path).map_err(|e| invalid("esi", format!("{}: {e}", path.display())))?;
+                    crate::net::esi::read_xml(&path).map_err(|e| invalid("esi", format!("{}: {e}", path.display())))?;
                 let f = EsiFile::parse(&text).map_err(|e| invalid("esi", format!("{}: {e}", path.display())))?;
                 let code = match self.product_code {
                     Some(c) => c,

@@ -282,6 +282,14 @@ pub fn with_token<T>(msg: T, token: &str) -> tonic::Request<T> {
     r
 }
 
+/// A write of `kind` to the named process-image entry.
+pub fn by_entry(name: &str, kind: pb::value::Kind) -> pb::OutputWrite {
+    pb::OutputWrite {
+        target: Some(pb::output_write::Target::Entry(name.into())),
+        value: Some(pb::Value { kind: Some(kind) }),
+    }
+}
+
 /// A harmless SDO write (the TI drive's quick stop option code := 2).
 pub fn sdo_write() -> pb::SdoDownloadRequest {
     pb::SdoDownloadRequest {

@@ -20,9 +20,7 @@ fn value(kind: Kind) -> Option<pb::Value> {
     Some(pb::Value { kind: Some(kind) })
 }
 
-fn write(name: &str, kind: Kind) -> pb::OutputWrite {
-    pb::OutputWrite { target: Some(pb::output_write::Target::Entry(name.into())), value: value(kind) }
-}
+use ecmxf_e2e::by_entry as write;
 
 #[test]
 fn a_write_that_does_not_fit_its_target_is_refused_whole_and_nothing_changes() {

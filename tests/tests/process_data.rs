@@ -5,7 +5,7 @@
 
 use std::time::{Duration, Instant};
 
-use ecmxf_e2e::{Daemon, run};
+use ecmxf_e2e::{Daemon, by_entry, run};
 use ecmxf_proto::v1 as pb;
 use ecmxf_sim::chip::fifo::PlayedFrame;
 use ecmxfd::realtime::monotonic_ns;
@@ -17,13 +17,6 @@ use tonic::Code;
 
 fn raw(b: Vec<u8>) -> Option<pb::Value> {
     Some(pb::Value { kind: Some(Kind::Raw(b)) })
-}
-
-fn by_entry(name: &str, kind: Kind) -> pb::OutputWrite {
-    pb::OutputWrite {
-        target: Some(pb::output_write::Target::Entry(name.into())),
-        value: Some(pb::Value { kind: Some(kind) }),
-    }
 }
 
 #[test]

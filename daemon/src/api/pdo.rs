@@ -111,23 +111,25 @@ fn helper_bits_untouched(
     lo: usize,
     hi: usize,
 ) -> Result<(), Status> {
-    for (n, a) in ctx.master.axes().iter().enumerate() {
-        let Some(s) = slaves.get(usize::from(a.slave)) else { continue };
-        let at = s.rx_offset + usize::from(a.controlword_offset);
-        if at + 2 > staged.len() || at + 2 <= lo || at >= hi {
-            continue;
+    ctx.master.with_axes(|axes| {
+        for (n, a) in axes.iter().enumerate() {
+            let Some(s) = slaves.get(usize::from(a.slave)) else { continue };
+            let at = s.rx_offset + usize::from(a.controlword_offset);
+            if at + 2 > staged.len() || at + 2 <= lo || at >= hi {
+                continue;
+            }
+            let set = u16::from_le_bytes([staged[at], staged[at + 1]]) & HELPER_BITS;
+            if set != 0 {
+                return Err(Status::failed_precondition(format!(
+                    "axis {n} (slave {}, controlword at output byte {at}): bits 0-3 and 7 are driven by the chip's \
+                     CiA 402 helper ([[axis]]), and this write sets {set:#06x} of them; use Cia402.Command to \
+                     change the drive's state, and write only bits 4-6 and 8-15 here",
+                    a.slave
+                )));
+            }
         }
-        let set = u16::from_le_bytes([staged[at], staged[at + 1]]) & HELPER_BITS;
-        if set != 0 {
-            return Err(Status::failed_precondition(format!(
-                "axis {n} (slave {}, controlword at output byte {at}): bits 0-3 and 7 are driven by the chip's \
-                 CiA 402 helper ([[axis]]), and this write sets {set:#06x} of them; use Cia402.Command to change \
-                 the drive's state, and write only bits 4-6 and 8-15 here",
-                a.slave
-            )));
-        }
-    }
-    Ok(())
+        Ok(())
+    })
 }
 
 /// A value for an entry of `bits` bits must be exactly its bytes (a bit

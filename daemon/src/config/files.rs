@@ -19,8 +19,8 @@ impl Config {
         for (i, s) in self.slaves.iter().enumerate() {
             if let Some(esi) = &s.esi {
                 let key = format!("slave[{i}].esi");
-                let bytes = std::fs::read(esi).map_err(|e| bad(key.clone(), format!("{}: {e}", esi.display())))?;
-                let text = String::from_utf8_lossy(&bytes);
+                let text = ecmxf_devices::esi::read_xml(esi)
+                    .map_err(|e| bad(key.clone(), format!("{}: {e}", esi.display())))?;
                 let file = ecmxf_devices::esi::EsiFile::parse(&text)
                     .map_err(|e| bad(key.clone(), format!("{}: {e}", esi.display())))?;
                 if file.devices.is_empty() {

@@ -365,7 +365,6 @@ impl<L: Link> Engine<L> {
         self.announce(Instant::now());
     }
 
-    /// A recovery started: counted, and said to waiters at once.
     /// The network runs again after a fault: process data flows (the
     /// first input frame), or there is none to exchange. RECOVERED is said
     /// then and only then, never while nothing arrives.
@@ -377,6 +376,7 @@ impl<L: Link> Engine<L> {
         }
     }
 
+    /// A recovery started: counted, and said to waiters at once.
     fn count_recovery(&mut self) {
         self.telemetry.recoveries.fetch_add(1, Relaxed);
         self.announce(Instant::now());

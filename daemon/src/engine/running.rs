@@ -109,8 +109,7 @@ impl<L: Link> Engine<L> {
     }
 
     /// The cause, with the slaves' AL status codes read and reported where
-    /// a slave is at fault.
-    /// A slave that reports an AL status code is the cause of missing
+    /// a slave is at fault. A slave that reports an AL status code is the cause of missing
     /// working counters or a stopped exchange, not their symptom: the
     /// cause is then `slave_error` naming it and its code. A chip that
     /// stopped answering intact is asked what it is now: one back at its

@@ -38,7 +38,7 @@ impl EsiLibrary {
         }
         let owned = path.to_path_buf();
         let parsed = tokio::task::spawn_blocking(move || {
-            let xml = std::fs::read_to_string(&owned).map_err(|e| e.to_string())?;
+            let xml = ecmxf_devices::esi::read_xml(&owned).map_err(|e| e.to_string())?;
             EsiFile::parse(&xml).map_err(|e| e.to_string())
         })
         .await

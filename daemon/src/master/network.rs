@@ -88,10 +88,10 @@ impl Master {
         self.config.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
-    /// The `[[axis]]` entries in force (the chip's CiA 402 helper), without
-    /// copying the rest of the configuration: asked on every output write.
-    pub fn axes(&self) -> Vec<crate::config::AxisConfig> {
-        self.config.lock().unwrap_or_else(|e| e.into_inner()).axes.clone()
+    /// `f` over the `[[axis]]` entries in force (the chip's CiA 402
+    /// helper): asked on every output write, so nothing is copied.
+    pub fn with_axes<R>(&self, f: impl FnOnce(&[crate::config::AxisConfig]) -> R) -> R {
+        f(&self.config.lock().unwrap_or_else(|e| e.into_inner()).axes)
     }
 
     fn running_or_unavailable(&self) -> Result<(), EngineError> {

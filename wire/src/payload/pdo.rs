@@ -99,6 +99,17 @@ impl PdoConfigForm {
         }
     }
 
+    /// The form with what its prefix says (the 156-byte form's vendor id
+    /// and product code), read from the front of `r`.
+    fn read_prefix(self, r: &mut Reader<'_>) -> Result<Self, PayloadError> {
+        Ok(match self {
+            Self::Identified { .. } => {
+                Self::Identified { vendor_id: r.u32("vendor id")?, product_code: r.u32("product code")? }
+            }
+            other => other,
+        })
+    }
+
     /// PDO slots the form carries.
     pub const fn slots(self) -> usize {
         match self {
@@ -204,12 +215,7 @@ impl PdoConfig {
 
     fn read(data: &[u8], form: PdoConfigForm) -> Result<Self, PayloadError> {
         let mut r = Reader::new(data);
-        let form = match form {
-            PdoConfigForm::Identified { .. } => {
-                PdoConfigForm::Identified { vendor_id: r.u32("vendor id")?, product_code: r.u32("product code")? }
-            }
-            other => other,
-        };
+        let form = form.read_prefix(&mut r)?;
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;
         let pdo_count = r.u8("PDO count")?;
@@ -306,12 +312,7 @@ impl<'a> Request<'a> for PdoConfigReq {
             fixed_len(fields, Self::CODE, 4)?;
         }
         let mut r = Reader::new(data);
-        let form = match form {
-            PdoConfigForm::Identified { .. } => {
-                PdoConfigForm::Identified { vendor_id: r.u32("vendor id")?, product_code: r.u32("product code")? }
-            }
-            other => other,
-        };
+        let form = form.read_prefix(&mut r)?;
         let slave = r.u8("slave")?;
         expect_range("slave", slave.into(), 0, 127)?;
         let _ = r.u8("reserved")?;

@@ -12,8 +12,9 @@
 //! started): one exchange instead of the guard's two. When that answer is
 //! lost to a bit error, the next header the chip builds decides: busy, the
 //! read runs; not busy, it is sent again (it never ran, or it already
-//! ended: either way a second run is the answer). Never a result of the transaction before it: a GET is
-//! only believed after a start the chip confirmed.
+//! ended: either way a second run is the answer). Never a result of the
+//! transaction before it: a GET is only believed after a start the chip
+//! confirmed.
 //!
 //! Polls cost one exchange each and say as much as they can: where the
 //! result is read with a repeatable GET (SDO_GET, EEPROM_GET: a non-blocking
@@ -546,7 +547,7 @@ impl Active {
                 let code = SdoAbortReply::decode(&fields(&a), a.data).map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
-            (SlotRequest::SdoRead { slave, index, subindex, .. }, false) => {
+            (SlotRequest::SdoRead { .. }, false) => {
                 let a = match self.fetched(port) {
                     Some(a) => a,
                     None => port.call(&SdoGet)?,
@@ -555,9 +556,10 @@ impl Active {
                 // with a nonzero code is not this read's value.
                 match a.header.return_value {
                     0 => Ok(fill(&mut self.buffer, &[a.data])),
-                    code => Err(EngineError::Failed(format!(
-                        "SDO read {index:#06x}:{subindex} of slave {slave}: SDO_GET reports error code {code}"
-                    ))),
+                    code => {
+                        let what = self.request.to_string();
+                        Err(EngineError::Failed(format!("{what}: SDO_GET reports error code {code}")))
+                    }
                 }
             }
             (SlotRequest::SdoWrite { .. }, false) => Ok(Vec::new()),
