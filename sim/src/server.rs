@@ -6,10 +6,11 @@
 //! Every message, both ways, is an 8-byte header and a payload:
 //! `kind: u8, flags: u8, reserved: u16 = 0, length: u32 LE`.
 
+use std::collections::HashMap;
 use std::io::{self, Read, Write};
 use std::os::unix::net::{UnixListener, UnixStream};
 use std::path::Path;
-use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
 use std::sync::{Arc, Mutex, MutexGuard};
 use std::thread;
 use std::time::{Duration, Instant};
@@ -34,6 +35,25 @@ pub const KIND_WAIT_INT1: u8 = 0x04;
 /// transfer, or flags bit7 and no payload when INT0 stayed inactive (nothing
 /// was clocked). One round trip per exchange instead of two.
 pub const KIND_TRANSFER_WHEN_READY: u8 = 0x05;
+/// One transfer with a forecast of INT0, for hosts that see the line as a
+/// kernel does (edge events; the preload emulation of spidev and the GPIO
+/// character device, sim/hw-emu): payload = MOSI; reply payload = MISO
+/// followed by a [`Forecast`] (13 bytes), flags = lines after the transfer.
+pub const KIND_TRANSFER_FORECAST: u8 = 0x06;
+/// Wait until the lines change: payload = timeout (u32 LE, us), mask (u8),
+/// the lines as the host knows them (u8); the server waits until `lines &
+/// mask` differs from them or the time-out. Reply flags = lines, payload =
+/// 1 byte (1 = changed) followed by a [`Forecast`]. Catches what no
+/// transfer causes: `int0 stuck`, INT1 events.
+pub const KIND_WAIT_LINES: u8 = 0x07;
+/// Claim GPIO lines for this connection, as a line request does in the
+/// kernel: payload = UTF-8 `CHIP CONSUMER OFFSET...`; reply flags 0 =
+/// claimed, 1 = a line is held by another connection (payload: its
+/// consumer). Claims end when the connection closes.
+pub const KIND_GPIO_CLAIM: u8 = 0x08;
+/// Who holds a GPIO line: payload = UTF-8 `CHIP OFFSET`; reply flags 0 =
+/// free, 1 = held (payload: the consumer).
+pub const KIND_GPIO_OWNER: u8 = 0x09;
 /// Reply flag of [`KIND_TRANSFER_WHEN_READY`]: timed out, nothing clocked.
 pub const FLAG_TIMED_OUT: u8 = 0x80;
 /// A control command (UTF-8 text); reply flags 0 = ok, 1 = error, payload =
@@ -45,8 +65,57 @@ pub const KIND_ERROR: u8 = 0x7F;
 pub const LINE_INT0: u8 = 1 << 0;
 /// Lines byte: INT1 electrical level.
 pub const LINE_INT1: u8 = 1 << 1;
+/// [`Forecast::ready_lines`]: INT0 is held at its level by a fault (`int0
+/// stuck`): packets make no edges.
+pub const LINE_INT0_HELD: u8 = 1 << 7;
 /// Largest payload accepted.
 pub const MAX_PAYLOAD: usize = 64 * 1024;
+
+/// What INT0 will do without further transfers: the chip's level is a
+/// function of when it is ready again (v049 ECM-XF中斷: INT0 drops when a
+/// packet is complete and rises when it is processed), so a host that is
+/// told this once per transfer can time the rising edge itself.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Forecast {
+    /// Packets the chip took during the transfer (each one a busy period:
+    /// two edges of INT0, unless the line is held).
+    pub packets: u32,
+    /// Nanoseconds until the chip is ready again (0 = ready now).
+    pub until_ready_ns: u64,
+    /// The lines byte once the chip is ready (bit0 INT0's level then), and
+    /// [`LINE_INT0_HELD`] when a fault holds INT0 (its level never moves).
+    pub ready_lines: u8,
+}
+
+impl Forecast {
+    /// Encoded size.
+    pub const LEN: usize = 13;
+
+    fn of(chip: &Chip, now: u64, packets: u32) -> Self {
+        let ready_at = chip.ready_at().max(now);
+        let held = if chip.faults.int0_stuck.is_some() { LINE_INT0_HELD } else { 0 };
+        Self { packets, until_ready_ns: ready_at - now, ready_lines: Server::lines(chip, ready_at) | held }
+    }
+
+    /// The 13 bytes: packets (u32 LE), ns until ready (u64 LE), lines.
+    pub fn encode(&self) -> [u8; Self::LEN] {
+        let mut b = [0u8; Self::LEN];
+        b[..4].copy_from_slice(&self.packets.to_le_bytes());
+        b[4..12].copy_from_slice(&self.until_ready_ns.to_le_bytes());
+        b[12] = self.ready_lines;
+        b
+    }
+
+    /// Reads the 13 bytes; `None` when short.
+    pub fn decode(b: &[u8]) -> Option<Self> {
+        let b: &[u8; Self::LEN] = b.get(..Self::LEN)?.try_into().ok()?;
+        Some(Self {
+            packets: u32::from_le_bytes([b[0], b[1], b[2], b[3]]),
+            until_ready_ns: u64::from_le_bytes([b[4], b[5], b[6], b[7], b[8], b[9], b[10], b[11]]),
+            ready_lines: b[12],
+        })
+    }
+}
 
 fn write_msg(w: &mut impl Write, kind: u8, flags: u8, payload: &[u8]) -> io::Result<()> {
     let mut h = [0u8; 8];
@@ -110,17 +179,56 @@ fn read_msg(r: &mut UnixStream, spin: Duration) -> io::Result<(u8, u8, Vec<u8>)>
     Ok((h[0], h[1], payload))
 }
 
+/// GPIO lines claimed by connections: (chip, offset) -> (connection,
+/// consumer).
+type Claims = HashMap<(String, u32), (u64, String)>;
+
 /// A chip running against the wall clock, shared by connections.
 #[derive(Debug)]
 pub struct Server {
     chip: Mutex<Chip>,
     epoch: Instant,
+    claims: Mutex<Claims>,
+    connections: AtomicU64,
 }
 
 impl Server {
     /// Starts the clock at 0 now.
     pub fn new(chip: Chip) -> Self {
-        Self { chip: Mutex::new(chip), epoch: Instant::now() }
+        Self { chip: Mutex::new(chip), epoch: Instant::now(), claims: Mutex::default(), connections: AtomicU64::new(0) }
+    }
+
+    fn claims(&self) -> MutexGuard<'_, Claims> {
+        self.claims.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// `CHIP CONSUMER OFFSET...`: all or none, as the kernel grants a line
+    /// request.
+    fn claim(&self, connection: u64, text: &str) -> Result<String, String> {
+        let mut words = text.split_whitespace();
+        let (Some(chip), Some(consumer)) = (words.next(), words.next()) else {
+            return Err("claim needs CHIP CONSUMER OFFSET...".into());
+        };
+        let offsets: Vec<u32> = words.map(str::parse).collect::<Result<_, _>>().map_err(|e| format!("offset: {e}"))?;
+        let mut claims = self.claims();
+        for o in &offsets {
+            if let Some((_, holder)) = claims.get(&(chip.to_string(), *o)) {
+                return Err(holder.clone());
+            }
+        }
+        for o in offsets {
+            claims.insert((chip.to_string(), o), (connection, consumer.to_string()));
+        }
+        Ok(String::new())
+    }
+
+    fn owner(&self, text: &str) -> Result<Option<String>, String> {
+        let mut words = text.split_whitespace();
+        let (Some(chip), Some(offset)) = (words.next(), words.next()) else {
+            return Err("owner needs CHIP OFFSET".into());
+        };
+        let offset: u32 = offset.parse().map_err(|e| format!("offset: {e}"))?;
+        Ok(self.claims().get(&(chip.to_string(), offset)).map(|(_, c)| c.clone()))
     }
 
     /// Simulated time: nanoseconds since start.
@@ -161,6 +269,21 @@ impl Server {
         Ok(())
     }
 
+    /// Waits until the wall clock reaches simulated time `at`.
+    fn wait_until(&self, at: u64) {
+        loop {
+            let now = self.now_ns();
+            if now >= at {
+                return;
+            }
+            if at - now > 2_000_000 {
+                thread::sleep(Duration::from_nanos(at - now - 1_000_000));
+            } else {
+                thread::yield_now();
+            }
+        }
+    }
+
     fn wait(&self, timeout_us: u32, mut done: impl FnMut(&Chip, u64) -> bool) -> bool {
         let deadline = self.now_ns() + u64::from(timeout_us) * 1000;
         loop {
@@ -187,8 +310,16 @@ impl Server {
         }
     }
 
-    /// Serves one connection.
-    pub fn handle(&self, mut stream: UnixStream) -> io::Result<()> {
+    /// Serves one connection; the GPIO lines it claimed are free again
+    /// when it ends, as a line request's are when its file is closed.
+    pub fn handle(&self, stream: UnixStream) -> io::Result<()> {
+        let connection = self.connections.fetch_add(1, Ordering::Relaxed);
+        let result = self.serve_connection(connection, stream);
+        self.claims().retain(|_, (c, _)| *c != connection);
+        result
+    }
+
+    fn serve_connection(&self, connection: u64, mut stream: UnixStream) -> io::Result<()> {
         loop {
             let (kind, _flags, payload) = match read_msg(&mut stream, SERVER_SPIN) {
                 Ok(m) => m,
@@ -210,6 +341,57 @@ impl Server {
                     };
                     write_msg(&mut stream, KIND_TRANSFER, lines, &miso)?;
                 }
+                KIND_TRANSFER_FORECAST => {
+                    let mut reply = vec![0u8; payload.len() + Forecast::LEN];
+                    let (miso, tail) = reply.split_at_mut(payload.len());
+                    let (taken, wire_end) = {
+                        let mut c = self.chip();
+                        let now = self.now_ns();
+                        let packets = c.stats.packets;
+                        c.transfer(now, &payload, miso);
+                        (u32::try_from(c.stats.packets - packets).unwrap_or(u32::MAX), c.now_ns)
+                    };
+                    // The answer leaves when the clock would have shifted the
+                    // last byte, as a spidev ioctl returns: the forecast is
+                    // then measured from a moment the host also sees, so its
+                    // INT0 edge is never early.
+                    self.wait_until(wire_end);
+                    let lines = {
+                        let c = self.chip();
+                        let now = self.now_ns().max(c.now_ns);
+                        tail.copy_from_slice(&Forecast::of(&c, now, taken).encode());
+                        Self::lines(&c, now)
+                    };
+                    write_msg(&mut stream, KIND_TRANSFER_FORECAST, lines, &reply)?;
+                }
+                KIND_WAIT_LINES => {
+                    let Ok([t0, t1, t2, t3, mask, known]) = <[u8; 6]>::try_from(payload.as_slice()) else {
+                        write_msg(&mut stream, KIND_ERROR, 0, b"wait-lines needs timeout (u32 us), mask, lines")?;
+                        continue;
+                    };
+                    let timeout = u32::from_le_bytes([t0, t1, t2, t3]);
+                    let changed = self.wait(timeout, |c, now| Self::lines(c, now) & mask != known & mask);
+                    let (lines, forecast) = {
+                        let c = self.chip();
+                        let now = self.now_ns().max(c.now_ns);
+                        (Self::lines(&c, now), Forecast::of(&c, now, 0))
+                    };
+                    let mut reply = vec![u8::from(changed)];
+                    reply.extend_from_slice(&forecast.encode());
+                    write_msg(&mut stream, KIND_WAIT_LINES, lines, &reply)?;
+                }
+                KIND_GPIO_CLAIM => {
+                    let (flags, answer) = match self.claim(connection, &String::from_utf8_lossy(&payload)) {
+                        Ok(a) => (0, a),
+                        Err(holder) => (1, holder),
+                    };
+                    write_msg(&mut stream, KIND_GPIO_CLAIM, flags, answer.as_bytes())?;
+                }
+                KIND_GPIO_OWNER => match self.owner(&String::from_utf8_lossy(&payload)) {
+                    Ok(None) => write_msg(&mut stream, KIND_GPIO_OWNER, 0, &[])?,
+                    Ok(Some(consumer)) => write_msg(&mut stream, KIND_GPIO_OWNER, 1, consumer.as_bytes())?,
+                    Err(e) => write_msg(&mut stream, KIND_ERROR, 0, e.as_bytes())?,
+                },
                 KIND_TRANSFER_WHEN_READY => {
                     let Some((t, mosi)) = payload.split_first_chunk::<4>() else {
                         write_msg(&mut stream, KIND_ERROR, 0, b"transfer-when-ready needs a 4-byte timeout")?;
@@ -297,6 +479,12 @@ fn unexpected(kind: u8, payload: &[u8]) -> io::Error {
     )
 }
 
+impl std::os::fd::AsRawFd for SocketClient {
+    fn as_raw_fd(&self) -> std::os::fd::RawFd {
+        self.stream.as_raw_fd()
+    }
+}
+
 impl SocketClient {
     /// Connects to a serving simulator.
     pub fn connect(path: &Path) -> io::Result<Self> {
@@ -333,6 +521,45 @@ impl SocketClient {
         let n = back.len().min(miso.len());
         miso[..n].copy_from_slice(&back[..n]);
         Ok(Some(flags))
+    }
+
+    /// One transfer; returns the lines byte after it and what INT0 will do.
+    pub fn transfer_forecast(&mut self, mosi: &[u8], miso: &mut [u8]) -> io::Result<(u8, Forecast)> {
+        let (lines, p) = self.request(KIND_TRANSFER_FORECAST, mosi)?;
+        let split = p.len().saturating_sub(Forecast::LEN);
+        let forecast =
+            Forecast::decode(&p[split..]).ok_or_else(|| unexpected(KIND_TRANSFER_FORECAST, b"short reply"))?;
+        let n = split.min(miso.len());
+        miso[..n].copy_from_slice(&p[..n]);
+        Ok((lines, forecast))
+    }
+
+    /// Waits up to `timeout` until `lines & mask` differs from `known &
+    /// mask`; returns whether it did, the lines and the forecast.
+    pub fn wait_lines(&mut self, timeout: Duration, mask: u8, known: u8) -> io::Result<(bool, u8, Forecast)> {
+        let us = timeout.as_micros().min(u128::from(u32::MAX)) as u32;
+        let mut p = us.to_le_bytes().to_vec();
+        p.extend_from_slice(&[mask, known]);
+        let (lines, back) = self.request(KIND_WAIT_LINES, &p)?;
+        let forecast = back.get(1..).and_then(Forecast::decode).ok_or_else(|| unexpected(KIND_WAIT_LINES, &back))?;
+        Ok((back.first() == Some(&1), lines, forecast))
+    }
+
+    /// Claims GPIO lines for this connection; `Err` names the consumer
+    /// that holds one of them.
+    pub fn gpio_claim(&mut self, chip: &str, consumer: &str, offsets: &[u32]) -> io::Result<Result<(), String>> {
+        let mut text = format!("{chip} {consumer}");
+        for o in offsets {
+            text.push_str(&format!(" {o}"));
+        }
+        let (flags, p) = self.request(KIND_GPIO_CLAIM, text.as_bytes())?;
+        Ok(if flags == 0 { Ok(()) } else { Err(String::from_utf8_lossy(&p).into_owned()) })
+    }
+
+    /// The consumer holding a GPIO line, if any.
+    pub fn gpio_owner(&mut self, chip: &str, offset: u32) -> io::Result<Option<String>> {
+        let (flags, p) = self.request(KIND_GPIO_OWNER, format!("{chip} {offset}").as_bytes())?;
+        Ok((flags != 0).then(|| String::from_utf8_lossy(&p).into_owned()))
     }
 
     /// Lines byte, simulated time and ns until ready.
