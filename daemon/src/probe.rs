@@ -470,7 +470,12 @@ impl<'c, L: Link> Probe<'c, L> {
             (Board::Hardware { .. }, _) => (
                 "bytes arrive but never form packets: the SPI mode is not 0, or the clock is too fast for the wiring"
                     .to_string(),
-                self.board.bit_errors().1,
+                format!(
+                    "ecmxfd asks the controller for SPI mode 0 (CPOL 0, CPHA 0), 8-bit words, MSB first: make sure \
+                     no device-tree overlay or SPI driver forces another mode (spi-cpol/spi-cpha/spi-cs-high on \
+                     the chip's node); then {}",
+                    self.board.bit_errors().1
+                ),
             ),
             (Board::Simulator { .. }, _) => self.board.bit_errors(),
         };

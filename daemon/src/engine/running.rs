@@ -181,6 +181,7 @@ impl<L: Link> Engine<L> {
             flow_limit: cyclic.map_or(Duration::ZERO, |c| flow_limit(c.cycle())),
         };
         self.supervisor = Supervisor::new(shape, self.port.status().wkc_errors, now);
+        self.telemetry.int0_stuck.store(false, Relaxed);
         self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
         if let Some(c) = cyclic {
             self.intake.start(c, &self.telemetry, now);
@@ -255,8 +256,36 @@ impl<L: Link> Engine<L> {
         if self.active.is_none() && self.supervisor.census_due(now) {
             let count = self.port.call(&SlaveCountGet)?.header.return_value;
             self.supervisor.census(usize::from(count), now)?;
+            self.watch_int0();
         }
         Ok(())
+    }
+
+    /// INT0's edges since the last census (see `supervisor::Int0Watch`):
+    /// a line stuck at its ready level degrades the health, logged once.
+    /// The hardware link reads the edge events queued in the kernel (one
+    /// poll and a read a second); a link that cannot count them is not
+    /// judged.
+    fn watch_int0(&mut self) {
+        let edges = match self.port.link_mut().int0_edges() {
+            Ok(e) => e,
+            Err(e) => {
+                tracing::debug!(error = %e, "INT0 edges not readable");
+                None
+            }
+        };
+        let exchanges = self.port.stats().exchanges;
+        match self.supervisor.int0.census(edges, exchanges) {
+            Some(true) => warn!(
+                exchanges,
+                "INT0 has not moved across {} exchanges: it stays at its ready level, so the chip's busy time is \
+                 not seen (check link.int0_line, its wiring and chip.int0_active_high; `ecmxfd probe`, step 2)",
+                super::supervisor::INT0_SILENT_EXCHANGES
+            ),
+            Some(false) => info!("INT0 moves again"),
+            None => {}
+        }
+        self.telemetry.int0_stuck.store(self.supervisor.int0.stuck(), Relaxed);
     }
 
     /// Keeps the emergency question going: an answer no exchange has

@@ -109,6 +109,9 @@ pub struct Telemetry {
     pub recoveries: AtomicU64,
     /// Slaves in the network that runs (set at each bring-up).
     pub slaves: AtomicU64,
+    /// INT0 stays at its ready level while packets go through
+    /// (`supervisor::Int0Watch`).
+    pub int0_stuck: std::sync::atomic::AtomicBool,
     /// The most slaves a running network had since the start (or the last
     /// re-init or new configuration, which accept the network as it is).
     pub slaves_seen: AtomicU64,
@@ -265,6 +268,8 @@ pub struct Snapshot {
     pub recoveries: u64,
     /// Slaves in the network that runs.
     pub slaves: u64,
+    /// INT0 stays at its ready level while packets go through.
+    pub int0_stuck: bool,
     /// The most slaves a running network had since the start (or the
     /// last re-init or new configuration).
     pub slaves_seen: u64,
@@ -392,6 +397,7 @@ impl Telemetry {
             fifo_alarms: self.fifo_alarms.load(Relaxed),
             recoveries: self.recoveries.load(Relaxed),
             slaves: self.slaves.load(Relaxed),
+            int0_stuck: self.int0_stuck.load(Relaxed),
             slaves_seen: self.slaves_seen.load(Relaxed),
             max_fifo_gap_us: self.max_fifo_gap_us.load(Relaxed),
             config_generation: self.config_generation.load(Relaxed),

@@ -92,7 +92,8 @@ pub struct Verdict {
 impl Verdict {
     /// Healthy, with a cyclic exchange that delivers input frames.
     pub fn flowing(&self) -> bool {
-        matches!(self.health, Health::Healthy | Health::SlavesMissing { .. }) && self.input_age.is_some()
+        matches!(self.health, Health::Healthy | Health::SlavesMissing { .. } | Health::Int0Stuck)
+            && self.input_age.is_some()
     }
 }
 
@@ -129,6 +130,10 @@ pub enum Health {
         /// The most seen since the start.
         seen: u64,
     },
+    /// Running, process data flowing, but INT0 has not moved across
+    /// hundreds of exchanges (`supervisor::Int0Watch`): packets may be
+    /// clocked while the chip is busy. Degraded until the line moves.
+    Int0Stuck,
 }
 
 impl Health {
@@ -143,6 +148,7 @@ impl Health {
         match s.input_age(now_ns) {
             Some((age, limit)) if age > limit => Self::Stalled { age, limit },
             _ if s.slaves < s.slaves_seen => Self::SlavesMissing { now: s.slaves, seen: s.slaves_seen },
+            _ if s.int0_stuck => Self::Int0Stuck,
             _ => Self::Healthy,
         }
     }
@@ -169,6 +175,10 @@ impl std::fmt::Display for Health {
                 f,
                 "degraded: {now} of {seen} slaves since start (one seen then is missing; a re-init accepts the \
                  network as it is)"
+            ),
+            Self::Int0Stuck => f.write_str(
+                "degraded: INT0 stays at its ready level while packets go through, so the chip's busy time is not \
+                 seen (check link.int0_line, its wiring and chip.int0_active_high; `ecmxfd probe`, step 2)",
             ),
         }
     }
@@ -618,5 +628,18 @@ mod tests {
         assert!(matches!(Health::judge(&s, EcatState::Op, ms(151)), Health::Stalled { .. }));
         (s.slaves, s.slaves_seen) = (3, 3);
         assert_eq!(Health::judge(&s, EcatState::Op, ms(140)), Health::Healthy);
+    }
+
+    /// INT0 stuck at its ready level: degraded while data flows.
+    #[test]
+    fn a_stuck_int0_degrades_a_network_whose_data_flows() {
+        let ms = |v: u64| v * 1_000_000;
+        let mut s = running(EcatState::Op, 100, 50);
+        s.int0_stuck = true;
+        let h = Health::judge(&s, EcatState::Op, ms(140));
+        assert_eq!(h, Health::Int0Stuck);
+        assert!(h.to_string().starts_with("degraded: INT0 stays at its ready level"), "{h}");
+        assert!(Verdict { health: h, input_age: s.input_age(ms(140)) }.flowing());
+        assert!(matches!(Health::judge(&s, EcatState::Op, ms(151)), Health::Stalled { .. }));
     }
 }

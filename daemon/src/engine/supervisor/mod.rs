@@ -10,13 +10,15 @@
 //!   chip (PDO_CONFIGURED gone), and the rising edge of the FIFO error bit
 //!   (one alarm per time the RxFIFO ran dry, not one per header showing it).
 //! - [`Supervisor::census`]: the slave count, asked every [`CENSUS`] while
-//!   the slot is idle (slaves plugged in or out).
+//!   the slot is idle (slaves plugged in or out), and INT0's edges
+//!   ([`Int0Watch`]: a line stuck at its ready level degrades the health).
 //! - [`Supervisor::fifo_answer`]: input frames must keep coming while the
 //!   chip answers ([`FlowWatch`]).
 //! - [`RecoverCause`]: why, carried to events, logs and the API.
 
 mod cause;
 mod flow;
+mod int0;
 
 use std::time::{Duration, Instant};
 
@@ -27,6 +29,7 @@ pub use cause::RecoverCause;
 #[cfg(test)]
 use flow::STALL_ANSWERS;
 pub use flow::{FlowWatch, flow_limit};
+pub use int0::{Int0Watch, SILENT_EXCHANGES as INT0_SILENT_EXCHANGES};
 
 /// Working-counter errors this long in a row mean a slave left the
 /// exchange (lost, or dropped to a lower state): recover.
@@ -80,6 +83,8 @@ pub struct Supervisor {
     last_census: Instant,
     /// A stall an answer confirmed, for the loop to act on.
     stall: Option<RecoverCause>,
+    /// INT0's edges at the censuses.
+    pub int0: Int0Watch,
 }
 
 impl Supervisor {
@@ -95,6 +100,7 @@ impl Supervisor {
             fifo_dry: true,
             last_census: now,
             stall: None,
+            int0: Int0Watch::default(),
         }
     }
 
