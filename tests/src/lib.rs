@@ -9,6 +9,8 @@
 #![forbid(unsafe_code)]
 
 pub mod frames;
+pub mod hardware;
+pub mod probe_report;
 
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
@@ -353,9 +355,15 @@ impl Daemon {
 
     /// The `ecmxfd --config <text written to a file>` binary.
     pub fn binary_with_config(text: &str) -> Self {
+        Self::binary_with_config_on(&daemon_binary(), text, &[])
+    }
+
+    /// `binary --config <text written to a file>` with `env` added to its
+    /// environment (the emulated hardware: [`hardware::emulation`]).
+    pub fn binary_with_config_on(binary: &Path, text: &str, env: &[(String, std::ffi::OsString)]) -> Self {
         let dir = temp_dir("cfg");
         let path = write_config(&dir, text).display().to_string();
-        Self::spawn(dir, &["--config", &path])
+        Self::spawn_with(binary, env, dir, &["--config", &path])
     }
 
     fn embed(dir: PathBuf, mut config: ecmxfd::config::Config) -> Self {
@@ -385,9 +393,14 @@ impl Daemon {
     }
 
     fn spawn(dir: PathBuf, args: &[&str]) -> Self {
+        Self::spawn_with(&daemon_binary(), &[], dir, args)
+    }
+
+    fn spawn_with(binary: &Path, env: &[(String, std::ffi::OsString)], dir: PathBuf, args: &[&str]) -> Self {
         let socket = dir.join("ecmxfd.sock");
         let log = dir.join("ecmxfd.log");
-        let child = Command::new(daemon_binary())
+        let child = Command::new(binary)
+            .envs(env.iter().map(|(k, v)| (k, v)))
             .args(args)
             .args(["--socket", &socket.display().to_string(), "--status-every", "0"])
             .stdout(Stdio::null())

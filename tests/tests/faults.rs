@@ -23,7 +23,7 @@ use std::collections::{BTreeMap, BTreeSet};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
-use ecmxf_e2e::{Daemon, Simulator, run};
+use ecmxf_e2e::{Daemon, Simulator, hardware, run};
 use ecmxf_proto::v1 as pb;
 use pb::master_client::MasterClient;
 use pb::process_data_client::ProcessDataClient;
@@ -321,6 +321,34 @@ const FAULTS: &[Fault] = &[
 
 const MS_800: Duration = Duration::from_millis(800);
 
+/// INT0 held at its ready level, as the hardware link sees it: the line
+/// says ready all the time, which a chip quicker than the host's turnaround
+/// survives (no packet is lost, data flows), so there is no recovery; the
+/// daemon notices the line no longer moves and says "degraded" until it
+/// does (engine/supervisor/int0.rs). The socket links model a held line as
+/// never ready, whatever its level.
+const INT0_HIGH_ON_HARDWARE: Fault = Fault {
+    name: "INT0 stuck high",
+    inject: &["int0 stuck high"],
+    hold: Duration::from_millis(3000),
+    clear: &["int0 stuck off"],
+    detected: true,
+    detect_within: None,
+    causes: &[],
+};
+
+impl Fault {
+    /// The fault as `wire` meets it.
+    fn on(&'static self, wire: Wire) -> &'static Fault {
+        if wire == Wire::Hardware && self.name == INT0_HIGH_ON_HARDWARE.name { &INT0_HIGH_ON_HARDWARE } else { self }
+    }
+
+    /// Whether process data stops while it lasts (a recovery follows).
+    fn outage(&self) -> bool {
+        self.detected && !self.causes.is_empty()
+    }
+}
+
 /// After a recovery: the axis came up disabled and stays so (restart
 /// interlock), and the first frame after the outage looped back the
 /// pattern the lease holder wrote before the fault (hold-last). A slave
@@ -340,21 +368,41 @@ async fn after_recovery(b: &Bench, what: &str, io_restarted: bool) {
     assert!(!b.axis_enabled().await, "{what}: the axis came back enabled by itself");
 }
 
+/// How the daemon reaches the simulator.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Wire {
+    /// `link.backend = "sim-socket"`.
+    Socket,
+    /// `link.backend = "spidev"` with config/ecmxfd-rpi.toml's wiring, on
+    /// the devices sim/hw-emu emulates, run by the daemon built without
+    /// the simulator (tests/src/hardware.rs).
+    Hardware,
+}
+
 /// `ecmxfd` on the served simulator at a 1 ms cycle, as a gateway runs,
 /// with the TI drive's first axis and `extra` sections; running, with the
 /// IO slave as it found it.
-async fn on_the_simulator(sim: &Simulator, extra: &str) -> (Daemon, Channel, pb::Slave) {
+async fn on_the_simulator(sim: &Simulator, wire: Wire, extra: &str) -> (Daemon, Channel, pb::Slave) {
     let extra = format!("{}{extra}", ecmxf_e2e::TI_AXIS);
     // The TxFIFO deep enough for 150 ms of inputs (the FIFO memory shared
     // with a shallower RxFIFO, still 48 ms of outputs at its low mark):
     // a loaded 2-core host that stalls the engine for tens of ms must not
     // make the chip drop inputs, which the bit-error rounds count as loss.
-    let config = ecmxf_e2e::config_with_cycle(&sim.link(), "sync0_us = 1000\n", &extra).replace(
+    let link = match wire {
+        Wire::Socket => sim.link(),
+        Wire::Hardware => hardware::rpi_link(),
+    };
+    let config = ecmxf_e2e::config_with_cycle(&link, "sync0_us = 1000\n", &extra).replace(
         "fifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240",
         "fifo_rx_depth = 128\nfifo_tx_depth = 160\nfifo_low = 48\nfifo_high = 96",
     );
     assert!(config.contains("fifo_tx_depth = 160"), "the harness configuration changed: {config}");
-    let mut d = Daemon::binary_with_config(&config);
+    let mut d = match wire {
+        Wire::Socket => Daemon::binary_with_config(&config),
+        Wire::Hardware => {
+            Daemon::binary_with_config_on(&hardware::Build::NoSim.binary(), &config, &hardware::emulation(sim, &[]))
+        }
+    };
     let ch = d.connect().await;
     let slaves = pb::slaves_client::SlavesClient::new(ch.clone()).list_slaves(pb::ListSlavesRequest {}).await;
     let io = slaves.unwrap().into_inner().slaves.into_iter().find(|s| s.position == IO).expect("the IO slave");
@@ -383,12 +431,25 @@ fn ms(d: Duration) -> f64 {
 
 #[test]
 fn after_every_fault_process_data_flows_again() {
+    fault_matrix(Wire::Socket);
+}
+
+/// The same faults through the hardware link: spidev transfers and INT0
+/// edge events instead of the simulator's socket messages (the simulator
+/// restart is the SPI device and GPIO lines going away and coming back).
+#[test]
+fn through_the_hardware_link_after_every_fault_process_data_flows_again() {
+    fault_matrix(Wire::Hardware);
+}
+
+fn fault_matrix(wire: Wire) {
     let repeats: usize = std::env::var("ECMXF_FAULT_REPEATS").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
     run(async move {
         let dir = ecmxf_e2e::temp_dir("faults");
         let mut sim = Simulator::serve(&dir, &["--seed", "7"]);
         // A fast first retry.
-        let (mut d, ch, io) = on_the_simulator(&sim, "[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n").await;
+        let (mut d, ch, io) =
+            on_the_simulator(&sim, wire, "[recovery]\nbackoff_ms = 50\nmax_backoff_ms = 1000\n").await;
         let in_offset = io.input_offset as usize;
 
         // One stream for the whole run: it must survive every recovery.
@@ -477,9 +538,10 @@ fn after_every_fault_process_data_flows_again() {
         let mut tx_dropped = 0u64;
         for round in 0..repeats {
             for f in FAULTS {
+                let f = f.on(wire);
                 let what = format!("{} (round {round})", f.name);
                 assert!(b.healthy().await, "{what}: not healthy before the fault");
-                if f.detected {
+                if f.outage() {
                     b.enable_axis(&what).await;
                     b.seen.lock().unwrap().after_gap = None;
                 }
@@ -535,7 +597,7 @@ fn after_every_fault_process_data_flows_again() {
                 if b.until_health(true, Duration::from_secs(20)).await.is_none() {
                     panic!("{what}: not healthy again within 20 s: {:?}", b.status().await);
                 }
-                if f.detected {
+                if f.outage() {
                     recovery.entry(f.name).or_default().push(t0.elapsed());
                     after_recovery(&b, &what, f.name.contains("IO slave")).await;
                 }
@@ -604,6 +666,7 @@ fn after_every_fault_process_data_flows_again() {
                 s.counters.as_ref().map_or(0, |c| c.recoveries)
             );
         }
+        println!("{wire:?} link:");
         println!("{:<24} {:>24} {:>24}", "fault", "detected min/med/max", "healthy again min/med/max");
         for f in FAULTS.iter().map(|f| f.name).chain(["simulator restarted"]) {
             let none = Vec::new();
@@ -735,7 +798,7 @@ fn after_a_fault_axes_stay_disabled_and_outputs_follow_the_policy() {
             let dir = ecmxf_e2e::temp_dir("interlock");
             let sim = Simulator::serve(&dir, &[]);
             let (mut d, ch, io) =
-                on_the_simulator(&sim, &format!("[outputs]\non_last_writer_gone = \"{policy}\"\n")).await;
+                on_the_simulator(&sim, Wire::Socket, &format!("[outputs]\non_last_writer_gone = \"{policy}\"\n")).await;
             let mut cia = Cia402Client::new(ch.clone());
             let axis = cia.get_axis(pb::GetAxisRequest { axis: 0 }).await.unwrap().into_inner();
             assert_ne!(axis.state, pb::DriveState::OperationEnabled as i32, "{policy}: enabled at start: {axis:?}");

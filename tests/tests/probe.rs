@@ -11,6 +11,7 @@
 use std::process::{Command, Output};
 use std::time::Duration;
 
+use ecmxf_e2e::probe_report::{assert_fails_at, assert_passes, step};
 use ecmxf_e2e::{Daemon, Simulator, config, daemon_binary, repo, run, temp_dir};
 use ecmxf_proto::v1 as pb;
 use pb::master_client::MasterClient;
@@ -20,40 +21,6 @@ fn probe(args: &[&str]) -> (i32, String) {
     let out: Output = Command::new(daemon_binary()).arg("probe").args(args).output().expect("run ecmxfd probe");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     (out.status.code().unwrap_or(-1), text)
-}
-
-/// The line of step `n` and the lines under it up to the next step.
-fn step(text: &str, n: usize) -> String {
-    let start = text.find(&format!("\n{n}. ")).unwrap_or_else(|| panic!("no step {n} in:\n{text}")) + 1;
-    let rest = &text[start..];
-    let end = rest.find(&format!("\n{}. ", n + 1)).map_or(rest.len(), |e| e + 1);
-    rest[..end].to_string()
-}
-
-#[track_caller]
-fn assert_fails_at(text: &str, n: usize, code: i32, words: &[&str]) {
-    assert_eq!(code, 1, "{text}");
-    let s = step(text, n);
-    assert!(s.contains(" FAIL ") && s.contains("cause: ") && s.contains("fix: "), "step {n}:\n{text}");
-    for w in words {
-        assert!(s.contains(w), "step {n} does not say {w:?}:\n{text}");
-    }
-    for before in 1..n {
-        assert!(step(text, before).contains(" ok "), "step {before} before the failure:\n{text}");
-    }
-    for after in n + 1..=7 {
-        assert!(step(text, after).contains(" skip "), "step {after} after the failure:\n{text}");
-    }
-    assert!(text.contains(&format!("step {n} failed")), "{text}");
-}
-
-#[track_caller]
-fn assert_passes(code: i32, text: &str) {
-    assert_eq!(code, 0, "{text}");
-    for n in 1..=7 {
-        assert!(step(text, n).contains(" ok "), "step {n}:\n{text}");
-    }
-    assert!(text.contains("all 7 steps passed"), "{text}");
 }
 
 #[test]
