@@ -227,3 +227,31 @@ fn a_line_another_program_holds_is_named_by_the_probe() {
         assert_passes(code, &text);
     });
 }
+
+/// The one command docs/raspberry-pi.md gives for a machine without a
+/// board: `ecmxf-sim hardware -- ecmxfd probe --config
+/// config/ecmxfd-rpi.toml`, the configuration file as it ships.
+#[test]
+fn one_command_probes_the_shipped_rpi_configuration_on_emulated_devices() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let sim = ecmxf_e2e::daemon_binary().with_file_name("ecmxf-sim");
+    let out = Command::new(&sim)
+        .args(["hardware", "--library"])
+        .arg(ecmxf_e2e::hardware::emu_library())
+        .arg("--")
+        .arg(Build::NoSim.binary())
+        .args(["probe", "--config"])
+        .arg(ecmxf_e2e::repo().join("config/ecmxfd-rpi.toml"))
+        .output()
+        .expect("run ecmxf-sim hardware");
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert_passes(out.status.code().unwrap_or(-1), &text);
+    // The command's exit status is passed on.
+    let out = Command::new(&sim)
+        .args(["hardware", "--library"])
+        .arg(ecmxf_e2e::hardware::emu_library())
+        .args(["--", "sh", "-c", "exit 3"])
+        .output()
+        .expect("run ecmxf-sim hardware");
+    assert_eq!(out.status.code(), Some(3));
+}

@@ -1,5 +1,6 @@
 //! `ecmxf-sim`: serve the simulated ECM-XF chip on a Unix socket, control a
-//! running one, or check a network file.
+//! running one, run a program on emulated SPI and GPIO devices backed by
+//! it, or check a network file.
 #![forbid(unsafe_code)]
 
 use std::path::PathBuf;
@@ -47,6 +48,30 @@ enum Command {
         #[arg(required = true, num_args = 1..)]
         command: Vec<String>,
     },
+    /// Run a command on emulated /dev/spidev0.0 and /dev/gpiochip0 backed by
+    /// this simulator, e.g. `ecmxf-sim hardware -- ecmxfd probe --config
+    /// config/ecmxfd-rpi.toml`: the simulator is served on a socket and the
+    /// command runs with the preload library (sim/hw-emu) in LD_PRELOAD.
+    /// Faults: `ecmxf-sim ctl --socket SOCKET ...`, and the ECMXF_EMU_*
+    /// variables (sim/hw-emu/README.md). Exits with the command's status.
+    Hardware {
+        /// Network file (TOML); the built-in demo network when absent.
+        #[arg(long)]
+        network: Option<PathBuf>,
+        /// Socket path (default: one in the temporary folder, removed after).
+        #[arg(long)]
+        socket: Option<PathBuf>,
+        /// The preload library (default: libecmxf_hw_emu.so next to this
+        /// executable, or in its deps/ folder as `cargo test` leaves it).
+        #[arg(long)]
+        library: Option<PathBuf>,
+        /// Seed for bit-flip fault injection.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// The command and its arguments.
+        #[arg(required = true, num_args = 1.., last = true)]
+        command: Vec<String>,
+    },
     /// Validate a network file and list its slaves.
     Check {
         /// Network file.
@@ -60,6 +85,24 @@ enum Command {
 enum Failure {
     BadNetwork(String),
     Other(String),
+    /// The command `hardware` ran exited with this status.
+    Exit(u8),
+}
+
+/// The preload library beside this executable (`cargo build`) or in its
+/// deps/ folder (`cargo test`).
+fn find_library() -> Result<PathBuf, Failure> {
+    let exe = std::env::current_exe().map_err(|e| format!("this executable's path: {e}"))?;
+    let dir = exe.parent().map(PathBuf::from).unwrap_or_default();
+    [dir.join("libecmxf_hw_emu.so"), dir.join("deps/libecmxf_hw_emu.so")]
+        .into_iter()
+        .find(|p| p.exists())
+        .ok_or_else(|| {
+            Failure::Other(format!(
+                "no libecmxf_hw_emu.so in {} (build it: `cargo build -p ecmxf-hw-emu`, or give --library)",
+                dir.display()
+            ))
+        })
 }
 
 impl From<String> for Failure {
@@ -91,6 +134,55 @@ fn run(cli: Cli) -> Result<(), Failure> {
             eprintln!("ecmxf-sim: {slaves} slaves, serving on {}, data lengths {lengths}", socket.display());
             let stop = Arc::new(AtomicBool::new(false));
             Ok(Arc::new(Server::new(chip)).serve(listener, stop).map_err(|e| e.to_string())?)
+        }
+        Command::Hardware { network, socket, library, seed, command } => {
+            let (net, config) = load(network.as_ref())?;
+            let mut chip = Chip::new(net, config);
+            chip.faults.seed(seed);
+            let library = library.map_or_else(find_library, Ok)?;
+            let temporary = socket.is_none();
+            let socket = socket.unwrap_or_else(|| {
+                std::env::temp_dir().join(format!("ecmxf-sim-hardware-{}.sock", std::process::id()))
+            });
+            let listener = server::bind(&socket).map_err(|e| format!("{}: {e}", socket.display()))?;
+            let stop = Arc::new(AtomicBool::new(false));
+            let serving = {
+                let stop = Arc::clone(&stop);
+                let server = Arc::new(Server::new(chip));
+                std::thread::spawn(move || server.serve(listener, stop))
+            };
+            eprintln!(
+                "ecmxf-sim: serving on {} for {} with {} preloaded (devices: sim/hw-emu/README.md)",
+                socket.display(),
+                command[0],
+                library.display()
+            );
+            let preload = match std::env::var_os("LD_PRELOAD") {
+                Some(other) if !other.is_empty() => {
+                    let mut all = library.clone().into_os_string();
+                    all.push(":");
+                    all.push(other);
+                    all
+                }
+                _ => library.clone().into_os_string(),
+            };
+            let status = std::process::Command::new(&command[0])
+                .args(&command[1..])
+                .env("LD_PRELOAD", preload)
+                .env("ECMXF_SIM_SOCKET", &socket)
+                .status()
+                .map_err(|e| format!("{}: {e}", command[0]));
+            stop.store(true, std::sync::atomic::Ordering::Relaxed);
+            let _ = serving.join();
+            if temporary {
+                let _ = std::fs::remove_file(&socket);
+            }
+            let status = status?;
+            match status.code() {
+                Some(0) => Ok(()),
+                Some(code) => Err(Failure::Exit(u8::try_from(code).unwrap_or(1))),
+                None => Err(format!("{} ended by a signal ({status})", command[0]).into()),
+            }
         }
         Command::Ctl { socket, command } => {
             let mut c = SocketClient::connect(&socket).map_err(|e| format!("{}: {e}", socket.display()))?;
@@ -132,5 +224,6 @@ fn main() -> ExitCode {
             eprintln!("ecmxf-sim: {e}");
             ExitCode::FAILURE
         }
+        Err(Failure::Exit(code)) => ExitCode::from(code),
     }
 }
