@@ -11,7 +11,7 @@ use std::path::PathBuf;
 use std::time::{Duration, Instant};
 
 use gpiocdev::Request;
-use gpiocdev::line::{EdgeDetection, EventClock, Value};
+use gpiocdev::line::{EdgeDetection, EdgeKind, EventClock, Value};
 use spidev::{SpiModeFlags, Spidev, SpidevOptions, SpidevTransfer};
 
 use super::{Link, LinkError};
@@ -51,14 +51,40 @@ pub struct HardwareLink {
     /// newest when larger (it counts events that overflowed the queue; uAPI
     /// v1 leaves it 0).
     int0_edge_count: u64,
+    /// Where edge events are read to (no allocation per read).
+    events: Box<EventBuffer>,
 }
 
-/// Reads one queued INT0 edge event into the link's record of edges.
-fn read_int0_edge(req: &Request, line: u32, last_ns: &mut u64, count: &mut u64) -> Result<(), LinkError> {
-    let ev = req.read_edge_event().map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
-    *last_ns = ev.timestamp_ns;
-    *count = (*count + 1).max(u64::from(ev.line_seqno));
-    Ok(())
+/// Edge events taken from the kernel in one `read` (the line request's
+/// queue holds 16 per line by default).
+const EVENTS_PER_READ: usize = 16;
+
+/// Room for [`EVENTS_PER_READ`] v2 events (48 bytes each), as u64s for
+/// their alignment.
+type EventBuffer = [u64; EVENTS_PER_READ * 6];
+
+/// Reads the INT0 edge events queued now, in one system call, into the
+/// link's record of edges; the level the newest one left the line at
+/// (`None`: none was queued). The kernel drops the oldest events of a full
+/// queue, never the newest, so the newest says the level now.
+fn drain_int0_edges(
+    req: &Request,
+    line: u32,
+    buf: &mut EventBuffer,
+    last_ns: &mut u64,
+    count: &mut u64,
+) -> Result<Option<bool>, LinkError> {
+    let words =
+        req.read_edge_events_into_slice(buf).map_err(|e| gpio_err(format!("read INT0 line {line} events"), e))?;
+    let size = req.edge_event_u64_size().max(1);
+    let mut newest = None;
+    for chunk in buf[..words].chunks_exact(size) {
+        let ev = req.edge_event_from_slice(chunk).map_err(|e| gpio_err(format!("read INT0 line {line} event"), e))?;
+        *last_ns = ev.timestamp_ns;
+        *count = (*count + 1).max(u64::from(ev.line_seqno));
+        newest = Some(ev.kind == EdgeKind::Rising);
+    }
+    Ok(newest)
 }
 
 /// A GPIO error as an `io::Error` that keeps what the kernel said: the
@@ -128,6 +154,7 @@ impl HardwareLink {
             last_transfer: Instant::now(),
             last_int0_edge_ns: 0,
             int0_edge_count: 0,
+            events: Box::new([0; EVENTS_PER_READ * 6]),
         })
     }
 
@@ -158,8 +185,12 @@ impl Link for HardwareLink {
         };
         let line = self.config.int0_line.unwrap_or(0);
         let deadline = Instant::now() + timeout;
+        // The level once; then the edges say it: the newest queued edge
+        // leaves the line where it is now, so no second level read follows
+        // a wait (on a chip still busy: a level read, a poll and a read).
+        let mut ready = Self::level(req, line, "INT0")? == self.int0_active_high;
         loop {
-            if Self::level(req, line, "INT0")? == self.int0_active_high {
+            if ready {
                 return Ok(true);
             }
             let now = Instant::now();
@@ -169,7 +200,16 @@ impl Link for HardwareLink {
             let edge =
                 req.wait_edge_event(deadline - now).map_err(|e| gpio_err(format!("wait for INT0 line {line}"), e))?;
             if edge {
-                read_int0_edge(req, line, &mut self.last_int0_edge_ns, &mut self.int0_edge_count)?;
+                let newest = drain_int0_edges(
+                    req,
+                    line,
+                    &mut self.events,
+                    &mut self.last_int0_edge_ns,
+                    &mut self.int0_edge_count,
+                )?;
+                if let Some(rising) = newest {
+                    ready = rising == self.int0_active_high;
+                }
             }
         }
     }
@@ -187,7 +227,7 @@ impl Link for HardwareLink {
         let Some(req) = &self.int0 else { return Ok(None) };
         let line = self.config.int0_line.unwrap_or(0);
         while req.has_edge_event().map_err(|e| gpio_err(format!("poll INT0 line {line}"), e))? {
-            read_int0_edge(req, line, &mut self.last_int0_edge_ns, &mut self.int0_edge_count)?;
+            drain_int0_edges(req, line, &mut self.events, &mut self.last_int0_edge_ns, &mut self.int0_edge_count)?;
         }
         Ok(Some(self.int0_edge_count))
     }

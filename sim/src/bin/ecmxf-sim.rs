@@ -94,15 +94,14 @@ enum Failure {
 fn find_library() -> Result<PathBuf, Failure> {
     let exe = std::env::current_exe().map_err(|e| format!("this executable's path: {e}"))?;
     let dir = exe.parent().map(PathBuf::from).unwrap_or_default();
-    [dir.join("libecmxf_hw_emu.so"), dir.join("deps/libecmxf_hw_emu.so")]
-        .into_iter()
-        .find(|p| p.exists())
-        .ok_or_else(|| {
+    [dir.join("libecmxf_hw_emu.so"), dir.join("deps/libecmxf_hw_emu.so")].into_iter().find(|p| p.exists()).ok_or_else(
+        || {
             Failure::Other(format!(
                 "no libecmxf_hw_emu.so in {} (build it: `cargo build -p ecmxf-hw-emu`, or give --library)",
                 dir.display()
             ))
-        })
+        },
+    )
 }
 
 impl From<String> for Failure {
