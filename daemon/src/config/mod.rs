@@ -632,7 +632,17 @@ impl Config {
                 format!("{} slaves; the chip takes at most {}", self.slaves.len(), ecmxf_wire::limits::MAX_SLAVES),
             );
         }
-        if let LinkConfig::Spidev { spi_hz, idle_us, debounce_us, .. } = &self.link {
+        if let LinkConfig::Spidev { spi_hz, idle_us, debounce_us, int0_line, int1_line, .. } = &self.link {
+            if let (Some(int0), Some(int1)) = (int0_line, int1_line)
+                && int0 == int1
+            {
+                // The kernel grants a line to one request: the second would
+                // fail with EBUSY, which reads as "another program holds it".
+                return bad(
+                    "link.int1_line",
+                    format!("line {int1} is link.int0_line too: INT0 and INT1 are two pins, each on its own line"),
+                );
+            }
             let range = ecmxf_wire::limits::SPI_HZ;
             if !range.contains(&u64::from(*spi_hz)) {
                 return bad(
@@ -760,6 +770,14 @@ mod tests {
         assert!(e.contains("\"usb\"") && e.contains("spidev"), "{e}");
         let e = parse("version = 1\n[link]\nbackend = \"sim\"\nspeed = 3\n").unwrap_err().to_string();
         assert!(e.contains("speed") && e.contains("line 4"), "{e}");
+    }
+
+    #[test]
+    fn int0_and_int1_on_one_line_is_refused() {
+        let spi = "version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\ngpio_chip = \"/dev/gpiochip0\"\n\
+                   int0_line = 24\nint1_line = 24\n";
+        let e = parse(spi).unwrap_err().to_string();
+        assert!(e.contains("link.int1_line") && e.contains("line 24 is link.int0_line too"), "{e}");
     }
 
     #[test]
