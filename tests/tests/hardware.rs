@@ -59,6 +59,20 @@ fn probe_passes_every_step_through_spidev_and_gpio_in_both_builds() {
     }
 }
 
+/// A debounce on the lines (`link.debounce_us`) applies to INT1 only: on
+/// INT0 it would erase the chip's busy pulse (tens of us) and step 2 would
+/// fail blaming the wiring (the emulated kernel debounces as the real one).
+#[test]
+fn a_debounce_does_not_erase_int0s_pulses() {
+    let _turn = SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = temp_dir("hw-probe-debounce");
+    let sim = Simulator::serve(&dir, &[]);
+    let link = rpi_link().replace("idle_us = 200", "idle_us = 200\ndebounce_us = 100");
+    assert!(link.contains("debounce_us = 100"), "{link}");
+    let (code, text) = probe(Build::NoSim, &sim, &link, &[]);
+    assert_passes(code, &text);
+}
+
 /// One fault: what to change, where the probe must stop and what it says.
 struct Case {
     name: &'static str,

@@ -157,7 +157,8 @@ pub enum LinkConfig {
         int0_line: Option<u32>,
         /// INT1 line offset (events).
         int1_line: Option<u32>,
-        /// Kernel debounce on the lines, us.
+        /// Kernel debounce on INT1, us (INT0's busy pulse, tens of us, would
+        /// vanish under it: it is never debounced).
         debounce_us: Option<u32>,
         /// Idle time after a transfer without INT0, us (vendor: 150-200).
         idle_us: u32,

@@ -29,7 +29,7 @@ pub struct HardwareConfig {
     pub int0_line: Option<u32>,
     /// Line offset of INT1, when wired.
     pub int1_line: Option<u32>,
-    /// Kernel debounce on the lines.
+    /// Kernel debounce on INT1 (never on INT0, whose pulses are shorter).
     pub debounce: Option<Duration>,
     /// Wait after each transfer when INT0 is not wired (vendor: 150-200 us).
     pub idle: Duration,
@@ -137,7 +137,10 @@ impl HardwareLink {
                 .as_active_high()
                 .with_edge_detection(EdgeDetection::BothEdges)
                 .with_event_clock(EventClock::Monotonic);
-            if let Some(d) = config.debounce {
+            // INT1 only: INT0's busy pulse lasts the chip's processing time
+            // (tens of us), and a debounce as long erases both its edges
+            // (the emulated devices showed probe step 2 failing with 100 us).
+            if let Some(d) = config.debounce.filter(|_| name == "int1") {
                 b.with_debounce_period(d);
             }
             b.request().map(Some).map_err(|e| gpio_err(format!("request {name} line {line} on {}", chip.display()), e))
