@@ -4,6 +4,16 @@
 //! library's shutdown and reloads.
 #![forbid(unsafe_code)]
 
+/// `println!` that never panics: a reader that went away (`ecmxfd
+/// --check-config FILE | head`) ends the output, not the process with a
+/// panic.
+macro_rules! out {
+    ($($arg:tt)*) => {{
+        use std::io::Write as _;
+        let _ = writeln!(std::io::stdout(), $($arg)*);
+    }};
+}
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::time::Duration;
@@ -119,7 +129,7 @@ fn probe(config: &Config, path: Option<&std::path::Path>, force: bool) -> ExitCo
         return ExitCode::from(2);
     }
     let source = path.map_or("--sim".to_string(), |p| p.display().to_string());
-    println!("ecmxfd probe ({source})");
+    out!("ecmxfd probe ({source})");
     match ecmxfd::probe::run(config, &mut std::io::stdout()) {
         Ok(true) => ExitCode::SUCCESS,
         Ok(false) => ExitCode::from(1),
@@ -222,7 +232,7 @@ fn main() -> ExitCode {
         }) {
             Ok((c, notes)) => {
                 for n in &notes {
-                    println!("note: {n}");
+                    out!("note: {n}");
                 }
                 let link = match &c.link {
                     LinkConfig::Sim { .. } => "in-process simulator".to_string(),
@@ -238,7 +248,7 @@ fn main() -> ExitCode {
                     eprintln!("{}: the network cannot run: link budget: {e}", path.display());
                     return ExitCode::from(ecmxfd::lifecycle::EXIT_REFUSED);
                 }
-                println!(
+                out!(
                     "{}: ok ({link}, {} expected slaves, {} us cycle{latency})",
                     path.display(),
                     c.slaves.len(),
@@ -246,7 +256,7 @@ fn main() -> ExitCode {
                 );
                 match budget {
                     Some(Ok(b)) => {
-                        println!(
+                        out!(
                             "link budget: the process data needs {:.0}% of the SPI link ({} cycle(s) of frames a \
                              packet, {:.0} exchanges/s at least)",
                             b.load() * 100.0,
@@ -256,7 +266,7 @@ fn main() -> ExitCode {
                         ExitCode::SUCCESS
                     }
                     _ => {
-                        println!("link budget: checked at bring-up (the frame sizes come from the slaves)");
+                        out!("link budget: checked at bring-up (the frame sizes come from the slaves)");
                         ExitCode::SUCCESS
                     }
                 }

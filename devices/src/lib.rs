@@ -8,6 +8,9 @@
 //! - [`esi`]: EtherCAT Slave Information XML files (ETG.2000): identity,
 //!   sync managers, PDOs, mailbox protocols, DC modes, the dictionary, and
 //!   the SII an ESI implies.
+//! - [`eni`]: EtherCAT Network Information files (ETG.2100): slaves,
+//!   identities and CoE init commands per transition, and what else the
+//!   file holds.
 //! - [`od`]: an object dictionary: types, access per state, PDO-mapping
 //!   flags, defaults.
 //! - [`pdo`]: PDO assignment and mapping objects.
@@ -20,6 +23,7 @@
 
 pub mod catalog;
 pub mod config_file;
+pub mod eni;
 pub mod esi;
 pub mod od;
 pub mod pdo;

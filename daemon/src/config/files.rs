@@ -16,6 +16,11 @@ impl Config {
     pub fn check_files(&self, path: &Path) -> Result<Vec<String>, ConfigError> {
         let bad = |key: String, message: String| ConfigError::Invalid { file: path.into(), key, message };
         let mut notes = Vec::new();
+        if let Some(eni) = &self.eni {
+            let file =
+                ecmxf_devices::eni::Eni::load(eni).map_err(|e| bad("eni".into(), format!("{}: {e}", eni.display())))?;
+            notes.extend(super::eni::eni_notes(&file));
+        }
         for (i, s) in self.slaves.iter().enumerate() {
             if let Some(esi) = &s.esi {
                 let key = format!("slave[{i}].esi");

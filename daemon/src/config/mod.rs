@@ -9,6 +9,7 @@ use std::time::Duration;
 use serde::Deserialize;
 
 pub mod api;
+mod eni;
 mod files;
 
 pub use api::{ApiConfig, Role};
@@ -46,6 +47,11 @@ pub struct Config {
     /// Cyclic exchange.
     #[serde(default)]
     pub cycle: CycleConfig,
+    /// An ENI file (ETG.2100) describing the network: its slaves and their
+    /// CoE init commands become the `[[slave]]` list, or are merged into
+    /// the one given (config/eni.rs).
+    #[serde(default)]
+    pub eni: Option<PathBuf>,
     /// The expected network, in ring order (empty: accept what is found).
     #[serde(default, rename = "slave")]
     pub slaves: Vec<SlaveConfig>,
@@ -435,6 +441,27 @@ pub struct StartupSdo {
     /// Complete access.
     #[serde(default)]
     pub complete_access: bool,
+    /// The transition it is written at: `ip` (INIT to PRE-OP: right after
+    /// PRE-OP is reached), `ps` (before SAFE-OP; the default) or `so` (in
+    /// SAFE-OP, before OP), as ENI init commands say.
+    #[serde(default)]
+    pub transition: InitTransition,
+    /// How long the slave may take, ms (default 1000).
+    pub timeout_ms: Option<u32>,
+}
+
+/// When a start-up SDO is written (ETG.2100 transitions a master replays
+/// CoE init commands at).
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum InitTransition {
+    /// INIT to PRE-OP (once the mailbox works: in PRE-OP).
+    Ip,
+    /// PRE-OP to SAFE-OP.
+    #[default]
+    Ps,
+    /// SAFE-OP to OP.
+    So,
 }
 
 impl StartupSdo {
@@ -495,6 +522,7 @@ impl Config {
             // VM can stop a thread for 100 ms and more) is not a chip fault,
             // so wait longer for "ready" before calling it one.
             chip: ChipSettings { ready_timeout_ms: 1000, ..ChipSettings::default() },
+            eni: None,
             // No spinning: the in-process simulator already keeps a core
             // busy, and on a small machine a yielding engine thread takes
             // the CPU the API needs (ecmxf-api-bench on 2 cores: stream p99
@@ -549,6 +577,16 @@ impl Config {
             if let Some(p) = &mut s.esi {
                 resolve(p);
             }
+        }
+        if let Some(p) = &mut c.eni {
+            resolve(p);
+            let eni = ecmxf_devices::eni::Eni::load(p).map_err(|e| ConfigError::Invalid {
+                file: path.into(),
+                key: "eni".into(),
+                message: format!("{}: {e}", p.display()),
+            })?;
+            c.apply_eni(&eni).map_err(|(key, message)| ConfigError::Invalid { file: path.into(), key, message })?;
+            c.validate(path)?;
         }
         Ok(c)
     }

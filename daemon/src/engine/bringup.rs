@@ -25,7 +25,7 @@ use ecmxf_wire::{CheckType, EcatState, Reply, ReplyFields, Request};
 
 use tracing::warn;
 
-use crate::config::{Config, TargetState};
+use crate::config::{Config, InitTransition, TargetState};
 use crate::link::Link;
 use crate::port::{Port, PortError};
 
@@ -337,19 +337,26 @@ pub fn bring_up<L: Link>(
     if config.cycle.wkc_error_limit != 255 {
         port.call(&WkcErrorLimitSet(WkcErrorLimit(config.cycle.wkc_error_limit.max(1))))?;
     }
-    // 2. PRE-OP.
+    // 2. PRE-OP, and the start-up SDOs of INIT -> PRE-OP (the mailbox
+    // works from here).
     enter(port, EcatState::PreOp, usize::from(count))?;
-    // 3. PDO mapping and per-slave DC; 4. start-up SDOs; 5./6. CiA402 helper.
+    let mut remap = startup_sdos(port, config, InitTransition::Ip)?;
+    // 3. PDO mapping; 4. the start-up SDOs of PRE-OP -> SAFE-OP (an ENI's
+    // PDO assignment among them: the chip reads the mapping again); per-
+    // slave DC; 5./6. CiA402 helper.
     map_pdos(port, config)?;
+    remap |= startup_sdos(port, config, InitTransition::Ps)?;
+    if remap {
+        blocking(port, &EcatReconfig, SLOW).map_err(|e| step("ECAT_RECONFIG after PDO objects", e.to_string()))?;
+    }
     slave_dc(port, config)?;
-    startup_sdos(port, config)?;
     cia402_helper(port, config)?;
     // 7. FIFO plan, then where each slave's data sits in the frames.
     let fifo = fifo_plan(port, config)?;
     place_slaves(port, &mut slaves)?;
     axes_fit(&config.axes, &slaves)?;
     // 8. SAFE-OP and OP as the target says.
-    let state = reach_target(port, config.cycle.target_state, &slaves, &fifo, held)?;
+    let state = reach_target(port, config, &slaves, &fifo, held)?;
     Ok(NetworkLayout {
         firmware,
         slaves,
@@ -431,26 +438,45 @@ fn slave_dc<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpE
     Ok(())
 }
 
-/// 4. Start-up SDOs, in the order the configuration lists them.
-fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
+/// Whether an object is a PDO assignment (0x1C12/0x1C13) or mapping
+/// (0x1600-0x17FF, 0x1A00-0x1BFF): writing one changes the frames.
+fn is_pdo_object(index: u16) -> bool {
+    matches!(index, 0x1C12 | 0x1C13 | 0x1600..=0x17FF | 0x1A00..=0x1BFF)
+}
+
+/// Step 4: the start-up SDOs of one transition, slave by slave, in the
+/// order the configuration (or its ENI) lists them. Returns whether one
+/// wrote a PDO assignment or mapping object.
+fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition) -> Result<bool, BringUpError> {
+    let mut pdo_objects = false;
     for (i, s) in config.slaves.iter().enumerate() {
-        for sdo in &s.sdos {
+        for sdo in s.sdos.iter().filter(|s| s.transition == at) {
             let data = sdo.payload();
+            let timeout = Duration::from_millis(u64::from(sdo.timeout_ms.unwrap_or(1000)));
             let req = SdoRequest {
                 slave: i as u8,
                 index: sdo.index,
                 subindex: sdo.subindex,
                 complete_access: sdo.complete_access,
-                timeout_us: 1_000_000,
+                timeout_us: u32::try_from(timeout.as_micros()).unwrap_or(u32::MAX),
                 access: SdoAccess::Write(&data),
             };
-            if blocking(port, &req, SLOW).is_err() {
+            if blocking(port, &req, SLOW.max(timeout + Duration::from_secs(1))).is_err() {
                 let code = abort_code(port)?;
-                return Err(step("start-up SDO", format!("slave {i} {:#06x}:{:02x}: {code}", sdo.index, sdo.subindex)));
+                let at = match at {
+                    InitTransition::Ip => "IP",
+                    InitTransition::Ps => "PS",
+                    InitTransition::So => "SO",
+                };
+                return Err(step(
+                    "start-up SDO",
+                    format!("slave {i} {:#06x}:{:02x} (transition {at}): {code}", sdo.index, sdo.subindex),
+                ));
             }
+            pdo_objects |= is_pdo_object(sdo.index);
         }
     }
-    Ok(())
+    Ok(pdo_objects)
 }
 
 /// 5./6. The chip's CiA402 helper for each `[[axis]]`, every axis disabled.
@@ -563,11 +589,12 @@ fn place_slaves<L: Link>(port: &mut Port<L>, slaves: &mut [SlaveSummary]) -> Res
 /// state reached.
 fn reach_target<L: Link>(
     port: &mut Port<L>,
-    target: TargetState,
+    config: &Config,
     slaves: &[SlaveSummary],
     fifo: &FifoPlan,
     held: &super::held::HeldOutputs,
 ) -> Result<EcatState, BringUpError> {
+    let target = config.cycle.target_state;
     if target == TargetState::PreOp {
         return Ok(EcatState::PreOp);
     }
@@ -575,6 +602,8 @@ fn reach_target<L: Link>(
     if target == TargetState::SafeOp {
         return Ok(EcatState::SafeOp);
     }
+    // The start-up SDOs of SAFE-OP -> OP.
+    startup_sdos(port, config, InitTransition::So)?;
     let rx_size = fifo.rx_size;
     let per_packet = port.data_size().checked_div(rx_size).unwrap_or(0);
     let mut left = usize::from(fifo.high);

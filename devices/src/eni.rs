@@ -1,0 +1,377 @@
+//! EtherCAT Network Information files (ENI, ETG.2100 `EtherCATConfig`),
+//! as configuration tools export them (TwinCAT, acontis, the EtherCAT
+//! Configurator) or people write them (SOEM's sample): the slaves in ring
+//! order with their identities and their CoE init commands per state
+//! transition, and a record of every other element the file has, so a
+//! reader can say what it does not apply.
+//!
+//! Numbers come decimal (TwinCAT: `<Index>7186</Index>`), C hex (`0x1c12`)
+//! or ESI hex (`#x1c12`). The CoE init command's `Ccs` is the SDO client
+//! command specifier: ETG.2100 and TwinCAT write 1 for a download (a
+//! write). SOEM's hand-written sample writes 2 for its writes (SOEM's
+//! reader takes 2 as a write): an init command with `Ccs` 2 AND data is
+//! therefore read as a download too, and said so ([`CcsConvention`]); `Ccs`
+//! 2 without data is an upload (a read), which nothing here replays.
+
+use roxmltree::{Document, Node};
+
+use crate::esi::parse_number;
+
+/// A state transition an init command belongs to (ETG.2100 `Transition`:
+/// two letters, from and to: I INIT, P PRE-OP, S SAFE-OP, O OP, B BOOT).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
+pub enum Transition {
+    /// INIT to PRE-OP.
+    InitPreOp,
+    /// PRE-OP to SAFE-OP.
+    PreOpSafeOp,
+    /// SAFE-OP to OP.
+    SafeOpOp,
+    /// Any other (to INIT, to or from BOOT, back down).
+    Other([u8; 2]),
+}
+
+impl Transition {
+    fn parse(text: &str) -> Option<Self> {
+        match text.trim() {
+            "IP" => Some(Self::InitPreOp),
+            "PS" => Some(Self::PreOpSafeOp),
+            "SO" => Some(Self::SafeOpOp),
+            t if t.len() == 2 && t.bytes().all(|b| b"IPSOB".contains(&b)) => {
+                let b = t.as_bytes();
+                Some(Self::Other([b[0], b[1]]))
+            }
+            _ => None,
+        }
+    }
+
+    /// The two letters.
+    pub fn letters(&self) -> String {
+        match self {
+            Self::InitPreOp => "IP".into(),
+            Self::PreOpSafeOp => "PS".into(),
+            Self::SafeOpOp => "SO".into(),
+            Self::Other(b) => String::from_utf8_lossy(b).into_owned(),
+        }
+    }
+}
+
+/// How an init command's `Ccs` was read.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CcsConvention {
+    /// `Ccs` 1: a download (ETG.2100, TwinCAT).
+    Etg,
+    /// `Ccs` 2 with data: a download as SOEM writes it.
+    Soem,
+}
+
+/// What an init command does.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum CoeAccess {
+    /// An SDO download of these bytes.
+    Download(Vec<u8>),
+    /// An SDO upload (`Ccs` 2 without data).
+    Upload,
+}
+
+/// One CoE init command (`Mailbox/CoE/InitCmds/InitCmd`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct CoeInitCmd {
+    /// The transitions it runs at, as the file lists them.
+    pub transitions: Vec<Transition>,
+    /// Object index.
+    pub index: u16,
+    /// Subindex.
+    pub subindex: u8,
+    /// `CompleteAccess="1"` (or `true`).
+    pub complete_access: bool,
+    /// Download or upload.
+    pub access: CoeAccess,
+    /// How `Ccs` was read.
+    pub ccs: CcsConvention,
+    /// `Timeout`, ms (0 or absent: the reader's default).
+    pub timeout_ms: u32,
+    /// `Comment`.
+    pub comment: String,
+    /// `Disabled` is true: skipped.
+    pub disabled: bool,
+    /// Its line in the file.
+    pub line: u32,
+}
+
+/// One slave (`Config/Slave`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct EniSlave {
+    /// `Info/Name`.
+    pub name: String,
+    /// `Info/VendorId`.
+    pub vendor_id: u32,
+    /// `Info/ProductCode`.
+    pub product_code: u32,
+    /// `Info/RevisionNo`, when given.
+    pub revision: Option<u32>,
+    /// `Info/PhysAddr`, when given.
+    pub phys_addr: Option<u16>,
+    /// CoE init commands, in file order.
+    pub coe_init_cmds: Vec<CoeInitCmd>,
+    /// Elements of this slave the reader's caller may not apply, with a
+    /// count: `("InitCmds (register)", 49)`, `("ProcessData", 1)`, ...
+    pub elements: Vec<(&'static str, usize)>,
+    /// Its line in the file.
+    pub line: u32,
+}
+
+/// An ENI file.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Eni {
+    /// The slaves, in ring order.
+    pub slaves: Vec<EniSlave>,
+    /// Master-level elements: `("Master/InitCmds", 12)`, `("Cyclic", 1)`,
+    /// `("ProcessImage", 1)`...
+    pub elements: Vec<(&'static str, usize)>,
+}
+
+/// Why an ENI file was refused: what, and where.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct EniError {
+    /// Line in the file (1-based; 0 when unknown).
+    pub line: u32,
+    /// What is wrong, naming the element.
+    pub message: String,
+}
+
+impl std::fmt::Display for EniError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        if self.line > 0 { write!(f, "line {}: {}", self.line, self.message) } else { f.write_str(&self.message) }
+    }
+}
+
+impl std::error::Error for EniError {}
+
+fn line_of(node: Node<'_, '_>) -> u32 {
+    node.document().text_pos_at(node.range().start).row
+}
+
+fn child<'a, 'i>(n: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
+    n.children().find(|c| c.has_tag_name(name))
+}
+
+fn children<'a, 'i: 'a>(n: Node<'a, 'i>, name: &'a str) -> impl Iterator<Item = Node<'a, 'i>> + 'a {
+    n.children().filter(move |c| c.has_tag_name(name))
+}
+
+fn fail(node: Node<'_, '_>, message: String) -> EniError {
+    EniError { line: line_of(node), message }
+}
+
+/// A number in element `name` of `parent`, at most `max`.
+fn number(parent: Node<'_, '_>, name: &str, path: &str, max: u64) -> Result<Option<u64>, EniError> {
+    let Some(node) = child(parent, name) else { return Ok(None) };
+    let text = node.text().unwrap_or("").trim();
+    match parse_number(text) {
+        Some(v) if v <= max => Ok(Some(v)),
+        Some(_) => Err(fail(node, format!("{path}/{name} {text:?} is above {max}"))),
+        None => Err(fail(node, format!("{path}/{name} {text:?} is not a number"))),
+    }
+}
+
+fn required(parent: Node<'_, '_>, name: &str, path: &str, max: u64) -> Result<u64, EniError> {
+    number(parent, name, path, max)?.ok_or_else(|| fail(parent, format!("{path} has no {name}")))
+}
+
+fn hex_bytes(node: Node<'_, '_>, path: &str) -> Result<Vec<u8>, EniError> {
+    let text: String = node.text().unwrap_or("").chars().filter(|c| !c.is_whitespace()).collect();
+    if text.len() % 2 != 0 {
+        return Err(fail(node, format!("{path}/Data {text:?} has an odd number of hex digits")));
+    }
+    (0..text.len())
+        .step_by(2)
+        .map(|i| u8::from_str_radix(&text[i..i + 2], 16))
+        .collect::<Result<_, _>>()
+        .map_err(|_| fail(node, format!("{path}/Data {text:?} is not hex bytes")))
+}
+
+fn flag(text: Option<&str>) -> bool {
+    matches!(text.map(str::trim), Some("1" | "true"))
+}
+
+fn coe_init_cmd(cmd: Node<'_, '_>, path: &str) -> Result<CoeInitCmd, EniError> {
+    let mut transitions = Vec::new();
+    for t in children(cmd, "Transition") {
+        let text = t.text().unwrap_or("").trim();
+        transitions.push(
+            Transition::parse(text)
+                .ok_or_else(|| fail(t, format!("{path}/Transition {text:?} is not a transition")))?,
+        );
+    }
+    if transitions.is_empty() {
+        return Err(fail(cmd, format!("{path} has no Transition")));
+    }
+    let ccs = required(cmd, "Ccs", path, 255)?;
+    let data = child(cmd, "Data").map(|d| hex_bytes(d, path)).transpose()?.unwrap_or_default();
+    let (access, convention) = match ccs {
+        1 => (CoeAccess::Download(data), CcsConvention::Etg),
+        2 if !data.is_empty() => (CoeAccess::Download(data), CcsConvention::Soem),
+        2 => (CoeAccess::Upload, CcsConvention::Etg),
+        other => {
+            let node = child(cmd, "Ccs").unwrap_or(cmd);
+            return Err(fail(node, format!("{path}/Ccs {other} is neither 1 (download) nor 2 (upload)")));
+        }
+    };
+    Ok(CoeInitCmd {
+        transitions,
+        index: required(cmd, "Index", path, 0xFFFF)? as u16,
+        subindex: number(cmd, "SubIndex", path, 0xFF)?.unwrap_or(0) as u8,
+        complete_access: flag(cmd.attribute("CompleteAccess")),
+        access,
+        ccs: convention,
+        timeout_ms: number(cmd, "Timeout", path, u64::from(u32::MAX))?.unwrap_or(0) as u32,
+        comment: child(cmd, "Comment").and_then(|c| c.text()).unwrap_or("").trim().to_string(),
+        disabled: flag(child(cmd, "Disabled").and_then(|d| d.text())),
+        line: line_of(cmd),
+    })
+}
+
+fn count(parent: Node<'_, '_>, name: &str) -> usize {
+    children(parent, name).count()
+}
+
+fn slave(node: Node<'_, '_>, position: usize) -> Result<EniSlave, EniError> {
+    let path = format!("Slave[{position}]");
+    let info = child(node, "Info").ok_or_else(|| fail(node, format!("{path} has no Info")))?;
+    let info_path = format!("{path}/Info");
+    let mut coe_init_cmds = Vec::new();
+    let mut elements = Vec::new();
+    if let Some(mailbox) = child(node, "Mailbox") {
+        if let Some(cmds) = child(mailbox, "CoE").and_then(|c| child(c, "InitCmds")) {
+            for (k, cmd) in children(cmds, "InitCmd").enumerate() {
+                coe_init_cmds.push(coe_init_cmd(cmd, &format!("{path}/Mailbox/CoE/InitCmds/InitCmd[{k}]"))?);
+            }
+        }
+        elements.push(("Mailbox (Send/Recv areas, set up by the chip)", 1));
+        for (tag, what) in
+            [("BootStrap", "Mailbox/BootStrap"), ("EoE", "Mailbox/EoE"), ("FoE", "Mailbox/FoE"), ("SoE", "Mailbox/SoE")]
+        {
+            let n = count(mailbox, tag);
+            if n > 0 {
+                elements.push((what, n));
+            }
+        }
+    }
+    for (tag, what) in [("InitCmds", "InitCmds (register)"), ("ProcessData", "ProcessData"), ("DC", "DC")] {
+        let n = match tag {
+            "InitCmds" => child(node, tag).map_or(0, |c| count(c, "InitCmd")),
+            _ => count(node, tag),
+        };
+        if n > 0 {
+            elements.push((what, n));
+        }
+    }
+    Ok(EniSlave {
+        name: child(info, "Name").and_then(|n| n.text()).unwrap_or("").trim().to_string(),
+        vendor_id: required(info, "VendorId", &info_path, u64::from(u32::MAX))? as u32,
+        product_code: required(info, "ProductCode", &info_path, u64::from(u32::MAX))? as u32,
+        revision: number(info, "RevisionNo", &info_path, u64::from(u32::MAX))?.map(|v| v as u32),
+        phys_addr: number(info, "PhysAddr", &info_path, 0xFFFF)?.map(|v| v as u16),
+        coe_init_cmds,
+        elements,
+        line: line_of(node),
+    })
+}
+
+impl Eni {
+    /// Parses ENI XML.
+    pub fn parse(xml: &str) -> Result<Self, EniError> {
+        let doc = Document::parse(xml).map_err(|e| {
+            let pos = e.pos();
+            EniError { line: pos.row, message: format!("not well-formed XML: {e}") }
+        })?;
+        let root = doc.root_element();
+        if !root.has_tag_name("EtherCATConfig") {
+            return Err(fail(root, format!("the root element is {}, not EtherCATConfig", root.tag_name().name())));
+        }
+        let config = child(root, "Config").ok_or_else(|| fail(root, "EtherCATConfig has no Config".into()))?;
+        let slaves = children(config, "Slave").enumerate().map(|(i, s)| slave(s, i)).collect::<Result<Vec<_>, _>>()?;
+        if slaves.is_empty() {
+            return Err(fail(config, "Config has no Slave".into()));
+        }
+        let mut elements = Vec::new();
+        if let Some(master) = child(config, "Master") {
+            let n = child(master, "InitCmds").map_or(0, |c| count(c, "InitCmd"));
+            if n > 0 {
+                elements.push(("Master/InitCmds", n));
+            }
+            if child(master, "MailboxStates").is_some() {
+                elements.push(("Master/MailboxStates", 1));
+            }
+            if child(master, "EoE").is_some() {
+                elements.push(("Master/EoE", 1));
+            }
+        }
+        for tag in ["Cyclic", "ProcessImage"] {
+            let n = count(config, tag);
+            if n > 0 {
+                elements.push((if tag == "Cyclic" { "Cyclic" } else { "ProcessImage" }, n));
+            }
+        }
+        Ok(Self { slaves, elements })
+    }
+
+    /// Reads and parses a file (lossy UTF-8, as ESI files are read).
+    pub fn load(path: &std::path::Path) -> Result<Self, EniError> {
+        let text = crate::esi::read_xml(path)
+            .map_err(|e| EniError { line: 0, message: format!("{}: {e}", path.display()) })?;
+        Self::parse(&text)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const SMALL: &str = r#"<?xml version="1.0"?>
+<EtherCATConfig Version="1.3"><Config>
+  <Slave><Info><Name>A</Name><VendorId>#x9a</VendorId><ProductCode>0x30924</ProductCode><RevisionNo>66592</RevisionNo></Info>
+    <Mailbox><CoE><InitCmds>
+      <InitCmd><Transition>PS</Transition><Ccs>1</Ccs><Index>24672</Index><SubIndex>0</SubIndex><Data>08</Data></InitCmd>
+      <InitCmd CompleteAccess="1"><Transition>PS</Transition><Ccs>2</Ccs><Index>0x1c12</Index><Data>0100001a</Data></InitCmd>
+      <InitCmd><Transition>SO</Transition><Ccs>1</Ccs><Index>0x6060</Index><Data>09</Data><Disabled>true</Disabled></InitCmd>
+    </InitCmds></CoE></Mailbox>
+  </Slave>
+</Config></EtherCATConfig>"#;
+
+    #[test]
+    fn numbers_in_every_notation_and_both_ccs_conventions() {
+        let eni = Eni::parse(SMALL).unwrap();
+        let s = &eni.slaves[0];
+        assert_eq!((s.vendor_id, s.product_code, s.revision), (0x9A, 0x30924, Some(0x10420)));
+        let c = &s.coe_init_cmds;
+        assert_eq!(
+            (c[0].index, c[0].access.clone(), c[0].ccs),
+            (0x6060, CoeAccess::Download(vec![8]), CcsConvention::Etg)
+        );
+        assert_eq!(c[1].ccs, CcsConvention::Soem);
+        assert!(c[1].complete_access);
+        assert_eq!(c[1].access, CoeAccess::Download(vec![1, 0, 0, 0x1A]));
+        assert_eq!(c[2].transitions, vec![Transition::SafeOpOp]);
+        assert!(c[2].disabled);
+        assert_eq!(c[2].line, 7);
+    }
+
+    #[test]
+    fn mistakes_name_the_element_and_the_line() {
+        let e = Eni::parse(&SMALL.replace("<Ccs>1</Ccs><Index>24672", "<Ccs>7</Ccs><Index>24672")).unwrap_err();
+        assert_eq!(e.line, 5, "{e}");
+        assert!(e.message.contains("InitCmd[0]/Ccs 7"), "{e}");
+        let e = Eni::parse(&SMALL.replace("#x9a", "#xZZ")).unwrap_err();
+        assert!(e.to_string().contains("line 3") && e.message.contains("Info/VendorId \"#xZZ\""), "{e}");
+        let e = Eni::parse(&SMALL.replace("<Data>08</Data>", "<Data>080</Data>")).unwrap_err();
+        assert!(e.message.contains("odd number of hex digits"), "{e}");
+        let e = Eni::parse(&SMALL.replace("<SubIndex>0</SubIndex>", "<SubIndex>300</SubIndex>")).unwrap_err();
+        assert!(e.message.contains("SubIndex \"300\" is above 255"), "{e}");
+        let e = Eni::parse(&SMALL[..SMALL.len() / 2]).unwrap_err();
+        assert!(e.message.contains("not well-formed"), "{e}");
+        let e = Eni::parse(&SMALL.replace("<Transition>SO</Transition>", "<Transition>XY</Transition>")).unwrap_err();
+        assert!(e.message.contains("Transition \"XY\"") && e.line == 7, "{e}");
+    }
+}
