@@ -18,6 +18,7 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         ("config/ecmxfd-sim.toml", "in-process simulator"),
         ("config/ecmxfd-rpi.toml", "/dev/spidev0.0"),
         ("config/ecmxfd-gateway.toml", "/dev/spidev1.0"),
+        ("config/ecmxfd-eni.toml", "in-process simulator"),
     ] {
         let out = Command::new(BIN).args(["--check-config", &repo(file)]).output().unwrap();
         if file.ends_with("gateway.toml") && !std::path::Path::new("/etc/ecmxfd/tls/server.pem").exists() {
@@ -37,7 +38,7 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .filter(|n| n.starts_with("ecmxfd") && n.ends_with(".toml"))
         .collect();
-    assert_eq!(examples.len(), 3, "a new example configuration needs a line above: {examples:?}");
+    assert_eq!(examples.len(), 4, "a new example configuration needs a line above: {examples:?}");
 
     let bad = std::env::temp_dir().join(format!("ecmxfd-bad-{}.toml", std::process::id()));
     for (text, expect) in [
