@@ -93,7 +93,8 @@ pub struct CoeInitCmd {
     pub timeout_ms: u32,
     /// `Comment`.
     pub comment: String,
-    /// `Disabled` is true: skipped.
+    /// `Disabled` is true, or (ESI) the data is `AdaptAutomatically`: a
+    /// value the configuration tool computes, which a master cannot.
     pub disabled: bool,
     /// Its line in the file.
     pub line: u32,
@@ -195,7 +196,9 @@ fn flag(text: Option<&str>) -> bool {
     matches!(text.map(str::trim), Some("1" | "true"))
 }
 
-fn coe_init_cmd(cmd: Node<'_, '_>, path: &str) -> Result<CoeInitCmd, EniError> {
+/// One CoE init command element. `ccs_default`: the `Ccs` when the element
+/// has none (ESI files have none: their init commands are downloads).
+pub(crate) fn coe_init_cmd(cmd: Node<'_, '_>, path: &str, ccs_default: Option<u64>) -> Result<CoeInitCmd, EniError> {
     let mut transitions = Vec::new();
     for t in children(cmd, "Transition") {
         let text = t.text().unwrap_or("").trim();
@@ -207,7 +210,10 @@ fn coe_init_cmd(cmd: Node<'_, '_>, path: &str) -> Result<CoeInitCmd, EniError> {
     if transitions.is_empty() {
         return Err(fail(cmd, format!("{path} has no Transition")));
     }
-    let ccs = required(cmd, "Ccs", path, 255)?;
+    let ccs = match (number(cmd, "Ccs", path, 255)?, ccs_default) {
+        (Some(c), _) | (None, Some(c)) => c,
+        (None, None) => return Err(fail(cmd, format!("{path} has no Ccs"))),
+    };
     let data = child(cmd, "Data").map(|d| hex_bytes(d, path)).transpose()?.unwrap_or_default();
     let (access, convention) = match ccs {
         1 => (CoeAccess::Download(data), CcsConvention::Etg),
@@ -227,7 +233,8 @@ fn coe_init_cmd(cmd: Node<'_, '_>, path: &str) -> Result<CoeInitCmd, EniError> {
         ccs: convention,
         timeout_ms: number(cmd, "Timeout", path, u64::from(u32::MAX))?.unwrap_or(0) as u32,
         comment: child(cmd, "Comment").and_then(|c| c.text()).unwrap_or("").trim().to_string(),
-        disabled: flag(child(cmd, "Disabled").and_then(|d| d.text())),
+        disabled: flag(child(cmd, "Disabled").and_then(|d| d.text()))
+            || flag(child(cmd, "Data").and_then(|d| d.attribute("AdaptAutomatically"))),
         line: line_of(cmd),
     })
 }
@@ -245,7 +252,7 @@ fn slave(node: Node<'_, '_>, position: usize) -> Result<EniSlave, EniError> {
     if let Some(mailbox) = child(node, "Mailbox") {
         if let Some(cmds) = child(mailbox, "CoE").and_then(|c| child(c, "InitCmds")) {
             for (k, cmd) in children(cmds, "InitCmd").enumerate() {
-                coe_init_cmds.push(coe_init_cmd(cmd, &format!("{path}/Mailbox/CoE/InitCmds/InitCmd[{k}]"))?);
+                coe_init_cmds.push(coe_init_cmd(cmd, &format!("{path}/Mailbox/CoE/InitCmds/InitCmd[{k}]"), None)?);
             }
         }
         elements.push(("Mailbox (Send/Recv areas, set up by the chip)", 1));

@@ -189,6 +189,10 @@ pub struct EsiDevice {
     pub categories: Vec<(u16, Vec<u8>)>,
     /// Object dictionary.
     pub dictionary: ObjectDictionary,
+    /// CoE init commands (`Mailbox/CoE/InitCmd`): what a configuration
+    /// tool writes into an ENI for this device (e.g. the mode of operation
+    /// at PRE-OP -> SAFE-OP).
+    pub init_cmds: Vec<crate::eni::CoeInitCmd>,
     /// What the loader had to leave out or correct, in words a user can
     /// act on (a PDO listed twice, a PDO on a sync manager the device does
     /// not have).
@@ -342,6 +346,8 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
     let (mut pdo_assign, mut pdo_config, mut complete_access, mut sdo_info) = (false, false, true, false);
     let yes = |v: &str| v == "1" || v.eq_ignore_ascii_case("true");
     let mut data_link_layer = false;
+    let mut init_cmds = Vec::new();
+    let mut init_warnings = Vec::new();
     if let Some(mb) = child(d, "Mailbox") {
         data_link_layer = mb.attribute("DataLinkLayer").is_some_and(yes);
         for (name, bit) in [
@@ -363,6 +369,12 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
                     // explicit "0"/"false" turns complete access off.
                     complete_access =
                         p.attribute("CompleteAccess").is_none_or(|v| v == "1" || v.eq_ignore_ascii_case("true"));
+                    for (k, cmd) in children(p, "InitCmd").enumerate() {
+                        match crate::eni::coe_init_cmd(cmd, &format!("Mailbox/CoE/InitCmd[{k}]"), Some(1)) {
+                            Ok(c) => init_cmds.push(c),
+                            Err(e) => init_warnings.push(format!("init command left out: {e}")),
+                        }
+                    }
                 }
             }
         }
@@ -421,7 +433,11 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
         bootstrap,
         categories,
         dictionary,
-        warnings,
+        init_cmds,
+        warnings: {
+            warnings.append(&mut init_warnings);
+            warnings
+        },
     })
 }
 

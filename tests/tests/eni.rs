@@ -117,3 +117,40 @@ fn a_malformed_eni_is_refused_naming_element_and_line() {
     assert!(out.contains("slave[1].vendor_id") && out.contains("0x0000059d"), "{out}");
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Without an ENI, a `[[slave]] esi` device's own CoE init commands are
+/// written as a configuration tool would write them into one: the Elmo
+/// Gold's ESI sets the mode of operation (0x6060 = 8) and the cycle time
+/// (0x60C2:01 = 2) at PRE-OP -> SAFE-OP, before the entry's own
+/// `[[slave.sdo]]` (which here sets the mode to 9); `esi_init_cmds = false`
+/// switches them off.
+#[test]
+fn an_esi_devices_init_commands_are_written_before_the_entrys_own_sdos() {
+    let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
+    run(async {
+        let dir = temp_dir("esi-init");
+        let net = dir.join("net.toml");
+        let device = format!("esi = \"{}\"\nproduct_code = 0x30924\n", elmo.display());
+        std::fs::write(&net, format!("version = 1\n[[slave]]\n{device}")).unwrap();
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
+        for (switch, mode, cycle) in [("", 9u8, Some(2u8)), ("esi_init_cmds = false\n", 9, None)] {
+            let slave =
+                format!("[[slave]]\n{device}{switch}  [[slave.sdo]]\n  index = 0x6060\n  value = 9\n  size = 1\n");
+            let mut d = Daemon::with_config(&config(&link, &slave));
+            let ch = d.connect().await;
+            let mut sdo = pb::sdo_client::SdoClient::new(ch);
+            let mut read = async |index: u32, subindex: u32| {
+                let r = sdo.upload(pb::SdoUploadRequest { slave: 0, index, subindex, ..Default::default() }).await;
+                r.unwrap_or_else(|e| panic!("{index:#06x}:{subindex}: {e:?}")).into_inner().raw
+            };
+            assert_eq!(read(0x6060, 0).await, vec![mode], "{switch}: the entry's own SDO comes last");
+            let got = read(0x60C2, 1).await;
+            match cycle {
+                Some(c) => assert_eq!(got, vec![c], "the ESI's init command"),
+                None => assert_ne!(got, vec![2], "esi_init_cmds = false: not written"),
+            }
+            d.stop();
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}

@@ -22,20 +22,28 @@
 //! frames and the ProcessImage (the chip builds its own frames: offsets are
 //! GetLayout's), the master's own init commands, EoE/FoE/SoE settings.
 //!
+//! Without an ENI, a `[[slave]] esi` device's own CoE init commands
+//! (`Mailbox/CoE/InitCmd` in its ESI: a Delta or Elmo servo sets its mode
+//! of operation there) are written the same way, before the entry's
+//! `[[slave.sdo]]`, as a configuration tool would put them into an ENI
+//! (`esi_init_cmds = false` or `esi_init_cmds_skip = [index, ...]` switch
+//! them off; an ENI carries them already, so with one they are not added).
+//!
 //! With `[[slave]]` entries beside the ENI, they must be as many; an
 //! identity they give must be the ENI's; their names, ESI files, PDOs and
 //! DC settings are kept, and their own `[[slave.sdo]]` run after the ENI's
 //! init commands of the same transition.
 
-use ecmxf_devices::eni::{CcsConvention, CoeAccess, Eni, EniSlave, Transition};
+use ecmxf_devices::eni::{CcsConvention, CoeAccess, CoeInitCmd, Eni, Transition};
+use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
 use super::{Config, InitTransition, SlaveConfig, StartupSdo};
 
-/// The start-up SDOs of one ENI slave, in file order, one per transition
-/// an init command lists.
-fn startup_sdos(slave: &EniSlave) -> Vec<StartupSdo> {
+/// The start-up SDOs of init commands (an ENI slave's or an ESI device's),
+/// in file order, one per transition a command lists.
+fn startup_sdos(cmds: &[CoeInitCmd]) -> Vec<StartupSdo> {
     let mut out = Vec::new();
-    for c in slave.coe_init_cmds.iter().filter(|c| !c.disabled) {
+    for c in cmds.iter().filter(|c| !c.disabled) {
         let CoeAccess::Download(data) = &c.access else { continue };
         for t in &c.transitions {
             let transition = match t {
@@ -74,10 +82,12 @@ impl Config {
                     revision: s.revision,
                     rx_pdos: Vec::new(),
                     tx_pdos: Vec::new(),
-                    sdos: startup_sdos(s),
+                    sdos: startup_sdos(&s.coe_init_cmds),
                     dc_assign_activate: None,
                     dc_shift_ns: None,
                     esi: None,
+                    esi_init_cmds: true,
+                    esi_init_cmds_skip: Vec::new(),
                 })
                 .collect();
             return Ok(());
@@ -116,12 +126,85 @@ impl Config {
             if mine.name.is_none() && !theirs.name.is_empty() {
                 mine.name = Some(theirs.name.clone());
             }
-            let mut sdos = startup_sdos(theirs);
+            let mut sdos = startup_sdos(&theirs.coe_init_cmds);
             sdos.append(&mut mine.sdos);
             mine.sdos = sdos;
         }
         Ok(())
     }
+}
+
+/// The device of an ESI file a `[[slave]]` entry means: by its product
+/// code (and revision when given; else the highest), or the only one.
+pub(super) fn esi_device<'a>(file: &'a EsiFile, slave: &SlaveConfig) -> Option<&'a EsiDevice> {
+    match slave.product_code {
+        Some(p) => file
+            .devices
+            .iter()
+            .filter(|d| d.product_code == p && slave.revision.is_none_or(|r| d.revision == r))
+            .max_by_key(|d| d.revision),
+        None => (file.devices.len() == 1).then(|| &file.devices[0]),
+    }
+}
+
+impl Config {
+    /// Without an ENI, the CoE init commands of each `[[slave]] esi`
+    /// device become its first start-up SDOs, as a configuration tool
+    /// writes them into an ENI (issue 32). The key and message of a file
+    /// that does not read.
+    pub(super) fn apply_esi_init_cmds(&mut self) -> Result<(), (String, String)> {
+        for (i, s) in self.slaves.iter_mut().enumerate() {
+            let Some(path) = s.esi.as_ref().filter(|_| s.esi_init_cmds) else { continue };
+            let key = format!("slave[{i}].esi");
+            let text =
+                ecmxf_devices::esi::read_xml(path).map_err(|e| (key.clone(), format!("{}: {e}", path.display())))?;
+            let file = EsiFile::parse(&text).map_err(|e| (key.clone(), format!("{}: {e}", path.display())))?;
+            let Some(device) = esi_device(&file, s) else { continue };
+            let cmds: Vec<CoeInitCmd> =
+                device.init_cmds.iter().filter(|c| !s.esi_init_cmds_skip.contains(&c.index)).cloned().collect();
+            let mut sdos = startup_sdos(&cmds);
+            sdos.append(&mut s.sdos);
+            s.sdos = sdos;
+        }
+        Ok(())
+    }
+}
+
+/// What `--check-config` says about the ESI init commands of `[[slave]]`
+/// `i` (written, skipped, or not known without a product code).
+pub fn esi_init_notes(i: usize, slave: &SlaveConfig, file: &EsiFile) -> Vec<String> {
+    let Some(device) = esi_device(file, slave) else {
+        return if file.devices.iter().any(|d| !d.init_cmds.is_empty()) {
+            vec![format!(
+                "slave[{i}].esi: the file has several devices and the entry no product_code: their init commands are \
+                 not written"
+            )]
+        } else {
+            Vec::new()
+        };
+    };
+    device
+        .init_cmds
+        .iter()
+        .map(|c| {
+            let what = format!(
+                "slave[{i}].esi: init command {:#06x}:{:02x} at {} ({:?})",
+                c.index,
+                c.subindex,
+                c.transitions.iter().map(Transition::letters).collect::<Vec<_>>().join("/"),
+                c.comment
+            );
+            if !slave.esi_init_cmds {
+                format!("{what}: not written (esi_init_cmds = false)")
+            } else if slave.esi_init_cmds_skip.contains(&c.index) {
+                format!("{what}: not written (esi_init_cmds_skip)")
+            } else if c.disabled {
+                format!("{what}: not written (its data is for the configuration tool to adapt)")
+            } else {
+                format!("{what}: written before the [[slave.sdo]] entries")
+            }
+        })
+        .collect()
 }
 
 /// What `--check-config` says about an ENI: what is applied, and every

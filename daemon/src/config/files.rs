@@ -31,6 +31,9 @@ impl Config {
                 if file.devices.is_empty() {
                     return Err(bad(key, format!("{}: describes no device", esi.display())));
                 }
+                if self.eni.is_none() {
+                    notes.extend(super::eni::esi_init_notes(i, s, &file));
+                }
             }
         }
         for (key, file, label) in [

@@ -408,9 +408,22 @@ pub struct SlaveConfig {
     /// This slave's SYNC0 shift in ns when it differs from `cycle.shift_ns`.
     pub dc_shift_ns: Option<i32>,
     /// The slave's ESI file: its object dictionary is what the API lists
-    /// (`Sdo.ListObjects`) instead of probing standard objects.
+    /// (`Sdo.ListObjects`) instead of probing standard objects; its
+    /// device's CoE init commands are written at their transitions, before
+    /// the `[[slave.sdo]]` entries (config/eni.rs), unless an ENI is given.
     #[serde(default)]
     pub esi: Option<PathBuf>,
+    /// Whether the ESI device's CoE init commands are written (default
+    /// true).
+    #[serde(default = "yes")]
+    pub esi_init_cmds: bool,
+    /// Objects (indexes) whose ESI init commands are not written.
+    #[serde(default)]
+    pub esi_init_cmds_skip: Vec<u16>,
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// One PDO of an assignment.
@@ -577,6 +590,13 @@ impl Config {
             if let Some(p) = &mut s.esi {
                 resolve(p);
             }
+        }
+        if c.eni.is_none() {
+            c.apply_esi_init_cmds().map_err(|(key, message)| ConfigError::Invalid {
+                file: path.into(),
+                key,
+                message,
+            })?;
         }
         if let Some(p) = &mut c.eni {
             resolve(p);
