@@ -201,6 +201,12 @@ pub enum Command {
     },
     /// Which slave broke the working counter: counters, per-slave state and AL status.
     Diag,
+    /// Bring the network up again and list the slaves found (admin; IgH `rescan`).
+    Rescan,
+    /// The network as Graphviz dot: `ecmxfctl graph | dot -Tsvg > ring.svg`.
+    Graph,
+    /// Versions: this tool, the daemon, the chip's firmware, the API.
+    Version,
     /// Live view: slaves, states, FIFO, counters and a plot of process data.
     Top(Top),
     /// Shell completions: `ecmxfctl completions bash > /etc/bash_completion.d/ecmxfctl`.

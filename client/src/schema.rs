@@ -6,7 +6,9 @@
 
 use schemars::{JsonSchema, Schema, schema_for};
 
-use crate::commands::{cia402, data, diag, foe, master, pdo, peripherals, reg, sdo, sii, slaves, states};
+use crate::commands::{
+    cia402, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
+};
 
 fn s<T: JsonSchema>() -> Schema {
     schema_for!(T)
@@ -17,6 +19,9 @@ pub fn all() -> Vec<(&'static str, Schema)> {
     vec![
         ("master", s::<master::MasterReport>()),
         ("slaves", s::<slaves::SlavesReport>()),
+        ("rescan", s::<slaves::SlavesReport>()),
+        ("graph", s::<graph::GraphReport>()),
+        ("version", s::<version::VersionReport>()),
         ("states", s::<states::StatesReport>()),
         ("upload", s::<sdo::UploadReport>()),
         ("download", s::<sdo::DownloadReport>()),

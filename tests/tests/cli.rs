@@ -54,6 +54,25 @@ fn every_command_works_as_a_table_and_as_json() {
         assert!(t.contains("Station address:") && t.contains("DC:"), "{t}");
         let (_, j) = both(&d, "slaves", &["slaves", "--scan"]);
         assert_eq!(j["matches_config"], true);
+        // The IgH verbs: version, graph, rescan.
+        let (t, j) = both(&d, "version", &["version"]);
+        assert!(t.contains("Chip firmware:") && t.contains("0x24") && t.contains("ecmxf.v1"), "{t}");
+        assert_eq!(j["firmware"], 0x24);
+        assert_eq!(j["daemon"], j["ecmxfctl"], "one workspace, one version");
+        let (t, j) = both(&d, "graph", &["graph"]);
+        assert!(t.starts_with("digraph ethercat {") && t.trim_end().ends_with('}'), "{t}");
+        assert!(t.contains("master -> slave0;") && t.contains("slave1 -> slave2;"), "{t}");
+        assert!(t.contains("1: TI CiA402 3-axis") && t.contains("0x0000059d:0x00000402"), "{t}");
+        assert_eq!(j["dot"].as_str(), Some(t.as_str()));
+        // A slave taken down to PRE-OP is brought back to OP by the rescan's
+        // bring-up.
+        d.ctl(&["states", "2", "preop"]).ok();
+        let (t, j) = both(&d, "rescan", &["rescan"]);
+        assert!(t.contains("TI CiA402 3-axis"), "{t}");
+        assert_eq!(j["slaves"].as_array().unwrap().len(), 3);
+        assert_eq!(j["matches_config"], true);
+        assert_eq!(j["slaves"][2]["state"], "OP", "{t}");
+        d.connect().await;
         let (t, j) = both(&d, "states", &["states"]);
         assert!(t.starts_with("network: OP"), "{t}");
         assert_eq!(j["slaves"].as_array().unwrap().len(), 3);

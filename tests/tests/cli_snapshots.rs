@@ -27,6 +27,7 @@ fn tables_read_as_they_did() {
         d.connect().await;
         snap(&d, "master", &["master"]);
         snap(&d, "slaves", &["slaves"]);
+        snap(&d, "graph", &["graph"]);
         snap(&d, "slaves_verbose", &["slaves", "-v"]);
         snap(&d, "states", &["states"]);
         snap(&d, "pdos", &["pdos"]);

@@ -168,6 +168,16 @@ impl Report for SlavesReport {
     }
 }
 
+/// `rescan`: the whole bring-up again (Slaves.Scan with reinit; admin),
+/// then the slaves it found, as `slaves` lists them.
+pub async fn rescan(api: &Api) -> Result<SlavesReport, CliError> {
+    let req = api.req_for(pb::ScanRequest { reinit: true }, std::time::Duration::from_secs(35));
+    let r = api.slaves().scan(req).await.map_err(CliError::rpc("rescan"))?;
+    let r = r.into_inner();
+    let slaves = r.slaves.into_iter().map(Into::into).collect();
+    Ok(SlavesReport { slaves, missing: r.missing, matches_config: r.matches_config, verbose: false })
+}
+
 /// Lists (or scans) the slaves; `position` keeps one.
 pub async fn fetch(api: &Api, position: Option<u32>, scan: bool) -> Result<SlavesReport, CliError> {
     let (slaves, missing, matches_config) = if scan {
