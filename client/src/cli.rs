@@ -205,6 +205,15 @@ pub enum Command {
     Rescan,
     /// The network as Graphviz dot: `ecmxfctl graph | dot -Tsvg > ring.svg`.
     Graph,
+    /// Error counters per port of each slave's ESC (registers 0x0300..; admin; IgH `crc`).
+    Crc {
+        /// Only this slave.
+        #[arg(short, long = "position", value_name = "POS")]
+        position: Option<u32>,
+        /// Clear the counters first.
+        #[arg(long)]
+        reset: bool,
+    },
     /// Versions: this tool, the daemon, the chip's firmware, the API.
     Version,
     /// Live view: slaves, states, FIFO, counters and a plot of process data.

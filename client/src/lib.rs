@@ -25,7 +25,7 @@ use schemars::JsonSchema;
 use serde::Serialize;
 
 use cli::{Cli, Command};
-use commands::{cia402, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version};
+use commands::{cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version};
 use error::CliError;
 use output::Out;
 
@@ -138,6 +138,7 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
         Command::Top(t) => top::run(&api, out, t).await?,
         Command::Rescan => out.report(&slaves::rescan(&api).await?)?,
         Command::Graph => out.report(&graph::fetch(&api).await?)?,
+        Command::Crc { position, reset } => out.report(&crc::run(&api, *position, *reset).await?)?,
         Command::Version => out.report(&version::fetch(&api).await?)?,
         Command::Completions { .. } | Command::Man { .. } | Command::JsonSchema { .. } => {}
     }

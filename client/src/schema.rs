@@ -7,7 +7,7 @@
 use schemars::{JsonSchema, Schema, schema_for};
 
 use crate::commands::{
-    cia402, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
+    cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
 };
 
 fn s<T: JsonSchema>() -> Schema {
@@ -21,6 +21,7 @@ pub fn all() -> Vec<(&'static str, Schema)> {
         ("slaves", s::<slaves::SlavesReport>()),
         ("rescan", s::<slaves::SlavesReport>()),
         ("graph", s::<graph::GraphReport>()),
+        ("crc", s::<crc::CrcReport>()),
         ("version", s::<version::VersionReport>()),
         ("states", s::<states::StatesReport>()),
         ("upload", s::<sdo::UploadReport>()),

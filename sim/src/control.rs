@@ -21,6 +21,7 @@ gpio LINE high|low|float        drive a GPIO pin from outside
 qei EDGES                       encoder edges (X4 count)
 adc VOLTS                       analog input voltage
 io-input SLAVE BYTE             bits ORed into a digital-IO slave's inputs
+port-errors SLAVE PORT RX [INVALID [FORWARDED]]  errors counted on a slave's port (0x0300..)
 outputs SLAVE                   the output bytes the slave holds (hex) and its state
 record SLAVE|all [MAX]          record the output frames played from now (MAX, default 100000)
 recorded [FROM [COUNT]]         the recorded frames: cycle, bytes (hex), \"repeat\" when the RxFIFO was empty
@@ -191,6 +192,25 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 _ => Err(format!("slave {i} is not a digital-IO slave")),
             }
         }
+        "port-errors" => {
+            // Errors on a slave's port as its ESC counts them (registers
+            // 0x0300 + 2 * port: invalid frames, + 1: RX errors; 0x0308 +
+            // port: forwarded RX errors), added to what it counted so far.
+            let i = slave_index(chip, w.next())?;
+            let port = num(w.next(), "port")?;
+            if port > 3 {
+                return Err(format!("port {port}: an ESC has ports 0..=3"));
+            }
+            let rx = num(w.next(), "RX errors")?;
+            let invalid = w.next().map(|v| num(Some(v), "invalid frames")).transpose()?.unwrap_or(0);
+            let forwarded = w.next().map(|v| num(Some(v), "forwarded errors")).transpose()?.unwrap_or(0);
+            let r = &mut chip.net.slaves[i].registers;
+            let add = |r: &mut Vec<u8>, at: usize, n: u64| r[at] = r[at].saturating_add(n.min(255) as u8);
+            add(r, 0x0300 + 2 * port as usize, invalid);
+            add(r, 0x0301 + 2 * port as usize, rx);
+            add(r, 0x0308 + port as usize, forwarded);
+            ok()
+        }
         "outputs" => {
             // What reached the slave: what a master wrote, as the slave
             // holds it (to check outputs flow end to end).
@@ -242,6 +262,20 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
 mod tests {
     use super::*;
     use crate::{ChipConfig, Network};
+
+    #[test]
+    fn port_errors_count_as_an_esc_does_and_a_write_clears_them() {
+        let mut c = Chip::new(Network::demo(), ChipConfig::default());
+        assert!(execute(&mut c, "port-errors 1 2 5 3 1").is_ok());
+        assert!(execute(&mut c, "port-errors 1 2 300").is_ok());
+        let mut b = [0u8; 14];
+        c.net.slaves[1].read_registers(0x0300, &mut b);
+        assert_eq!((b[4], b[5], b[10]), (3, 255, 1), "port 2's counters, saturating at 255");
+        assert!(execute(&mut c, "port-errors 1 4 1").is_err());
+        c.net.slaves[1].write_registers(0x0305, &[9]);
+        c.net.slaves[1].read_registers(0x0300, &mut b);
+        assert_eq!(b, [0; 14], "a write to any RX error counter clears them all");
+    }
 
     #[test]
     fn commands_act_and_errors_say_why() {

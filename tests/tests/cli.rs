@@ -408,3 +408,36 @@ fn completions_man_pages_and_schemas_need_no_daemon() {
     assert_eq!(one, doc["commands"]["cia402 status"]);
     ecmxf_e2e::ctl(&["json-schema", "nothing"]).fails(2);
 }
+
+/// `crc`: the ESC error counters per port, as the simulated slaves count
+/// them (`ecmxf-sim ctl port-errors`), and `--reset` clearing them.
+#[test]
+fn crc_reads_each_ports_error_counters_and_reset_clears_them() {
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("crc");
+        let sim = ecmxf_e2e::Simulator::serve(&dir, &[]);
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config(&sim.link(), ""));
+        d.connect().await;
+        sim.ctl("port-errors 1 0 5 2 1");
+        sim.ctl("port-errors 2 1 3");
+        let (t, j) = both(&d, "crc", &["crc"]);
+        assert!(t.starts_with("POS") && t.contains("2/5/1") && t.contains("0/3/0"), "{t}");
+        let slaves = j["slaves"].as_array().unwrap();
+        assert_eq!(slaves.len(), 3);
+        let p = &slaves[1]["ports"][0];
+        assert_eq!(
+            (p["invalid_frames"].as_u64(), p["rx_errors"].as_u64(), p["forwarded_rx_errors"].as_u64()),
+            (Some(2), Some(5), Some(1))
+        );
+        assert_eq!(slaves[2]["ports"][1]["rx_errors"], 3);
+        assert_eq!(slaves[0]["ports"][0]["rx_errors"], 0);
+        assert!(slaves.iter().all(|s| s["working_counter"] == 1), "{j}");
+        let (_, j) = both(&d, "crc", &["crc", "-p", "1", "--reset"]);
+        assert_eq!(j["reset"], true);
+        assert_eq!(j["slaves"].as_array().unwrap().len(), 1);
+        assert_eq!(j["slaves"][0]["ports"][0]["rx_errors"], 0, "{j}");
+        let j = d.ctl(&["--json", "crc"]).json();
+        assert_eq!(j["slaves"][2]["ports"][1]["rx_errors"], 3, "only slave 1 was cleared: {j}");
+        d.stop();
+    });
+}

@@ -2,6 +2,7 @@
 //! report types next to the code that fills them.
 
 pub mod cia402;
+pub mod crc;
 pub mod data;
 pub mod diag;
 pub mod foe;

@@ -284,6 +284,14 @@ impl Slave {
         if ado <= reg::STATION_ADDRESS && usize::from(ado) + data.len() >= usize::from(reg::STATION_ADDRESS) + 2 {
             self.station_address = u16::from_le_bytes([self.registers[0x10], self.registers[0x11]]);
         }
+        // A write to one of the RX error counters (0x0300..=0x030B) clears
+        // all the error counters 0x0300..=0x0313 (ET1100 datasheet, section
+        // II, "RX Error Counter"), which is how a master resets them.
+        if usize::from(ado) <= 0x030B && usize::from(ado) + data.len() > 0x0300 {
+            if let Some(counters) = self.registers.get_mut(0x0300..=0x0313) {
+                counters.fill(0);
+            }
+        }
     }
 
     /// One DC cycle. `outputs` is this cycle's output image for the slave, or
