@@ -205,6 +205,15 @@ pub enum Command {
     Rescan,
     /// The network as Graphviz dot: `ecmxfctl graph | dot -Tsvg > ring.svg`.
     Graph,
+    /// Station aliases in the slaves' SII; `--set N -p POS` writes one with its checksum (admin; IgH `alias`).
+    Alias {
+        /// Only this slave (required with --set).
+        #[arg(short, long = "position", value_name = "POS")]
+        position: Option<u32>,
+        /// Write this alias (0..=65535).
+        #[arg(long, value_name = "ALIAS")]
+        set: Option<u16>,
+    },
     /// Error counters per port of each slave's ESC (registers 0x0300..; admin; IgH `crc`).
     Crc {
         /// Only this slave.

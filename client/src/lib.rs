@@ -25,7 +25,9 @@ use schemars::JsonSchema;
 use serde::Serialize;
 
 use cli::{Cli, Command};
-use commands::{cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version};
+use commands::{
+    alias, cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
+};
 use error::CliError;
 use output::Out;
 
@@ -139,6 +141,7 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
         Command::Rescan => out.report(&slaves::rescan(&api).await?)?,
         Command::Graph => out.report(&graph::fetch(&api).await?)?,
         Command::Crc { position, reset } => out.report(&crc::run(&api, *position, *reset).await?)?,
+        Command::Alias { position, set } => out.report(&alias::run(&api, *position, *set).await?)?,
         Command::Version => out.report(&version::fetch(&api).await?)?,
         Command::Completions { .. } | Command::Man { .. } | Command::JsonSchema { .. } => {}
     }

@@ -7,7 +7,7 @@
 use schemars::{JsonSchema, Schema, schema_for};
 
 use crate::commands::{
-    cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
+    alias, cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
 };
 
 fn s<T: JsonSchema>() -> Schema {
@@ -22,6 +22,7 @@ pub fn all() -> Vec<(&'static str, Schema)> {
         ("rescan", s::<slaves::SlavesReport>()),
         ("graph", s::<graph::GraphReport>()),
         ("crc", s::<crc::CrcReport>()),
+        ("alias", s::<alias::AliasReport>()),
         ("version", s::<version::VersionReport>()),
         ("states", s::<states::StatesReport>()),
         ("upload", s::<sdo::UploadReport>()),

@@ -441,3 +441,28 @@ fn crc_reads_each_ports_error_counters_and_reset_clears_them() {
         d.stop();
     });
 }
+
+/// `alias`: the SII's station alias (word 4), and `--set` writing it with
+/// the config area's checksum (word 7), which `sii decode` then finds right.
+#[test]
+fn alias_reads_and_writes_the_sii_station_alias_with_its_checksum() {
+    run(async {
+        let mut d = Daemon::binary_with_config(&config());
+        d.connect().await;
+        let (t, j) = both(&d, "alias", &["alias"]);
+        assert!(t.starts_with("POS") && t.contains("TI CiA402 3-axis"), "{t}");
+        let before = j["slaves"][2]["alias"].as_u64().unwrap();
+        let (t, j) = both(&d, "alias", &["alias", "-p", "2", "--set", "7"]);
+        assert!(t.contains(&format!("alias {before} -> 7 written to the SII")), "{t}");
+        assert_eq!((j["slaves"][0]["alias"].as_u64(), j["slaves"][0]["previous"].as_u64()), (Some(7), Some(7)), "{j}");
+        let j = d.ctl(&["--json", "alias", "-p", "2"]).json();
+        assert_eq!(j["slaves"][0]["alias"], 7);
+        assert!(j["slaves"][0]["previous"].is_null());
+        let decoded = d.ctl(&["--json", "sii", "decode", "-p", "2"]).json();
+        assert_eq!(decoded["checksum_ok"], true, "the checksum follows the alias: {decoded}");
+        let e = d.ctl(&["alias", "--set", "7"]);
+        e.fails(2);
+        assert!(e.stderr.contains("-p POS"), "{}", e.stderr);
+        d.stop();
+    });
+}

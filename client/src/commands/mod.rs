@@ -1,6 +1,7 @@
 //! One module per command (or family of commands), each with its JSON
 //! report types next to the code that fills them.
 
+pub mod alias;
 pub mod cia402;
 pub mod crc;
 pub mod data;
