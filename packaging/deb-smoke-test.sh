@@ -6,7 +6,8 @@
 # installed ecmxfctl, and removes the package again. Needs root; CI runs it
 # on a throw-away machine. Under a running systemd the service itself is
 # started; in a container (no systemd) the same command line runs as the
-# ecmxfd user.
+# ecmxfd user. Then the installed binary probes the Raspberry Pi example
+# configuration on emulated SPI and GPIO devices.
 set -eu
 cd "$(dirname "$0")/.."
 
@@ -50,6 +51,19 @@ ecmxfctl slaves
 if [ -n "$pid" ]; then
     kill -TERM "$pid"
     wait "$pid" || fail "ecmxfd did not stop cleanly"
+else
+    systemctl stop ecmxfd
+fi
+# The installed binary on the hardware link: the Raspberry Pi example as it
+# ships, on /dev/spidev0.0 and /dev/gpiochip0 emulated in front of the
+# simulator (sim/hw-emu; built by the test run before this), through every
+# probe step.
+sim=target/debug/ecmxf-sim
+if [ -x "$sim" ]; then
+    "$sim" hardware -- /usr/bin/ecmxfd probe --config /usr/share/doc/ecmxfd/examples/ecmxfd-rpi.toml \
+        || fail "the installed ecmxfd did not pass the probe on emulated hardware"
+else
+    echo "deb smoke test: $sim not built: the probe on emulated hardware is skipped"
 fi
 apt-get purge -y -q ecmxfd >/dev/null
 [ ! -e /usr/bin/ecmxfd ] || fail "purge left /usr/bin/ecmxfd"
