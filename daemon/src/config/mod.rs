@@ -477,6 +477,17 @@ pub enum InitTransition {
     So,
 }
 
+impl InitTransition {
+    /// ETG.2100's two letters for it.
+    pub fn letters(self) -> &'static str {
+        match self {
+            Self::Ip => "IP",
+            Self::Ps => "PS",
+            Self::So => "SO",
+        }
+    }
+}
+
 impl StartupSdo {
     /// The bytes to write.
     pub fn payload(&self) -> Vec<u8> {

@@ -463,14 +463,9 @@ fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition
             };
             if blocking(port, &req, SLOW.max(timeout + Duration::from_secs(1))).is_err() {
                 let code = abort_code(port)?;
-                let at = match at {
-                    InitTransition::Ip => "IP",
-                    InitTransition::Ps => "PS",
-                    InitTransition::So => "SO",
-                };
                 return Err(step(
                     "start-up SDO",
-                    format!("slave {i} {:#06x}:{:02x} (transition {at}): {code}", sdo.index, sdo.subindex),
+                    format!("slave {i} {:#06x}:{:02x} (transition {}): {code}", sdo.index, sdo.subindex, at.letters()),
                 ));
             }
             pdo_objects |= is_pdo_object(sdo.index);

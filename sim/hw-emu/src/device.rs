@@ -256,6 +256,11 @@ impl Emu {
     /// `arg` points to what `request` says, as for the kernel.
     pub unsafe fn ioctl(&self, fd: RawFd, request: u64, arg: *mut libc::c_void) -> Result<c_int, Errno> {
         let device = self.device(fd).ok_or(libc::EBADF)?;
+        // Every request here takes an argument; the kernel's copy from a
+        // null one fails so.
+        if arg.is_null() {
+            return Err(libc::EFAULT);
+        }
         let mut device = device.lock().unwrap_or_else(|e| e.into_inner());
         match &mut *device {
             // SAFETY: passed on from the caller.
@@ -280,9 +285,6 @@ impl Emu {
         request: u64,
         arg: *mut libc::c_void,
     ) -> Result<c_int, Errno> {
-        if arg.is_null() {
-            return Err(libc::EFAULT);
-        }
         if let Some(n) = uapi::spi_message_count(request) {
             bump(&self.stats.spi_messages);
             // SAFETY: the caller passes `n` transfers, as the number says.
@@ -390,9 +392,6 @@ impl Emu {
         request: u64,
         arg: *mut libc::c_void,
     ) -> Result<c_int, Errno> {
-        if arg.is_null() {
-            return Err(libc::EFAULT);
-        }
         let lines = self.config.gpio_lines;
         match request {
             uapi::GPIO_GET_CHIPINFO => {
@@ -510,9 +509,6 @@ impl Emu {
         number: u64,
         arg: *mut libc::c_void,
     ) -> Result<c_int, Errno> {
-        if arg.is_null() {
-            return Err(libc::EFAULT);
-        }
         match number {
             uapi::GPIO_V2_LINE_GET_VALUES => {
                 bump(&self.stats.get_values);
