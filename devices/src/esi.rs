@@ -295,7 +295,7 @@ pub fn data_type(name: &str, bits: u32) -> DataType {
     }
 }
 
-fn parse_pdo(n: Node<'_, '_>) -> Result<EsiPdo, EsiError> {
+pub(crate) fn parse_pdo(n: Node<'_, '_>) -> Result<EsiPdo, EsiError> {
     if let (Some(name), None) = (n.attribute("Ref"), child(n, "Index")) {
         return Err(EsiError::PdoReference { name: name.to_string() });
     }

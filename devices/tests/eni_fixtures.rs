@@ -9,7 +9,7 @@
 
 use std::path::PathBuf;
 
-use ecmxf_devices::eni::{CcsConvention, CoeAccess, Eni, Transition};
+use ecmxf_devices::eni::{BitRange, CcsConvention, CoeAccess, Eni, Transition};
 
 fn fixtures() -> Option<PathBuf> {
     let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures");
@@ -74,6 +74,43 @@ fn the_twincat_export_reads_as_twincat_means_it() {
     }
     assert!(eni.elements.iter().any(|(e, _)| *e == "ProcessImage"), "{:?}", eni.elements);
     assert!(eni.elements.iter().any(|(e, _)| *e == "Cyclic"), "{:?}", eni.elements);
+}
+
+#[test]
+fn the_twincat_export_gives_process_data_dc_and_its_image() {
+    let Some(eni) = load("eni_twincat_elmo4_imu.xml") else { return };
+    assert_eq!(eni.cycle_us, Some(10_000));
+    // The IMU, known only from the ENI: one fixed TxPDO of seven 16-bit
+    // values on SM3 at 0x2800, a CoE mailbox.
+    let imu = eni.slaves[0].device();
+    assert_eq!((imu.product_code, imu.revision), (1, 65537));
+    assert_eq!(imu.tx_pdos.len(), 1);
+    assert_eq!((imu.tx_pdos[0].index, imu.tx_pdos[0].sm, imu.tx_pdos[0].entries.len()), (0x1A00, Some(3), 7));
+    assert_eq!(
+        imu.sms.iter().map(|s| (s.kind, s.start)).collect::<Vec<_>>(),
+        [(1, 16384), (2, 18432), (3, 4096), (4, 10240)]
+    );
+    assert_ne!(imu.protocols & ecmxf_devices::sii::protocol::COE, 0);
+    let elmo = &eni.slaves[1];
+    let pd = elmo.process_data.as_ref().unwrap();
+    assert_eq!(pd.outputs, Some(BitRange { start: 776, len: 48 }));
+    assert_eq!(pd.inputs, Some(BitRange { start: 776, len: 112 }));
+    let assigned: Vec<u16> = pd.rx_pdos.iter().chain(&pd.tx_pdos).filter(|p| p.sm.is_some()).map(|p| p.index).collect();
+    assert_eq!(assigned, [0x1601, 0x1A03]);
+    let dc = elmo.dc.unwrap();
+    assert!(dc.reference_clock && dc.cycle_time0_ns == 10_000_000, "{dc:?}");
+    assert!(!eni.slaves[2].dc.unwrap().reference_clock);
+    // Each variable of a slave, from the start of that slave's data; the
+    // tool's own variables (frame and device states) belong to none.
+    let rel: Vec<(usize, &str, bool, u32, u32)> = eni
+        .relative_variables()
+        .iter()
+        .map(|v| (v.slave, v.variable.name.as_str(), v.variable.output, v.relative_bit, v.variable.bit_size))
+        .collect();
+    assert_eq!(rel.len(), 7 + 4 * 4 + 4 * 2, "{rel:#?}");
+    assert!(rel.contains(&(0, "Imu.Transmit PDO Mapping.Error code", false, 96, 16)));
+    assert!(rel.contains(&(1, "WheelRearLeft.Inputs.Status word", false, 96, 16)));
+    assert!(rel.contains(&(4, "WheelFrontRight.Outputs.Control word", true, 32, 16)));
 }
 
 #[test]

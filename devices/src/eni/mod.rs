@@ -17,6 +17,10 @@ use roxmltree::{Document, Node};
 
 use crate::esi::parse_number;
 
+mod process;
+
+pub use process::{BitRange, EniDc, EniMailbox, EniProcessData, EniVariable, SlaveVariable};
+
 /// A state transition an init command belongs to (ETG.2100 `Transition`:
 /// two letters, from and to: I INIT, P PRE-OP, S SAFE-OP, O OP, B BOOT).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord, Hash)]
@@ -115,6 +119,12 @@ pub struct EniSlave {
     pub phys_addr: Option<u16>,
     /// CoE init commands, in file order.
     pub coe_init_cmds: Vec<CoeInitCmd>,
+    /// `ProcessData`, when given.
+    pub process_data: Option<EniProcessData>,
+    /// `Mailbox` areas and protocols, when given.
+    pub mailbox: Option<EniMailbox>,
+    /// `DC`, when given.
+    pub dc: Option<EniDc>,
     /// Elements of this slave the reader's caller may not apply, with a
     /// count: `("InitCmds (register)", 49)`, `("ProcessData", 1)`, ...
     pub elements: Vec<(&'static str, usize)>,
@@ -130,6 +140,10 @@ pub struct Eni {
     /// Master-level elements: `("Master/InitCmds", 12)`, `("Cyclic", 1)`,
     /// `("ProcessImage", 1)`...
     pub elements: Vec<(&'static str, usize)>,
+    /// `ProcessImage` variables, inputs then outputs, in file order.
+    pub process_image: Vec<EniVariable>,
+    /// `Cyclic/CycleTime` (us) of the first cycle, when given.
+    pub cycle_us: Option<u32>,
 }
 
 /// Why an ENI file was refused: what, and where.
@@ -274,7 +288,13 @@ fn slave(node: Node<'_, '_>, position: usize) -> Result<EniSlave, EniError> {
             elements.push((what, n));
         }
     }
+    let process_data = child(node, "ProcessData").map(|p| process::process_data(p, &path)).transpose()?;
+    let mailbox = child(node, "Mailbox").map(|m| process::mailbox(m, &path)).transpose()?;
+    let dc = child(node, "DC").map(|d| process::dc(d, &path)).transpose()?;
     Ok(EniSlave {
+        process_data,
+        mailbox,
+        dc,
         name: child(info, "Name").and_then(|n| n.text()).unwrap_or("").trim().to_string(),
         vendor_id: required(info, "VendorId", &info_path, u64::from(u32::MAX))? as u32,
         product_code: required(info, "ProductCode", &info_path, u64::from(u32::MAX))? as u32,
@@ -321,7 +341,12 @@ impl Eni {
                 elements.push((if tag == "Cyclic" { "Cyclic" } else { "ProcessImage" }, n));
             }
         }
-        Ok(Self { slaves, elements })
+        let process_image = child(config, "ProcessImage").map(process::process_image).transpose()?.unwrap_or_default();
+        let cycle_us = match child(config, "Cyclic") {
+            Some(c) => number(c, "CycleTime", "Cyclic", u64::from(u32::MAX))?.map(|v| v as u32),
+            None => None,
+        };
+        Ok(Self { slaves, elements, process_image, cycle_us })
     }
 
     /// Reads and parses a file (lossy UTF-8, as ESI files are read).
