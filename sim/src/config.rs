@@ -76,6 +76,11 @@ pub struct SlaveSection {
     pub esi: Option<PathBuf>,
     /// An SII EEPROM dump (binary), the slave's only description.
     pub sii: Option<PathBuf>,
+    /// An ENI file whose slave entry (`eni_slave`) describes the device
+    /// (a device known only from a configuration tool's export).
+    pub eni: Option<PathBuf>,
+    /// The ENI slave entry by name (`Info/Name`), or by position from 1.
+    pub eni_slave: Option<String>,
     /// Product code of the ESI device.
     pub product_code: Option<u32>,
     /// Revision of the ESI device.
@@ -222,6 +227,31 @@ impl SlaveSection {
             message,
         };
         let serial = self.serial.unwrap_or(1000 + i as u32);
+        if let Some(eni) = &self.eni {
+            if self.profile.is_some() || self.esi.is_some() || self.sii.is_some() {
+                return Err(invalid("eni", "give one of profile, esi, sii or eni".into()));
+            }
+            let path = base.join(eni);
+            let file =
+                ecmxf_devices::eni::Eni::load(&path).map_err(|e| invalid("eni", format!("{}: {e}", path.display())))?;
+            let wanted = self.eni_slave.as_deref().unwrap_or("1");
+            let entry = file
+                .slaves
+                .iter()
+                .find(|s| s.name == wanted)
+                .or_else(|| wanted.parse::<usize>().ok().and_then(|n| file.slaves.get(n.checked_sub(1)?)))
+                .ok_or_else(|| {
+                    let names: Vec<&str> = file.slaves.iter().map(|s| s.name.as_str()).collect();
+                    invalid(
+                        "eni_slave",
+                        format!("{} has no slave {wanted:?} (its slaves: {})", path.display(), names.join(", ")),
+                    )
+                })?;
+            return Ok(crate::net::eni_slave::slave_from_eni(entry, self.alias));
+        }
+        if self.eni_slave.is_some() {
+            return Err(invalid("eni_slave", "eni_slave names a slave of an `eni` file; give `eni` too".into()));
+        }
         if let Some(sii) = &self.sii {
             if self.profile.is_some() || self.esi.is_some() {
                 return Err(invalid("sii", "give one of profile, esi or sii".into()));
@@ -262,7 +292,7 @@ impl SlaveSection {
                 Ok(d.to_slave(f.vendor_id, self.alias))
             }
             (Some(_), Some(_)) => Err(invalid("profile", "give either profile or esi, not both".into())),
-            (None, None) => Err(invalid("profile", "each slave needs a profile, an esi or an sii".into())),
+            (None, None) => Err(invalid("profile", "each slave needs a profile, an esi, an sii or an eni".into())),
         }
     }
 }

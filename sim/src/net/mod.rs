@@ -2,6 +2,7 @@
 //! state machine, object dictionary, SII image and device model.
 
 pub mod cia402;
+pub mod eni_slave;
 pub mod esi;
 pub mod esm;
 pub mod od;

@@ -120,13 +120,26 @@ impl SdoServer for ObjectDictionary {
             }
             for (s, v) in &writes {
                 check_write(self, index, *s, v, state)?;
-                validate(self, index, *s, v)?;
             }
-            for (s, v) in writes {
-                if let Some(e) = self.entry_mut(index, s) {
+            // The object-specific rules judge the new value as a whole, in
+            // the order a master writing one subindex at a time follows
+            // (ETG.1000.6 5.6.7: count to 0, the entries, then the count):
+            // checked against the old entries, a new assignment's count
+            // would name PDOs not yet written.
+            let mut trial = self.clone();
+            if writes.first().is_some_and(|(s, _)| *s == 0) {
+                if let Some(e) = trial.entry_mut(index, 0) {
+                    e.value = vec![0];
+                }
+            }
+            let (count, entries): (Vec<_>, Vec<_>) = writes.into_iter().partition(|(s, _)| *s == 0);
+            for (s, v) in entries.into_iter().chain(count) {
+                validate(&trial, index, s, &v)?;
+                if let Some(e) = trial.entry_mut(index, s) {
                     e.value = v;
                 }
             }
+            *self = trial;
             return Ok(());
         }
         check_write(self, index, sub, data, state)?;
