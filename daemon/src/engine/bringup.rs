@@ -463,9 +463,15 @@ fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition
             };
             if blocking(port, &req, SLOW.max(timeout + Duration::from_secs(1))).is_err() {
                 let code = abort_code(port)?;
+                let from = if sdo.origin.is_empty() { String::new() } else { format!(", {}", sdo.origin) };
                 return Err(step(
                     "start-up SDO",
-                    format!("slave {i} {:#06x}:{:02x} (transition {}): {code}", sdo.index, sdo.subindex, at.letters()),
+                    format!(
+                        "slave {i} {:#06x}:{:02x} (transition {}{from}): {code}",
+                        sdo.index,
+                        sdo.subindex,
+                        at.letters()
+                    ),
                 ));
             }
             pdo_objects |= is_pdo_object(sdo.index);
@@ -553,7 +559,7 @@ fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, B
         );
     }
     let (rx_depth, tx_depth, low, high) =
-        fit_fifo(c.fifo_rx_depth, c.fifo_low, c.fifo_high, c.fifo_tx_depth, rx_size, tx_size);
+        super::cyclic::fit_fifo(c.fifo_rx_depth, c.fifo_low, c.fifo_high, c.fifo_tx_depth, rx_size, tx_size);
     if (rx_depth, tx_depth) != (c.fifo_rx_depth, c.fifo_tx_depth) {
         warn!(rx_depth, tx_depth, low, high, "FIFO depths fitted to the 16 KiB FIFO memory");
     }
@@ -601,7 +607,16 @@ fn reach_target<L: Link>(
     startup_sdos(port, config, InitTransition::So)?;
     let rx_size = fifo.rx_size;
     let per_packet = port.data_size().checked_div(rx_size).unwrap_or(0);
-    let mut left = usize::from(fifo.high);
+    let plan = super::cyclic::Plan {
+        rx_size,
+        tx_size: fifo.tx_size,
+        cycle: config.cycle.dc_cycle(),
+        low: fifo.low,
+        high: fifo.high,
+        tx_depth: fifo.tx_depth,
+        budget: config.cycle.output_latency(),
+    };
+    let mut left = plan.prefill();
     let frames = held.image_for(slaves, rx_size).repeat(per_packet.max(1));
     while left > 0 && per_packet > 0 {
         let n = left.min(per_packet);
@@ -624,29 +639,6 @@ fn packet_time<L: Link>(port: &mut Port<L>) -> Result<Duration, PortError> {
     }
     times.sort();
     Ok(times[2])
-}
-
-/// Depths that fit the FIFO memory (v049 under 52/54: RxCnt x RxSize +
-/// TxCnt x TxSize <= 0x4000): unchanged when they fit; otherwise the TxFIFO
-/// gets at most a quarter of the memory and the RxFIFO, which is what keeps
-/// outputs flowing, the rest, with the marks scaled by the same ratio.
-/// Returns (rx depth, tx depth, low, high).
-pub fn fit_fifo(depth: u8, low: u8, high: u8, tx_depth: u8, rx_size: usize, tx_size: usize) -> (u8, u8, u8, u8) {
-    let budget = ecmxf_wire::payload::fifo::FIFO_BUDGET;
-    if usize::from(depth) * rx_size + usize::from(tx_depth) * tx_size <= budget {
-        return (depth, tx_depth, low, high);
-    }
-    let tx = if usize::from(tx_depth) * tx_size * 4 <= budget {
-        tx_depth
-    } else {
-        (budget / 4 / tx_size.max(1)).clamp(1, 255) as u8
-    };
-    let left = budget - usize::from(tx) * tx_size;
-    let fitted = (left / rx_size.max(1)).clamp(2, usize::from(depth)) as u8;
-    let scale = |m: u8| ((usize::from(m) * usize::from(fitted)) / usize::from(depth.max(1))) as u8;
-    let h = scale(high).clamp(1, fitted);
-    let l = scale(low).min(h - 1);
-    (fitted, tx, l, h)
 }
 
 fn abort_code<L: Link>(port: &mut Port<L>) -> Result<SdoAbortCode, PortError> {

@@ -79,6 +79,45 @@ impl Plan {
     }
 }
 
+/// Depths that fit the FIFO memory (v049 under 52/54: RxCnt x RxSize +
+/// TxCnt x TxSize <= 0x4000): unchanged when they fit; otherwise the TxFIFO
+/// gets at most a quarter of the memory and the RxFIFO, which is what keeps
+/// outputs flowing, the rest, with the marks scaled by the same ratio.
+/// Returns (rx depth, tx depth, low, high).
+pub fn fit_fifo(depth: u8, low: u8, high: u8, tx_depth: u8, rx_size: usize, tx_size: usize) -> (u8, u8, u8, u8) {
+    let budget = ecmxf_wire::payload::fifo::FIFO_BUDGET;
+    if usize::from(depth) * rx_size + usize::from(tx_depth) * tx_size <= budget {
+        return (depth, tx_depth, low, high);
+    }
+    let tx = if usize::from(tx_depth) * tx_size * 4 <= budget {
+        tx_depth
+    } else {
+        (budget / 4 / tx_size.max(1)).clamp(1, 255) as u8
+    };
+    let left = budget - usize::from(tx) * tx_size;
+    let fitted = (left / rx_size.max(1)).clamp(2, usize::from(depth)) as u8;
+    let scale = |m: u8| ((usize::from(m) * usize::from(fitted)) / usize::from(depth.max(1))) as u8;
+    let h = scale(high).clamp(1, fitted);
+    let l = scale(low).min(h - 1);
+    (fitted, tx, l, h)
+}
+
+impl Plan {
+    /// The frames bring-up queues before OP (outputs must be waiting when
+    /// the slaves enter it): the high mark; with an output latency budget,
+    /// the level kept under it. Prefilled to the high mark, the first
+    /// writes after every bring-up would wait for all of it (2.4 s with
+    /// marks up to 240 at a 10 ms cycle, an ENI's usual one) before the
+    /// budget held.
+    pub fn prefill(&self) -> usize {
+        let high = usize::from(self.high.max(1));
+        match self.budget {
+            Some(_) => usize::try_from(self.levels().target).unwrap_or(1).clamp(1, high),
+            None => high,
+        }
+    }
+}
+
 /// The cyclic state.
 #[derive(Debug)]
 pub struct Cyclic {
@@ -295,7 +334,6 @@ mod tests {
 
     #[test]
     fn fifo_depth_fits_the_memory() {
-        use crate::engine::bringup::fit_fifo;
         assert_eq!(fit_fifo(32, 8, 20, 32, 53, 53), (32, 32, 8, 20), "fits: unchanged");
         assert_eq!(fit_fifo(255, 96, 192, 40, 53, 53), (255, 40, 96, 192), "255 x 53 + 40 x 53 fits");
         for (rx, tx) in [(80, 53), (400, 400), (1408, 1408), (1, 1408)] {
@@ -390,6 +428,8 @@ mod tests {
         assert_eq!(plan(Some(2000)).levels(), Levels { target: 15, floor: 7, cap_cycles: 4 });
         assert_eq!(plan(Some(250)).levels().target, 2, "never fewer than two frames");
         assert_eq!(plan(Some(1_000_000)).levels().target, 184, "never deeper than the midpoint");
+        // Bring-up queues the high mark, or with a budget only its level.
+        assert_eq!((plan(None).prefill(), plan(Some(2000)).prefill()), (240, 15));
         // Held at the target: a packet of 19 frames is more than the room
         // between target and floor, so it refills at the floor.
         let mut cy = Cyclic::new(plan(Some(2000)), 1024, Vec::new());
