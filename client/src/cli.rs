@@ -148,8 +148,11 @@ pub enum Command {
     },
     /// Process data now: every input and output entry with its value.
     Data {
-        /// Only these entries (names as `pdos` lists them).
+        /// Only these entries (names or variable names as `pdos` lists them).
         entries: Vec<String>,
+        /// Only this variable (as `pdos` lists it: the ENI's name, or SLAVE.PDO.ENTRY), repeatable; the same as giving it as an entry.
+        #[arg(short = 'v', long = "variable", value_name = "NAME")]
+        variables: Vec<String>,
         /// The images as hex instead of entries.
         #[arg(long)]
         raw: bool,
@@ -334,8 +337,11 @@ pub enum SiiCommand {
 
 #[derive(Debug, Args)]
 pub struct Watch {
-    /// Entries to show (input and output names as `pdos` lists them) [default: every input].
+    /// Entries to show (input and output names or variable names as `pdos` lists them) [default: every input].
     pub entries: Vec<String>,
+    /// A variable to show (as `pdos` lists it: the ENI's name, or SLAVE.PDO.ENTRY), repeatable; the same as giving it as an entry.
+    #[arg(short = 'v', long = "variable", value_name = "NAME")]
+    pub variables: Vec<String>,
     /// Time between lines, e.g. 100ms (inputs are sampled, not averaged).
     #[arg(short, long, default_value = "100ms", value_parser = parse_duration, value_name = "DURATION")]
     pub interval: Duration,

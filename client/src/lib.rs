@@ -119,7 +119,10 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
         Command::Sdos { slave } => out.report(&sdo::sdos(&api, slave.position).await?)?,
         Command::Sii(c) => sii::run(&api, out, c).await?,
         Command::Pdos { position } => out.report(&pdo::fetch(&api, *position).await?)?,
-        Command::Data { entries, raw } => out.report(&data::data(&api, entries, *raw).await?)?,
+        Command::Data { entries, variables, raw } => {
+            let names: Vec<String> = entries.iter().chain(variables).cloned().collect();
+            out.report(&data::data(&api, &names, *raw).await?)?
+        }
         Command::Watch(w) => data::watch(&api, out, w).await?,
         Command::Cia402(c) => cia402::run(&api, out, c).await?,
         Command::Gpio(c) => peripherals::gpio(&api, out, c).await?,

@@ -142,7 +142,7 @@ pub async fn run(api: &Api, out: Out, t: &Top) -> Result<(), CliError> {
             .unwrap_or_default()
     } else {
         for n in &t.plot {
-            match image.entries.iter().find(|e| &e.name == n) {
+            match image.entries.iter().find(|e| e.is_named(n)) {
                 Some(e) if !e.is_output() => {}
                 Some(_) => return Err(CliError::Usage(format!("--plot {n}: only inputs can be plotted"))),
                 None => return Err(CliError::Usage(format!("--plot {n}: no such entry; `ecmxfctl pdos` lists them"))),

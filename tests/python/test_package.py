@@ -161,5 +161,49 @@ class Package(unittest.TestCase):
         self.assertIn("STATE_CHANGE", kinds, kinds)
 
 
+class EniVariables(unittest.TestCase):
+    """config/ecmxfd-eni.toml: the demo network described by an ENI whose
+    ProcessImage names the IO slave's data; values by those names."""
+
+    def test_6_values_by_the_eni_variable_names(self):
+        with tempfile.TemporaryDirectory(prefix="ecmxf-eni-") as tmp:
+            socket = os.path.join(tmp, "ecmxfd.sock")
+            binary = os.environ.get("ECMXFD", os.path.join(REPO, "target", "debug", "ecmxfd"))
+            config = os.path.join(REPO, "config", "ecmxfd-eni.toml")
+            with open(os.path.join(tmp, "log"), "w") as log:
+                daemon = subprocess.Popen(
+                    [binary, "--config", config, "--socket", socket, "--status-every", "0"], stdout=log, stderr=log
+                )
+            try:
+                deadline = time.monotonic() + 30
+                while True:
+                    try:
+                        c = ecmxf.connect(socket, wait=1)
+                        if c.status().phase == ecmxf.v1.master_pb2.ENGINE_PHASE_RUNNING:
+                            break
+                        c.close()
+                    except ecmxf.Unreachable:
+                        pass
+                    if daemon.poll() is not None or time.monotonic() > deadline:
+                        raise RuntimeError("ecmxfd did not come up:\n" + open(os.path.join(tmp, "log")).read())
+                    time.sleep(0.1)
+                with c:
+                    out, inp = "IO.Outputs.Outputs 1-8", "IO.Inputs.Inputs 1-8"
+                    layout = c.layout()
+                    self.assertEqual(layout.entry(inp).name, IN)
+                    self.assertEqual(layout.entry(out).variable, out)
+                    with c.lease([IO]) as lease:
+                        self.assertEqual(lease.write({out: 0x3C}), 1)
+                        seen = None
+                        for s in c.stream_inputs([inp], duration=2.0):
+                            seen = s[inp]
+                            if seen == 0x3C:
+                                break
+                        self.assertEqual(seen, 0x3C, "written and read by the ENI's names")
+            finally:
+                daemon.terminate()
+                daemon.wait(10)
+
+
 if __name__ == "__main__":
     unittest.main(verbosity=2)

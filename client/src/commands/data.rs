@@ -65,22 +65,36 @@ impl Report for DataReport {
     }
 }
 
-/// The entries named (all when none), checked against the layout.
-fn select(layout: &LayoutReport, names: &[String], default_outputs: bool) -> Result<Vec<EntryReport>, CliError> {
+/// The entries named (all when none), checked against the layout. An
+/// entry asked for by its variable name is shown under that name (its
+/// `name` stays the daemon's, to ask for its value by).
+fn select(layout: &LayoutReport, names: &[String], default_outputs: bool) -> Result<Vec<Chosen>, CliError> {
     if names.is_empty() {
-        return Ok(layout.entries.iter().filter(|e| default_outputs || !e.is_output()).cloned().collect());
+        let all = layout.entries.iter().filter(|e| default_outputs || !e.is_output());
+        return Ok(all.map(|e| Chosen { shown: e.name.clone(), entry: e.clone() }).collect());
     }
     names
         .iter()
         .map(|n| {
-            layout
-                .entries
-                .iter()
-                .find(|e| &e.name == n)
-                .cloned()
-                .ok_or_else(|| CliError::Usage(format!("no process data entry {n:?}; `ecmxfctl pdos` lists the names")))
+            let e = layout.entries.iter().find(|e| e.is_named(n)).ok_or_else(|| {
+                CliError::Usage(format!("no process data entry or variable {n:?}; `ecmxfctl pdos` lists them"))
+            })?;
+            Ok(Chosen { shown: n.clone(), entry: e.clone() })
         })
         .collect()
+}
+
+/// A selected entry and the name it is shown under.
+struct Chosen {
+    entry: EntryReport,
+    shown: String,
+}
+
+impl std::ops::Deref for Chosen {
+    type Target = EntryReport;
+    fn deref(&self) -> &EntryReport {
+        &self.entry
+    }
 }
 
 /// One input sample with the selected inputs (None when nothing selected).
@@ -106,9 +120,9 @@ async fn outputs(api: &Api, names: Vec<String>) -> Result<pb::OutputImage, CliEr
     Ok(r.map_err(CliError::rpc("read outputs"))?.into_inner())
 }
 
-fn entry_value(e: &EntryReport, v: Option<&pb::Value>) -> EntryValueReport {
+fn entry_value(e: &Chosen, v: Option<&pb::Value>) -> EntryValueReport {
     EntryValueReport {
-        name: e.name.clone(),
+        name: e.shown.clone(),
         direction: e.direction.clone(),
         data_type: e.data_type.clone(),
         value: value_json(v),
@@ -136,7 +150,7 @@ pub async fn data(api: &Api, names: &[String], raw: bool) -> Result<DataReport, 
         });
     }
     let chosen = select(&layout, names, true)?;
-    let (outs, ins): (Vec<&EntryReport>, Vec<&EntryReport>) = chosen.iter().partition(|e| e.is_output());
+    let (outs, ins): (Vec<&Chosen>, Vec<&Chosen>) = chosen.iter().partition(|e| e.is_output());
     let sample = inputs(api, ins.iter().map(|e| e.name.clone()).collect(), false).await?;
     let o =
         if outs.is_empty() { None } else { Some(outputs(api, outs.iter().map(|e| e.name.clone()).collect()).await?) };
@@ -171,8 +185,9 @@ pub struct WatchLine {
 /// `watch`.
 pub async fn watch(api: &Api, out: Out, w: &Watch) -> Result<(), CliError> {
     let layout = layout(api).await?;
-    let chosen = select(&layout, &w.entries, false)?;
-    let (outs, ins): (Vec<&EntryReport>, Vec<&EntryReport>) = chosen.iter().partition(|e| e.is_output());
+    let names: Vec<String> = w.entries.iter().chain(&w.variables).cloned().collect();
+    let chosen = select(&layout, &names, false)?;
+    let (outs, ins): (Vec<&Chosen>, Vec<&Chosen>) = chosen.iter().partition(|e| e.is_output());
     let cycle_us = u128::from(layout.cycle_us.max(1));
     let decimation = (w.interval.as_micros() / cycle_us).clamp(1, u128::from(u32::MAX)) as u32;
     let req = pb::StreamInputsRequest {
@@ -187,11 +202,11 @@ pub async fn watch(api: &Api, out: Out, w: &Watch) -> Result<(), CliError> {
     };
     let mut stream =
         api.pdo().stream_inputs(api.stream(req)).await.map_err(CliError::rpc("watch inputs"))?.into_inner();
-    let widths: Vec<usize> = chosen.iter().map(|e| e.name.len().max(12)).collect();
+    let widths: Vec<usize> = chosen.iter().map(|e| e.shown.len().max(12)).collect();
     if !out.json {
         let mut header = format!("{:>10}  {:>9}", "SEQ", "T(s)");
         for (e, w) in chosen.iter().zip(&widths) {
-            header.push_str(&format!("  {:>w$}", e.name));
+            header.push_str(&format!("  {:>w$}", e.shown));
         }
         println!("{header}");
     }
@@ -228,7 +243,7 @@ pub async fn watch(api: &Api, out: Out, w: &Watch) -> Result<(), CliError> {
             } else {
                 pick(&sample.values, &e.name)
             };
-            values.insert(e.name.clone(), value_json(v));
+            values.insert(e.shown.clone(), value_json(v));
             text.push_str(&format!("  {:>w$}", value_json(v).to_string()));
         }
         if w.on_change && !outs.is_empty() && last_values.as_ref() == Some(&values) {

@@ -61,6 +61,9 @@ pub struct LayoutReport {
     /// DC cycle, microseconds (one frame per cycle).
     pub cycle_us: u32,
     pub entries: Vec<EntryReport>,
+    /// Where the layout disagrees with the configuration (an ENI variable
+    /// no entry matches); empty when all agree.
+    pub notes: Vec<String>,
 }
 
 /// One named entry.
@@ -80,12 +83,21 @@ pub struct EntryReport {
     pub data_type: String,
     /// The device's name for it ("" when none).
     pub label: String,
+    /// Its variable name as configuration tools write it (the ENI's, else
+    /// "<slave>.<PDO>.<entry>"), "" when nothing names it; `data -v` and
+    /// `watch` take it as they take `name`.
+    pub variable: String,
 }
 
 impl EntryReport {
     /// Whether it is an output.
     pub fn is_output(&self) -> bool {
         self.direction == "output"
+    }
+
+    /// Whether `name` is this entry's name or its variable name.
+    pub fn is_named(&self, name: &str) -> bool {
+        self.name == name || (!self.variable.is_empty() && self.variable == name)
     }
 }
 
@@ -108,8 +120,10 @@ impl From<pb::ProcessImage> for LayoutReport {
                     bit_length: e.bit_length,
                     data_type: type_name(e.data_type).into(),
                     label: e.label,
+                    variable: e.variable,
                 })
                 .collect(),
+            notes: p.notes,
         }
     }
 }
@@ -122,7 +136,7 @@ fn at(bit_offset: u32) -> String {
 impl LayoutReport {
     /// The layout table.
     pub fn table(&self) -> String {
-        let mut t = Table::new(&["ENTRY", "DIR", "OBJECT", "BYTE", "BITS", "TYPE"]);
+        let mut t = Table::new(&["ENTRY", "DIR", "OBJECT", "BYTE", "BITS", "TYPE", "VARIABLE"]);
         for e in &self.entries {
             t.row([
                 e.name.clone(),
@@ -131,10 +145,12 @@ impl LayoutReport {
                 at(e.bit_offset),
                 e.bit_length.to_string(),
                 e.data_type.clone(),
+                e.variable.clone(),
             ]);
         }
+        let notes: String = self.notes.iter().map(|n| format!("note: {n}\n")).collect();
         format!(
-            "Process image: {} bytes out, {} bytes in, cycle {} us\n{t}",
+            "Process image: {} bytes out, {} bytes in, cycle {} us\n{t}{notes}",
             self.output_bytes, self.input_bytes, self.cycle_us
         )
     }

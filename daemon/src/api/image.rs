@@ -55,6 +55,10 @@ pub struct Entry {
     pub data_type: pb::DataType,
     /// The device's name for it ("" when none).
     pub label: String,
+    /// Its variable name as configuration tools write it ("" when none):
+    /// the ENI's (`WheelRearLeft.Inputs.Status word`), else
+    /// `<slave>.<PDO name>.<entry name>` from the device's description.
+    pub variable: String,
 }
 
 /// The whole image.
@@ -67,6 +71,9 @@ pub struct Image {
     /// Entries, outputs then inputs, slave order.
     pub entries: Vec<Entry>,
     by_name: HashMap<String, usize>,
+    by_variable: HashMap<String, usize>,
+    /// What the layout disagrees with: an ENI variable no entry matches.
+    pub notes: Vec<String>,
     /// The configuration generation it was built for.
     pub generation: u64,
     /// Cycle, us.
@@ -95,10 +102,77 @@ impl Image {
                 }
                 let pdos = Arc::clone(&image.mappings[i]);
                 let list = if output { &pdos.rx } else { &pdos.tx };
+                let first = image.entries.len();
                 image.add_slave(i as u8, output, (offset * 8) as u32, (bytes * 8) as u32, list);
+                let config = master.config().slaves.get(i).cloned().unwrap_or_default();
+                image.name_variables(first, &config, output, (offset * 8) as u32);
             }
         }
+        for n in &image.notes {
+            tracing::warn!(target: "ecmxfd::api::image", "{n}");
+        }
         Ok(image)
+    }
+
+    /// Names the entries of one slave's outputs or inputs (from `first`
+    /// on, its data starting at bit `start`) with their variables: the
+    /// ENI's, placed by offset and size from the slave's start, where the
+    /// configuration came from one (an ENI variable no entry matches is a
+    /// note: the network's mapping is not the file's); else each entry's
+    /// `<slave>.<PDO>.<entry>` from the device's names.
+    fn name_variables(&mut self, first: usize, config: &crate::config::SlaveConfig, output: bool, start: u32) {
+        let dir = if output { "outputs" } else { "inputs" };
+        let mine: Vec<_> = config.variables.iter().filter(|v| v.output == output).collect();
+        let mut names: Vec<(usize, String)> = Vec::new();
+        if !mine.is_empty() {
+            // The ENI's type wins where it has one: the tool read it from
+            // the device's description, the mapping read over CoE has none.
+            for v in mine {
+                let hit = (first..self.entries.len()).find(|&k| {
+                    let e = &self.entries[k];
+                    e.index != 0 && e.bit_offset - start == v.bit && e.bit_length == v.bits
+                });
+                match hit {
+                    Some(k) => {
+                        if let Some(t) = v.data_type {
+                            self.entries[k].data_type = super::convert::pb_type(t);
+                        }
+                        names.push((k, v.name.clone()));
+                    }
+                    None => {
+                        let slave = self.entries.get(first).map_or(0, |e| e.slave);
+                        self.notes.push(format!(
+                            "ENI variable {:?} (line {}): slave {slave}'s {dir} have no {}-bit entry at bit {}: the \
+                             network's mapping is not the file's",
+                            v.name, v.line, v.bits, v.bit
+                        ));
+                    }
+                }
+            }
+        } else {
+            let prefix = match &config.name {
+                Some(n) => n.clone(),
+                None => self.entries.get(first).map_or_else(String::new, |e| e.slave.to_string()),
+            };
+            for (k, e) in self.entries.iter().enumerate().skip(first) {
+                if let Some(rest) = e.variable.strip_prefix('.') {
+                    names.push((k, format!("{prefix}.{rest}")));
+                }
+            }
+        }
+        for e in &mut self.entries[first..] {
+            e.variable.clear();
+        }
+        for (k, name) in names {
+            let mut unique = name.clone();
+            let mut n = 2;
+            while self.by_variable.contains_key(&unique) || self.by_name.contains_key(&unique) {
+                unique = format!("{name}#{n}");
+                n += 1;
+            }
+            self.by_variable.insert(unique.clone(), k);
+            self.entries[k].variable = unique;
+        }
     }
 
     fn add_slave(&mut self, slave: u8, output: bool, start: u32, bits: u32, pdos: &[PdoDescription]) {
@@ -123,6 +197,13 @@ impl Image {
                         bit_length: len,
                         data_type,
                         label: e.name.clone(),
+                        // ".<PDO>.<entry>": `name_variables` puts the
+                        // slave in front, or the ENI's name instead.
+                        variable: if pdo.name.is_empty() || e.name.is_empty() {
+                            String::new()
+                        } else {
+                            format!(".{}.{}", pdo.name, e.name)
+                        },
                     });
                 }
                 at += len;
@@ -143,6 +224,7 @@ impl Image {
                 bit_length: start + bits - at,
                 data_type: pb::DataType::OctetString,
                 label: String::new(),
+                variable: String::new(),
             });
         }
     }
@@ -158,9 +240,9 @@ impl Image {
         self.entries.push(e);
     }
 
-    /// An entry by name.
+    /// An entry by name, or by variable name.
     pub fn get(&self, name: &str) -> Option<&Entry> {
-        self.by_name.get(name).map(|&i| &self.entries[i])
+        self.by_name.get(name).or_else(|| self.by_variable.get(name)).map(|&i| &self.entries[i])
     }
 
     /// The input entry of `slave` for CiA 402 object `index`.
@@ -187,8 +269,10 @@ impl Image {
                     bit_length: e.bit_length,
                     data_type: e.data_type as i32,
                     label: e.label.clone(),
+                    variable: e.variable.clone(),
                 })
                 .collect(),
+            notes: self.notes.clone(),
         }
     }
 }

@@ -315,19 +315,20 @@ impl ProcessDataApi for ProcessDataService {
     ) -> Result<Response<pb::OutputImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
-        let mut selected: Vec<&Entry> = Vec::with_capacity(request.get_ref().entries.len());
+        // Each value named as asked for: by entry or by variable name.
+        let mut selected: Vec<(&String, &Entry)> = Vec::with_capacity(request.get_ref().entries.len());
         for name in &request.get_ref().entries {
             let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;
             if !e.output {
                 return Err(bad_argument("entries", format!("{name:?} is an input (see StreamInputs)")));
             }
-            selected.push(e);
+            selected.push((name, e));
         }
         let mut bytes = self.0.shadow.lock().unwrap_or_else(|e| e.into_inner()).clone();
         bytes.resize(image.output_bytes as usize, 0);
         let values = selected
             .into_iter()
-            .map(|e| pb::EntryValue { name: e.name.clone(), value: Some(super::image::entry_value(e, &bytes)) })
+            .map(|(name, e)| pb::EntryValue { name: name.clone(), value: Some(super::image::entry_value(e, &bytes)) })
             .collect();
         Ok(Response::new(pb::OutputImage { image: bytes, values }))
     }
@@ -355,7 +356,8 @@ impl ProcessDataApi for ProcessDataService {
         let mut selected: Vec<Entry> = Vec::with_capacity(r.entries.len());
         for name in &r.entries {
             let e = image.get(name).ok_or_else(|| bad_argument("entries", format!("no entry {name:?}")))?;
-            selected.push(e.clone());
+            // Its values are named as asked for: by entry or variable name.
+            selected.push(Entry { name: name.clone(), ..e.clone() });
         }
         // Straight from the broadcast channel to the HTTP/2 stream: no task
         // and no queue in between, so a frame costs one wake-up per

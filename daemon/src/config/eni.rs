@@ -13,14 +13,23 @@
 //!   0x1C13, 0x16xx, 0x1Axx) make the chip read the mapping again
 //!   (ECAT_RECONFIG), so assignments of any size reach the frames.
 //!
+//! - the DC block: `CycleTime0` is the SYNC0 cycle unless `[cycle]
+//!   sync0_us` is given, `ShiftTime` the slave's shift, a slave without
+//!   one runs without DC (see [`Config::take_dc`]);
+//! - the ProcessImage's variables (and each slave's ProcessData for its
+//!   `Send`/`Recv` start): they name GetLayout's entries
+//!   (`WheelRearLeft.Inputs.Status word`), matched by offset from the
+//!   slave's start and size; a variable no entry matches is a layout note
+//!   (the network's mapping is not the file's). The absolute offsets are
+//!   the tool's: the chip packs the slaves' data one after the other.
+//!
 //! What it does not take, each named by `ecmxfd --check-config`
 //! ([`eni_notes`]): register init commands (the chip's ECAT_INIT does the
 //! slaves' register set-up: addresses, SyncManagers, FMMUs, DC; v049
 //! "ECM-XF 初始化EtherCAT網路"), the mailbox areas (the chip sets them from
-//! the SII), ProcessData and the DC block (the mapping comes from the
-//! slaves after the init commands; the cycle from `[cycle]`), the cyclic
-//! frames and the ProcessImage (the chip builds its own frames: offsets are
-//! GetLayout's), the master's own init commands, EoE/FoE/SoE settings.
+//! the SII), the PDO mapping in ProcessData (the mapping comes from the
+//! slaves after the init commands), the cyclic frames (the chip builds its
+//! own), the master's own init commands, EoE/FoE/SoE settings.
 //!
 //! Without an ENI, a `[[slave]] esi` device's own CoE init commands
 //! (`Mailbox/CoE/InitCmd` in its ESI: a Delta or Elmo servo sets its mode
@@ -37,11 +46,11 @@
 use ecmxf_devices::eni::{CcsConvention, CoeAccess, CoeInitCmd, Eni, Transition};
 use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
-use super::{Config, InitTransition, SlaveConfig, StartupSdo};
+use super::{Config, InitTransition, SlaveConfig, SlaveVariable, StartupSdo};
 
 /// The start-up SDOs of init commands (an ENI slave's or an ESI device's),
 /// in file order, one per transition a command lists.
-fn startup_sdos(cmds: &[CoeInitCmd]) -> Vec<StartupSdo> {
+fn startup_sdos(cmds: &[CoeInitCmd], source: &str) -> Vec<StartupSdo> {
     let mut out = Vec::new();
     for c in cmds.iter().filter(|c| !c.disabled) {
         let CoeAccess::Download(data) = &c.access else { continue };
@@ -61,6 +70,11 @@ fn startup_sdos(cmds: &[CoeInitCmd]) -> Vec<StartupSdo> {
                 complete_access: c.complete_access,
                 transition,
                 timeout_ms: (c.timeout_ms > 0).then_some(c.timeout_ms),
+                origin: if c.comment.is_empty() {
+                    format!("{source} line {}", c.line)
+                } else {
+                    format!("{source} line {}, {:?}", c.line, c.comment)
+                },
             });
         }
     }
@@ -70,7 +84,15 @@ fn startup_sdos(cmds: &[CoeInitCmd]) -> Vec<StartupSdo> {
 impl Config {
     /// Takes the ENI's slaves and init commands (see the module doc); the
     /// key and message of what does not fit.
-    pub(super) fn apply_eni(&mut self, eni: &Eni) -> Result<(), (String, String)> {
+    pub(super) fn apply_eni(&mut self, eni: &Eni, sync0_given: bool) -> Result<(), (String, String)> {
+        self.take_slaves(eni)?;
+        self.take_variables(eni);
+        self.take_dc(eni, sync0_given);
+        Ok(())
+    }
+
+    /// The slaves: names, identities, CoE init commands.
+    fn take_slaves(&mut self, eni: &Eni) -> Result<(), (String, String)> {
         if self.slaves.is_empty() {
             self.slaves = eni
                 .slaves
@@ -82,12 +104,13 @@ impl Config {
                     revision: s.revision,
                     rx_pdos: Vec::new(),
                     tx_pdos: Vec::new(),
-                    sdos: startup_sdos(&s.coe_init_cmds),
+                    sdos: startup_sdos(&s.coe_init_cmds, "ENI"),
                     dc_assign_activate: None,
                     dc_shift_ns: None,
                     esi: None,
                     esi_init_cmds: true,
                     esi_init_cmds_skip: Vec::new(),
+                    variables: Vec::new(),
                 })
                 .collect();
             return Ok(());
@@ -126,11 +149,62 @@ impl Config {
             if mine.name.is_none() && !theirs.name.is_empty() {
                 mine.name = Some(theirs.name.clone());
             }
-            let mut sdos = startup_sdos(&theirs.coe_init_cmds);
+            let mut sdos = startup_sdos(&theirs.coe_init_cmds, "ENI");
             sdos.append(&mut mine.sdos);
             mine.sdos = sdos;
         }
         Ok(())
+    }
+
+    /// The DC block of each slave (ETG.2100 `Slave/DC`): the SYNC0 cycle
+    /// (`CycleTime0` of the reference clock, else of the first slave with
+    /// one) unless `[cycle] sync0_us` is given; each slave's `ShiftTime`
+    /// unless its entry sets `dc_shift_ns`; a slave without a DC block,
+    /// in a file where others have one, runs without DC
+    /// (`dc_assign_activate = 0`, as the tool configured it) unless its
+    /// entry says otherwise. The start time is the chip's to compute
+    /// (ECAT_INIT_DC), never the file's; the reference clock is the chip's
+    /// first DC slave.
+    fn take_dc(&mut self, eni: &Eni, sync0_given: bool) {
+        let dcs: Vec<_> = eni.slaves.iter().map(|s| s.dc).collect();
+        if dcs.iter().all(Option::is_none) {
+            return;
+        }
+        let cycle = dcs
+            .iter()
+            .flatten()
+            .find(|d| d.reference_clock && d.cycle_time0_ns > 0)
+            .or_else(|| dcs.iter().flatten().find(|d| d.cycle_time0_ns > 0))
+            .map(|d| d.cycle_time0_ns / 1000);
+        if let (Some(us), false) = (cycle, sync0_given) {
+            self.cycle.sync0_us = us;
+        }
+        for (mine, dc) in self.slaves.iter_mut().zip(&dcs) {
+            match dc {
+                Some(dc) if dc.shift_time_ns != 0 && mine.dc_shift_ns.is_none() => {
+                    mine.dc_shift_ns = i32::try_from(dc.shift_time_ns).ok();
+                }
+                None if mine.dc_assign_activate.is_none() => mine.dc_assign_activate = Some(0),
+                _ => {}
+            }
+        }
+    }
+
+    /// The ProcessImage's variables, each to its slave.
+    fn take_variables(&mut self, eni: &Eni) {
+        for v in eni.relative_variables() {
+            if let Some(s) = self.slaves.get_mut(v.slave) {
+                s.variables.push(SlaveVariable {
+                    name: v.variable.name.clone(),
+                    output: v.variable.output,
+                    bit: v.relative_bit,
+                    bits: v.variable.bit_size,
+                    data_type: Some(ecmxf_devices::esi::data_type(&v.variable.data_type, v.variable.bit_size))
+                        .filter(|t| !v.variable.data_type.is_empty() && t.bits() == v.variable.bit_size),
+                    line: v.variable.line,
+                });
+            }
+        }
     }
 }
 
@@ -162,7 +236,8 @@ impl Config {
             let Some(device) = esi_device(&file, s) else { continue };
             let cmds: Vec<CoeInitCmd> =
                 device.init_cmds.iter().filter(|c| !s.esi_init_cmds_skip.contains(&c.index)).cloned().collect();
-            let mut sdos = startup_sdos(&cmds);
+            let name = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into());
+            let mut sdos = startup_sdos(&cmds, &format!("init command of ESI {name}"));
             sdos.append(&mut s.sdos);
             s.sdos = sdos;
         }
@@ -234,14 +309,20 @@ pub fn eni_notes(eni: &Eni) -> Vec<String> {
                 ));
             }
         }
+        if s.dc.is_none() && eni.slaves.iter().any(|o| o.dc.is_some()) {
+            notes.push(format!("{who}: no DC block: runs without DC (dc_assign_activate = 0) unless its entry says"));
+        }
         for (element, n) in &s.elements {
             let why = match *element {
                 "InitCmds (register)" => {
                     "not replayed: the chip's ECAT_INIT sets up addresses, SyncManagers, FMMUs and DC"
                 }
-                "ProcessData" => "not applied: the mapping comes from the slave (after the CoE init commands)",
+                "ProcessData" => {
+                    "read for names and sizes: the mapping itself comes from the slave (after the CoE init commands)"
+                }
                 "DC" => {
-                    "not applied: the cycle is [cycle] sync0_us; per slave: [[slave]] dc_assign_activate / dc_shift_ns"
+                    "applied: CycleTime0 is the SYNC0 cycle unless [cycle] sync0_us is given, ShiftTime the slave's \
+                     shift; the start time is the chip's, the reference clock its first DC slave"
                 }
                 e if e.starts_with("Mailbox (") => "not applied: the chip sets the mailboxes up from the SII",
                 _ => "not applied",
@@ -251,7 +332,10 @@ pub fn eni_notes(eni: &Eni) -> Vec<String> {
     }
     for (element, n) in &eni.elements {
         let why = match *element {
-            "ProcessImage" => "not applied: the chip builds the frames; offsets are GetLayout's (`ecmxfctl pdos`)",
+            "ProcessImage" => {
+                "applied as names: each slave's variables name GetLayout's entries, checked by offset from the \
+                 slave's start and size (the chip packs the slaves; the tool's absolute offsets are its own)"
+            }
             "Cyclic" => "not applied: the chip builds the cyclic frames",
             _ => "not applied",
         };

@@ -420,6 +420,31 @@ pub struct SlaveConfig {
     /// Objects (indexes) whose ESI init commands are not written.
     #[serde(default)]
     pub esi_init_cmds_skip: Vec<u16>,
+    /// The ENI's process-image variables of this slave, placed from the
+    /// start of its data (config/eni.rs): the names the image's entries
+    /// take, and the offsets the layout must match. Not a TOML key.
+    #[serde(skip)]
+    pub variables: Vec<SlaveVariable>,
+}
+
+/// A named variable of one slave's process data, as a configuration tool
+/// laid it out (ENI `ProcessImage/*/Variable`).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct SlaveVariable {
+    /// `WheelRearLeft.Inputs.Status word`.
+    pub name: String,
+    /// In the outputs (else the inputs).
+    pub output: bool,
+    /// Bits from the start of the slave's outputs or inputs.
+    pub bit: u32,
+    /// Size in bits.
+    pub bits: u32,
+    /// Its type as the ENI names it, when it does and the type is of
+    /// that size (`INT` for the IMU's 16-bit values, which the slave's
+    /// CoE mapping alone would call unsigned).
+    pub data_type: Option<ecmxf_devices::od::DataType>,
+    /// Its line in the ENI.
+    pub line: u32,
 }
 
 fn yes() -> bool {
@@ -461,6 +486,11 @@ pub struct StartupSdo {
     pub transition: InitTransition,
     /// How long the slave may take, ms (default 1000).
     pub timeout_ms: Option<u32>,
+    /// Where it came from, for errors: `ENI line 1170 "download pdo
+    /// 0x1C13:01 index"`, `ESI ... init command`; "" for a `[[slave.sdo]]`
+    /// entry. Not a TOML key.
+    #[serde(skip)]
+    pub origin: String,
 }
 
 /// When a start-up SDO is written (ETG.2100 transitions a master replays
@@ -616,7 +646,16 @@ impl Config {
                 key: "eni".into(),
                 message: format!("{}: {e}", p.display()),
             })?;
-            c.apply_eni(&eni).map_err(|(key, message)| ConfigError::Invalid { file: path.into(), key, message })?;
+            // The ENI's DC cycle applies where the file does not set one.
+            let sync0_given = toml::from_str::<toml::Table>(text)
+                .ok()
+                .and_then(|t| t.get("cycle")?.as_table()?.get("sync0_us").cloned())
+                .is_some();
+            c.apply_eni(&eni, sync0_given).map_err(|(key, message)| ConfigError::Invalid {
+                file: path.into(),
+                key,
+                message,
+            })?;
             c.validate(path)?;
         }
         Ok(c)

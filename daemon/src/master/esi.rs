@@ -1,11 +1,14 @@
 //! The ESI files the configuration names (`[[slave]] esi`), parsed once and
 //! kept: a Beckhoff terminal family is megabytes of XML, and the process
-//! image, `pdos` and `ListObjects` all ask for the same device.
+//! image, `pdos` and `ListObjects` all ask for the same device. Also the
+//! ENI (`eni = FILE`), whose slave entries describe their PDOs the way an
+//! ESI does (names and types of the entries a slave maps).
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
+use ecmxf_devices::eni::Eni;
 use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
 use super::Master;
@@ -14,6 +17,7 @@ use super::Master;
 #[derive(Debug, Default)]
 pub struct EsiLibrary {
     files: Mutex<HashMap<PathBuf, Arc<EsiFile>>>,
+    enis: Mutex<HashMap<PathBuf, Arc<Eni>>>,
 }
 
 /// One device of a parsed ESI file.
@@ -72,7 +76,41 @@ impl EsiLibrary {
     }
 }
 
+impl EsiLibrary {
+    /// The ENI at `path`, parsed (on a blocking thread the first time).
+    pub async fn eni(&self, path: &Path) -> Result<Arc<Eni>, String> {
+        if let Some(f) = self.enis.lock().unwrap_or_else(|e| e.into_inner()).get(path) {
+            return Ok(Arc::clone(f));
+        }
+        let owned = path.to_path_buf();
+        let parsed = tokio::task::spawn_blocking(move || Eni::load(&owned).map_err(|e| e.to_string()))
+            .await
+            .map_err(|e| format!("parsing stopped: {e}"))?
+            .map_err(|e| format!("ENI {}: {e}", path.display()))?;
+        let eni = Arc::new(parsed);
+        self.enis.lock().unwrap_or_else(|e| e.into_inner()).insert(path.to_path_buf(), Arc::clone(&eni));
+        Ok(eni)
+    }
+}
+
 impl Master {
+    /// The device the configuration's ENI describes at `slave`'s place
+    /// (its PDOs with names and types, no dictionary), when the
+    /// configuration came from one and that entry has the slave's identity.
+    pub async fn eni_device(&self, slave: u8) -> Option<EsiDevice> {
+        let path = self.config.lock().unwrap_or_else(|e| e.into_inner()).eni.clone()?;
+        let eni = match self.esi.eni(&path).await {
+            Ok(e) => e,
+            Err(e) => {
+                tracing::warn!(slave, "{e}");
+                return None;
+            }
+        };
+        let found = self.layout().slaves.get(usize::from(slave)).cloned()?;
+        let entry = eni.slaves.get(usize::from(slave))?;
+        (entry.vendor_id == found.vendor_id && entry.product_code == found.product_code).then(|| entry.device())
+    }
+
     /// The ESI device configured for `slave`, matched to the identity the
     /// slave reported: `None` when no ESI is configured for it.
     pub async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, String>> {

@@ -122,6 +122,8 @@ impl Master {
             None => None,
         };
         let esi_device = esi.as_ref().map(EsiRef::device);
+        // Without an ESI, an ENI entry describes the PDOs (names, types).
+        let eni_device = if esi_device.is_none() { self.eni_device(slave).await } else { None };
         let mut notes = Vec::new();
         match self.coe_pdos(slave, rx_bytes, tx_bytes).await {
             Ok((mut rx, mut tx)) => {
@@ -132,7 +134,7 @@ impl Master {
                     from_description(&mut rx, &esi_described(d.rx_pdos.iter()));
                     from_description(&mut tx, &esi_described(d.tx_pdos.iter()));
                 }
-                if esi_device.is_none() {
+                if esi_device.is_none() && eni_device.is_none() {
                     match self.sii_described(slave, PDO_CATEGORIES).await {
                         Ok(image) => {
                             let (all_rx, all_tx) =
@@ -146,7 +148,8 @@ impl Master {
                         Err(e) => return Err(e),
                     }
                 }
-                return Ok(typed(SlavePdos { source: PdoSource::Coe, note: String::new(), rx, tx }, esi_device));
+                let pdos = SlavePdos { source: PdoSource::Coe, note: String::new(), rx, tx };
+                return Ok(typed(pdos, esi_device.or(eni_device.as_ref())));
             }
             Err(e) if source_lacks(&e) => notes.push(format!("CoE: {e}")),
             Err(e) => return Err(e),

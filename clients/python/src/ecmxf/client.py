@@ -106,6 +106,10 @@ class Entry:
     bit_offset: int
     bit_length: int
     data_type: str  # "UNSIGNED16", ...
+    # The variable name configuration tools give it ("" when none): the
+    # ENI's ("WheelRearLeft.Inputs.Status word"), else "<slave>.<PDO>.<entry>".
+    # Taken wherever ``name`` is: stream_inputs, lease.write, samples.
+    variable: str = ""
 
 
 @dataclass(frozen=True)
@@ -122,6 +126,13 @@ class Layout:
 
     def outputs(self) -> List[Entry]:
         return [e for e in self.entries if e.direction == "output"]
+
+    def entry(self, name: str) -> Entry:
+        """The entry with this name or variable name (KeyError if none)."""
+        for e in self.entries:
+            if name in (e.name, e.variable) and name:
+                return e
+        raise KeyError(name)
 
 
 class Sample(dict):
@@ -299,6 +310,7 @@ class Client:
                     bit_offset=e.bit_offset,
                     bit_length=e.bit_length,
                     data_type=common_pb2.DataType.Name(e.data_type).replace("DATA_TYPE_", ""),
+                    variable=e.variable,
                 )
                 for e in r.entries
             ],
@@ -353,8 +365,10 @@ class Client:
             raise ImportError('inputs_array needs numpy: pip install "ecmxf[numpy]"') from None
         if duration is None and count is None:
             raise ValueError("inputs_array needs duration= or count= (it collects before it returns)")
-        layout = {e.name: e for e in self.layout().inputs()}
-        names = list(entries) if entries is not None else list(layout)
+        inputs = self.layout().inputs()
+        layout = {e.name: e for e in inputs}
+        layout.update({e.variable: e for e in inputs if e.variable})
+        names = list(entries) if entries is not None else [e.name for e in inputs]
         rows = [
             (s.seq, *(s.get(n) for n in names))
             for s in self.stream_inputs(names, every, duration=duration, count=count)
