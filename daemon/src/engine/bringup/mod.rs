@@ -15,10 +15,8 @@ use ecmxf_wire::payload::control::{FwVersionGet, InfoUpdate, WkcErrorLimit, WkcE
 use ecmxf_wire::payload::ecat_init::{DcSync, DcTiming, EcatInit, EcatInitDc, EcatReconfig};
 use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSize, FifoPackSizeGet, FifoSetRxCount, FifoSetTxCount};
 use ecmxf_wire::payload::interrupt::{IntConfig, IntPolarity, IntSetEnable};
-use ecmxf_wire::payload::pdo::{
-    FifoOpFlags, PdoConfig, PdoDirection, PdoEntry, PdoFifoOp, RX_PDO_ASSIGN, TX_PDO_ASSIGN,
-};
-use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoRequest};
+use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoDirection, PdoFifoOp};
+use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest};
 use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
 use ecmxf_wire::{CheckType, EcatState, Reply, ReplyFields, Request};
@@ -137,6 +135,9 @@ impl From<PortError> for BringUpError {
 
 use super::layout::{NetworkLayout, SlaveSummary};
 
+mod pdos;
+use pdos::map_pdos;
+
 fn step(step: &'static str, detail: impl Into<String>) -> BringUpError {
     BringUpError::Step { step, detail: detail.into() }
 }
@@ -226,23 +227,6 @@ pub fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
 pub fn number<L: Link>(port: &mut Port<L>, slave: u8, item: SlaveInfoCode) -> Result<u32, PortError> {
     let a = port.call(&SlaveInfoGet { slave, item })?;
     Ok(SlaveInfo::decode(item, a.data).ok().and_then(|i| i.number()).unwrap_or(0))
-}
-
-fn pdo_config(slave: u8, assign: u16, pdos: &[crate::config::PdoConfig]) -> Result<PdoConfig, BringUpError> {
-    let entries: Vec<(u16, Vec<PdoEntry>)> = pdos
-        .iter()
-        .map(|p| {
-            (
-                p.index,
-                p.entries
-                    .iter()
-                    .map(|e| PdoEntry { index: e[0] as u16, subindex: e[1] as u8, bits: e[2] as u8 })
-                    .collect(),
-            )
-        })
-        .collect();
-    let refs: Vec<(u16, &[PdoEntry])> = entries.iter().map(|(i, e)| (*i, e.as_slice())).collect();
-    PdoConfig::new(slave, assign, &refs).map_err(|e| step("PDO mapping", format!("slave {slave}: {e}")))
 }
 
 /// Clears the chip's latched errors, initialises the network with the
@@ -391,28 +375,6 @@ fn link_setup<L: Link>(port: &mut Port<L>, config: &Config) -> Result<u8, BringU
     Ok(firmware)
 }
 
-/// 3. The `[[slave]]` PDO mappings (PDO_CONFIG_SET each), then RECONFIG.
-fn map_pdos<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
-    let mut remapped = false;
-    for (i, s) in config.slaves.iter().enumerate() {
-        for (assign, pdos) in [(RX_PDO_ASSIGN, &s.rx_pdos), (TX_PDO_ASSIGN, &s.tx_pdos)] {
-            if pdos.is_empty() {
-                continue;
-            }
-            let cfg = pdo_config(i as u8, assign, pdos)?;
-            if let Err(e) = blocking(port, &cfg, SLOW) {
-                let code = abort_code(port)?;
-                return Err(step("PDO mapping", format!("slave {i} {assign:#06x}: {e}: {code}")));
-            }
-            remapped = true;
-        }
-    }
-    if remapped {
-        blocking(port, &EcatReconfig, SLOW)?;
-    }
-    Ok(())
-}
-
 /// 3b. Per-slave DC settings (DCSYNC each, then ECAT_INIT_DC applies them).
 fn slave_dc<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpError> {
     let c = &config.cycle;
@@ -444,6 +406,45 @@ fn is_pdo_object(index: u16) -> bool {
     matches!(index, 0x1C12 | 0x1C13 | 0x1600..=0x17FF | 0x1A00..=0x1BFF)
 }
 
+/// One SDO download, waited for (up to `timeout` on the slave's side):
+/// `Ok(Err(code))` when the slave refuses it.
+fn sdo_download<L: Link>(
+    port: &mut Port<L>,
+    slave: u8,
+    (index, subindex, complete_access): (u16, u8, bool),
+    data: &[u8],
+    timeout: Duration,
+) -> Result<Result<(), SdoAbortCode>, BringUpError> {
+    let req = SdoRequest {
+        slave,
+        index,
+        subindex,
+        complete_access,
+        timeout_us: u32::try_from(timeout.as_micros()).unwrap_or(u32::MAX),
+        access: SdoAccess::Write(data),
+    };
+    match blocking(port, &req, SLOW.max(timeout + Duration::from_secs(1))) {
+        Ok(()) => Ok(Ok(())),
+        Err(_) => Ok(Err(abort_code(port)?)),
+    }
+}
+
+/// One SDO upload of at most 8 bytes (an assignment or mapping entry),
+/// waited for: `None` when the slave refuses it.
+fn sdo_upload<L: Link>(port: &mut Port<L>, slave: u8, index: u16, subindex: u8) -> Result<Option<u32>, BringUpError> {
+    let access = SdoAccess::Read { max_len: 8 };
+    let req = SdoRequest { slave, index, subindex, complete_access: false, timeout_us: 1_000_000, access };
+    if blocking(port, &req, SLOW).is_err() {
+        abort_code(port)?;
+        return Ok(None);
+    }
+    let a = port.call(&SdoGet)?;
+    if a.header.return_value != 0 {
+        return Ok(None);
+    }
+    Ok(Some(a.data.iter().take(4).enumerate().fold(0u32, |v, (i, b)| v | u32::from(*b) << (8 * i))))
+}
+
 /// Step 4: the start-up SDOs of one transition, slave by slave, in the
 /// order the configuration (or its ENI) lists them. Returns whether one
 /// wrote a PDO assignment or mapping object.
@@ -453,16 +454,8 @@ fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition
         for sdo in s.sdos.iter().filter(|s| s.transition == at) {
             let data = sdo.payload();
             let timeout = Duration::from_millis(u64::from(sdo.timeout_ms.unwrap_or(1000)));
-            let req = SdoRequest {
-                slave: i as u8,
-                index: sdo.index,
-                subindex: sdo.subindex,
-                complete_access: sdo.complete_access,
-                timeout_us: u32::try_from(timeout.as_micros()).unwrap_or(u32::MAX),
-                access: SdoAccess::Write(&data),
-            };
-            if blocking(port, &req, SLOW.max(timeout + Duration::from_secs(1))).is_err() {
-                let code = abort_code(port)?;
+            let object = (sdo.index, sdo.subindex, sdo.complete_access);
+            if let Err(code) = sdo_download(port, i as u8, object, &data, timeout)? {
                 let from = if sdo.origin.is_empty() { String::new() } else { format!(", {}", sdo.origin) };
                 return Err(step(
                     "start-up SDO",
