@@ -12,7 +12,12 @@
 //!   Init commands that write a PDO assignment or mapping object (0x1C12,
 //!   0x1C13, 0x16xx, 0x1Axx) make the chip read the mapping again
 //!   (ECAT_RECONFIG), so assignments of any size reach the frames.
-//!
+//! - the PDO assignment of each CoE slave's ProcessData (its PDOs with an
+//!   `Sm`) as `rx_pdos`/`tx_pdos` (see `take_assignments`): bring-up
+//!   writes it only where the slave does not run it, the assignment alone
+//!   where the PDOs map as the file says (engine/bringup/pdos.rs), so the
+//!   layout is the file's even without assigning init commands; beyond
+//!   PDO_CONFIG_SET's 3 PDOs of 8 entries it is left to them;
 //! - the DC block: `CycleTime0` is the SYNC0 cycle unless `[cycle]
 //!   sync0_us` is given, `ShiftTime` the slave's shift, a slave without
 //!   one runs without DC (see [`Config::take_dc`]);
@@ -27,9 +32,8 @@
 //! ([`eni_notes`]): register init commands (the chip's ECAT_INIT does the
 //! slaves' register set-up: addresses, SyncManagers, FMMUs, DC; v049
 //! "ECM-XF 初始化EtherCAT網路"), the mailbox areas (the chip sets them from
-//! the SII), the PDO mapping in ProcessData (the mapping comes from the
-//! slaves after the init commands), the cyclic frames (the chip builds its
-//! own), the master's own init commands, EoE/FoE/SoE settings.
+//! the SII), the cyclic frames (the chip builds its own), the master's own
+//! init commands, EoE/FoE/SoE settings.
 //!
 //! Without an ENI, a `[[slave]] esi` device's own CoE init commands
 //! (`Mailbox/CoE/InitCmd` in its ESI: a Delta or Elmo servo sets its mode
@@ -46,7 +50,7 @@
 use ecmxf_devices::eni::{CcsConvention, CoeAccess, CoeInitCmd, Eni, Transition};
 use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
-use super::{Config, InitTransition, SlaveConfig, SlaveVariable, StartupSdo};
+use super::{Config, InitTransition, PdoConfig, SlaveConfig, SlaveVariable, StartupSdo};
 
 /// The start-up SDOs of init commands (an ENI slave's or an ESI device's),
 /// in file order, one per transition a command lists.
@@ -86,6 +90,7 @@ impl Config {
     /// key and message of what does not fit.
     pub(super) fn apply_eni(&mut self, eni: &Eni, sync0_given: bool) -> Result<(), (String, String)> {
         self.take_slaves(eni)?;
+        self.take_assignments(eni);
         self.take_variables(eni);
         self.take_dc(eni, sync0_given);
         Ok(())
@@ -190,6 +195,26 @@ impl Config {
         }
     }
 
+    /// The PDO assignment each CoE slave's ProcessData gives (its PDOs
+    /// with an `Sm`), as `rx_pdos`/`tx_pdos` where the entry gives none:
+    /// bring-up writes only what the slave does not already run (the
+    /// assignment alone where its PDOs map as the file says), so the
+    /// layout is the file's even without init commands that assign it (a
+    /// file `ecmxfctl config --format eni` wrote). An assignment beyond
+    /// PDO_CONFIG_SET's 3 PDOs of 8 entries is left to the init commands
+    /// ([`assignment_of`]); a slave without CoE runs its fixed one.
+    fn take_assignments(&mut self, eni: &Eni) {
+        for (mine, theirs) in self.slaves.iter_mut().zip(&eni.slaves) {
+            for (rx, list) in [(true, &mut mine.rx_pdos), (false, &mut mine.tx_pdos)] {
+                if list.is_empty() {
+                    if let Ok(Some(pdos)) = assignment_of(theirs, rx) {
+                        *list = pdos;
+                    }
+                }
+            }
+        }
+    }
+
     /// The ProcessImage's variables, each to its slave.
     fn take_variables(&mut self, eni: &Eni) {
         for v in eni.relative_variables() {
@@ -206,6 +231,43 @@ impl Config {
             }
         }
     }
+}
+
+/// PDO_CONFIG_SET's limits (v049, command 7).
+const SET_PDOS: usize = 3;
+const SET_ENTRIES: usize = 8;
+
+/// An ENI slave's assignment in one direction (its ProcessData PDOs with
+/// an `Sm`): `Ok(None)` when it gives none or the slave has no CoE to
+/// write one with, `Err(why)` when it is beyond PDO_CONFIG_SET.
+fn assignment_of(slave: &ecmxf_devices::eni::EniSlave, rx: bool) -> Result<Option<Vec<PdoConfig>>, String> {
+    let coe = slave.mailbox.is_some_and(|m| m.protocols & ecmxf_devices::sii::protocol::COE != 0);
+    let Some(pd) = slave.process_data.as_ref().filter(|_| coe) else { return Ok(None) };
+    let assigned: Vec<_> = if rx { &pd.rx_pdos } else { &pd.tx_pdos }.iter().filter(|p| p.sm.is_some()).collect();
+    if assigned.is_empty() {
+        return Ok(None);
+    }
+    if assigned.len() > SET_PDOS || assigned.iter().any(|p| p.entries.len() > SET_ENTRIES) {
+        let sizes: Vec<String> = assigned.iter().map(|p| format!("{:#06x} ({})", p.index, p.entries.len())).collect();
+        return Err(format!(
+            "{} PDOs {} beyond PDO_CONFIG_SET's {SET_PDOS} PDOs of {SET_ENTRIES} entries: left to its init commands",
+            if rx { "Rx" } else { "Tx" },
+            sizes.join(", ")
+        ));
+    }
+    Ok(Some(
+        assigned
+            .iter()
+            .map(|p| PdoConfig {
+                index: p.index,
+                entries: p
+                    .entries
+                    .iter()
+                    .map(|(e, _, _)| [u32::from(e.index), u32::from(e.subindex), u32::from(e.bits)])
+                    .collect(),
+            })
+            .collect(),
+    ))
 }
 
 /// The device of an ESI file a `[[slave]]` entry means: by its product
@@ -309,6 +371,11 @@ pub fn eni_notes(eni: &Eni) -> Vec<String> {
                 ));
             }
         }
+        for rx in [true, false] {
+            if let Err(why) = assignment_of(s, rx) {
+                notes.push(format!("{who}: ProcessData: {why}"));
+            }
+        }
         if s.dc.is_none() && eni.slaves.iter().any(|o| o.dc.is_some()) {
             notes.push(format!("{who}: no DC block: runs without DC (dc_assign_activate = 0) unless its entry says"));
         }
@@ -318,7 +385,8 @@ pub fn eni_notes(eni: &Eni) -> Vec<String> {
                     "not replayed: the chip's ECAT_INIT sets up addresses, SyncManagers, FMMUs and DC"
                 }
                 "ProcessData" => {
-                    "read for names and sizes: the mapping itself comes from the slave (after the CoE init commands)"
+                    "applied: its PDOs with an Sm are the assignment, written where the slave does not run it \
+                     (the assignment alone where the PDOs map as the file says); names and types name the entries"
                 }
                 "DC" => {
                     "applied: CycleTime0 is the SYNC0 cycle unless [cycle] sync0_us is given, ShiftTime the slave's \
