@@ -208,6 +208,12 @@ pub enum Command {
     Rescan,
     /// The network as Graphviz dot: `ecmxfctl graph | dot -Tsvg > ring.svg`.
     Graph,
+    /// The network the daemon runs as a configuration ecmxfd takes unchanged (IgH `xml`): `ecmxfctl config > net.toml`, `--format eni > net.xml`.
+    Config {
+        /// `toml`: a whole ecmxfd configuration (link, cycle, [[slave]] with identities, DC and PDOs); `eni`: an ETG.2100 EtherCATConfig for `eni = FILE` (slaves, ProcessData, DC, cycle, ProcessImage).
+        #[arg(long, value_enum, default_value = "toml")]
+        format: ConfigFormat,
+    },
     /// Station aliases in the slaves' SII; `--set N -p POS` writes one with its checksum (admin; IgH `alias`).
     Alias {
         /// Only this slave (required with --set).
@@ -473,6 +479,12 @@ pub enum GpioCommand {
         #[arg(long, value_enum, default_value = "none")]
         pull: GpioPull,
     },
+}
+
+#[derive(Debug, Clone, Copy, ValueEnum)]
+pub enum ConfigFormat {
+    Toml,
+    Eni,
 }
 
 #[derive(Debug, Clone, Copy, ValueEnum)]

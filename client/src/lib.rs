@@ -26,7 +26,8 @@ use serde::Serialize;
 
 use cli::{Cli, Command};
 use commands::{
-    alias, cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
+    alias, cia402, config, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states,
+    version,
 };
 use error::CliError;
 use output::Out;
@@ -143,6 +144,7 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
         Command::Top(t) => top::run(&api, out, t).await?,
         Command::Rescan => out.report(&slaves::rescan(&api).await?)?,
         Command::Graph => out.report(&graph::fetch(&api).await?)?,
+        Command::Config { format } => out.report(&config::fetch(&api, *format).await?)?,
         Command::Crc { position, reset } => out.report(&crc::run(&api, *position, *reset).await?)?,
         Command::Alias { position, set } => out.report(&alias::run(&api, *position, *set).await?)?,
         Command::Version => out.report(&version::fetch(&api).await?)?,

@@ -7,7 +7,8 @@
 use schemars::{JsonSchema, Schema, schema_for};
 
 use crate::commands::{
-    alias, cia402, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states, version,
+    alias, cia402, config, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states,
+    version,
 };
 
 fn s<T: JsonSchema>() -> Schema {
@@ -21,6 +22,7 @@ pub fn all() -> Vec<(&'static str, Schema)> {
         ("slaves", s::<slaves::SlavesReport>()),
         ("rescan", s::<slaves::SlavesReport>()),
         ("graph", s::<graph::GraphReport>()),
+        ("config", s::<config::ConfigReport>()),
         ("crc", s::<crc::CrcReport>()),
         ("alias", s::<alias::AliasReport>()),
         ("version", s::<version::VersionReport>()),

@@ -93,7 +93,12 @@ impl ConfigError {
 /// A path as a TOML string value, quoted and escaped (for files that
 /// point at other files: network files, generated configurations).
 pub fn toml_path(path: &Path) -> String {
-    toml::Value::String(path.display().to_string()).to_string()
+    toml_string(&path.display().to_string())
+}
+
+/// `text` as a TOML string, quoted and escaped.
+pub fn toml_string(text: &str) -> String {
+    toml::Value::String(text.to_string()).to_string()
 }
 
 /// The 1-based line where a dotted key (`cycle.sync0_us`, `slave[2].alias`)

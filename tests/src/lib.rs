@@ -222,6 +222,25 @@ pub fn fixture(name: &str) -> Option<PathBuf> {
     present(fixtures_dir()?.join(name))
 }
 
+/// The network the TwinCAT fixture (eni_twincat_elmo4_imu.xml) was made
+/// for, as a simulator network file in `dir`: its IMU, known only from the
+/// ENI, then four Elmo Gold drives from their ESI. The ENI's path and the
+/// network file's; `None` (skipped) without the fixtures.
+pub fn twincat_network(dir: &Path) -> Option<(PathBuf, PathBuf)> {
+    let eni = fixture("eni_twincat_elmo4_imu.xml")?;
+    let elmo = fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml")?;
+    let net = dir.join("net.toml");
+    let mut text = format!("version = 1\n[[slave]]\neni = \"{}\"\neni_slave = \"Imu\"\n", eni.display());
+    for _ in 0..4 {
+        text.push_str(&format!(
+            "[[slave]]\nesi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n",
+            elmo.display()
+        ));
+    }
+    std::fs::write(&net, text).expect("write the network file");
+    Some((eni, net))
+}
+
 /// ../shared/fixtures itself, if there (else as [`fixture`]).
 pub fn fixtures_dir() -> Option<PathBuf> {
     present(repo().join("../shared/fixtures"))

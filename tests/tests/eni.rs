@@ -184,21 +184,6 @@ fn an_esi_devices_init_commands_are_written_before_the_entrys_own_sdos() {
     });
 }
 
-/// The sim network the TwinCAT export was made for: its IMU, known only
-/// from the ENI, then four Elmo Gold drives from their ESI.
-fn twincat_network(dir: &std::path::Path, eni: &std::path::Path, elmo: &std::path::Path) -> std::path::PathBuf {
-    let net = dir.join("net.toml");
-    let mut text = format!("version = 1\n[[slave]]\neni = \"{}\"\neni_slave = \"Imu\"\n", eni.display());
-    for _ in 0..4 {
-        text.push_str(&format!(
-            "[[slave]]\nesi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n",
-            elmo.display()
-        ));
-    }
-    std::fs::write(&net, text).unwrap();
-    net
-}
-
 /// The TwinCAT export (issue 32, "done when"): the network it describes
 /// comes up in OP; each drive's 12 init commands ran in the file's order
 /// (the assignment 0x1C12 = {0x1601} can only be written count-0 first,
@@ -208,16 +193,10 @@ fn twincat_network(dir: &std::path::Path, eni: &std::path::Path, elmo: &std::pat
 /// outputs written by variable name reach that drive; input frames flow.
 #[test]
 fn the_twincat_export_brings_its_network_up_with_its_layout() {
-    let (Some(eni_path), Some(elmo)) = (
-        ecmxf_e2e::fixture("eni_twincat_elmo4_imu.xml"),
-        ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml"),
-    ) else {
-        return;
-    };
+    let dir = temp_dir("eni-twincat");
+    let Some((eni_path, net)) = ecmxf_e2e::twincat_network(&dir) else { return };
     let eni = ecmxf_devices::eni::Eni::load(&eni_path).unwrap();
     run(async {
-        let dir = temp_dir("eni-twincat");
-        let net = twincat_network(&dir, &eni_path, &elmo);
         let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
         // The file's 10 ms cycle with the tests' deep FIFO marks would hold
         // a write back for seconds: a budget of five cycles.
@@ -310,15 +289,9 @@ fn the_twincat_export_brings_its_network_up_with_its_layout() {
 /// object the Elmo does not have).
 #[test]
 fn a_refused_init_command_is_named_by_its_line_in_the_eni() {
-    let (Some(eni_path), Some(elmo)) = (
-        ecmxf_e2e::fixture("eni_twincat_elmo4_imu.xml"),
-        ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml"),
-    ) else {
-        return;
-    };
+    let dir = temp_dir("eni-refused");
+    let Some((eni_path, net)) = ecmxf_e2e::twincat_network(&dir) else { return };
     run(async {
-        let dir = temp_dir("eni-refused");
-        let net = twincat_network(&dir, &eni_path, &elmo);
         let text = std::fs::read_to_string(&eni_path).unwrap();
         let at = text.find("<Index>24770</Index>").expect("the first drive's 0x60C2 command");
         let line = text[..at].lines().count();

@@ -3,6 +3,7 @@
 
 pub mod alias;
 pub mod cia402;
+pub mod config;
 pub mod crc;
 pub mod data;
 pub mod diag;

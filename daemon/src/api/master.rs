@@ -99,6 +99,9 @@ impl MasterApi for MasterService {
             target_state: state_to_pb(config.cycle.target()) as i32,
             config_generation: m.status().config_generation,
             daemon_version: env!("CARGO_PKG_VERSION").into(),
+            link_toml: config.link.to_toml(),
+            dc_assign_activate: config.cycle.dc_assign_activate.into(),
+            cycle_toml: config.cycle.to_toml(),
         }))
     }
 

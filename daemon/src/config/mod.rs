@@ -171,6 +171,44 @@ pub enum LinkConfig {
     },
 }
 
+impl LinkConfig {
+    /// The `[link]` table as TOML lines, paths as resolved: what
+    /// `ecmxfctl config` copies into a configuration written from the live
+    /// network (MasterInfo.link_toml).
+    pub fn to_toml(&self) -> String {
+        use ecmxf_devices::config_file::toml_path as path;
+        let mut out = String::new();
+        let mut line = |k: &str, v: String| out.push_str(&format!("{k} = {v}\n"));
+        match self {
+            Self::Sim { network } => {
+                line("backend", "\"sim\"".into());
+                if let Some(n) = network {
+                    line("network", path(n));
+                }
+            }
+            Self::SimSocket { socket } => {
+                line("backend", "\"sim-socket\"".into());
+                line("socket", path(socket));
+            }
+            Self::Spidev { device, spi_hz, gpio_chip, int0_line, int1_line, debounce_us, idle_us } => {
+                line("backend", "\"spidev\"".into());
+                line("device", path(device));
+                line("spi_hz", spi_hz.to_string());
+                if let Some(c) = gpio_chip {
+                    line("gpio_chip", path(c));
+                }
+                for (k, v) in [("int0_line", int0_line), ("int1_line", int1_line), ("debounce_us", debounce_us)] {
+                    if let Some(v) = v {
+                        line(k, v.to_string());
+                    }
+                }
+                line("idle_us", idle_us.to_string());
+            }
+        }
+        out
+    }
+}
+
 /// `[link]` as written: one flat table, so a value of the wrong type is
 /// reported at its own line (an internally tagged enum buffers the table
 /// and toml can then only point at `[link]`); which keys go with which
@@ -318,6 +356,33 @@ pub struct CycleConfig {
 }
 
 impl CycleConfig {
+    /// The `[cycle]` table as TOML lines, every key: what `ecmxfctl
+    /// config` copies into a configuration written from the live network
+    /// (MasterInfo.cycle_toml), so it runs with the same cycle and FIFOs.
+    pub fn to_toml(&self) -> String {
+        let target = match self.target_state {
+            TargetState::PreOp => "preop",
+            TargetState::SafeOp => "safeop",
+            TargetState::Op => "op",
+        };
+        let mut out = format!(
+            "sync0_us = {}\ndc_assign_activate = {:#06x}\nshift_ns = {}\nfifo_rx_depth = {}\nfifo_tx_depth = {}\n\
+             fifo_low = {}\nfifo_high = {}\nwkc_error_limit = {}\ntarget_state = \"{target}\"\n",
+            self.sync0_us,
+            self.dc_assign_activate,
+            self.shift_ns,
+            self.fifo_rx_depth,
+            self.fifo_tx_depth,
+            self.fifo_low,
+            self.fifo_high,
+            self.wkc_error_limit
+        );
+        if let Some(us) = self.output_latency_us {
+            out.push_str(&format!("output_latency_us = {us}\n"));
+        }
+        out
+    }
+
     /// The DC cycle the chip plays frames at (1 ms free-run without DC).
     pub fn dc_cycle(&self) -> std::time::Duration {
         let us = if self.dc_assign_activate != 0 { self.sync0_us } else { 1000 };
@@ -896,6 +961,24 @@ mod tests {
         let spi = "version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nspi_hz = 0\n";
         let e = parse(spi).unwrap_err().to_string();
         assert!(e.contains("line 5") && e.contains("link.spi_hz") && e.contains("96000000"), "{e}");
+    }
+
+    #[test]
+    fn the_link_table_written_back_reads_the_same() {
+        for link in [
+            "backend = \"sim\"\n",
+            "backend = \"sim\"\nnetwork = \"/tmp/a b/net.toml\"\n",
+            "backend = \"sim-socket\"\nsocket = \"/run/sim.sock\"\n",
+            "backend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nspi_hz = 24000000\ngpio_chip = \"/dev/gpiochip0\"\n\
+             int0_line = 25\nint1_line = 24\ndebounce_us = 5\nidle_us = 150\n",
+        ] {
+            let c = parse(&format!("version = 1\n[link]\n{link}")).unwrap();
+            assert_eq!(c.link.to_toml(), link);
+            assert_eq!(parse(&format!("version = 1\n[link]\n{}", c.link.to_toml())).unwrap().link, c.link);
+        }
+        let c = Config::simulator();
+        let back = parse(&format!("{MINIMAL}[cycle]\n{}", c.cycle.to_toml())).unwrap();
+        assert_eq!(back.cycle, c.cycle, "the [cycle] table written back reads the same");
     }
 
     #[test]

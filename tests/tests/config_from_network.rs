@@ -1,0 +1,99 @@
+//! `ecmxfctl config` (issue 32, item 4): the network a daemon runs, written
+//! as a configuration (`--format toml`) or an ENI (`--format eni`), is
+//! taken unchanged by ecmxfd, and running it gives the same process image:
+//! every entry with the same name, object, direction, offset, size and type,
+//! and the same cycle. Through the ENI, every entry is named by the file's
+//! ProcessImage and no variable disagrees with the layout. The TwinCAT
+//! network (an IMU known only from its ENI, four Elmo drives whose fixed
+//! PDOs 0x1601/0x1A03 its init commands assigned) goes round the same way:
+//! its TOML states the assignment, which bring-up writes alone (the PDOs
+//! already map it; writing their fixed mapping would be refused), and its
+//! entries keep their places (their types came from the ENI's descriptions,
+//! which a TOML does not carry).
+
+use ecmxf_e2e::{Daemon, assert_schema, config, run, temp_dir};
+use ecmxf_proto::v1 as pb;
+
+/// What must be the same: everything but the variable names (a written
+/// configuration names its slaves, and names are what it may change).
+type Key = (String, u32, u32, u32, i32, u32, u32, i32);
+
+async fn layout(d: &mut Daemon) -> (pb::ProcessImage, Vec<Key>) {
+    let ch = d.connect().await;
+    let image = pb::process_data_client::ProcessDataClient::new(ch)
+        .get_layout(pb::GetLayoutRequest {})
+        .await
+        .expect("GetLayout")
+        .into_inner();
+    let keys = image
+        .entries
+        .iter()
+        .map(|e| (e.name.clone(), e.slave, e.index, e.subindex, e.direction, e.bit_offset, e.bit_length, e.data_type))
+        .collect();
+    (image, keys)
+}
+
+/// Writes the network `d` runs in both forms, then runs each and compares.
+/// `typed_by_toml`: whether the TOML can carry what typed the entries (an
+/// ENI's descriptions type them; a TOML names no description unless the
+/// network's configuration gave ESI files).
+async fn round_trip(d: &mut Daemon, link: &str, typed_by_toml: bool) {
+    let (before, keys) = layout(d).await;
+    let toml = d.ctl(&["config"]);
+    assert_eq!(toml.code, 0, "{}", toml.stderr);
+    let eni = d.ctl(&["config", "--format", "eni"]);
+    assert_eq!(eni.code, 0, "{}", eni.stderr);
+    let json = d.ctl(&["config", "--json"]).json();
+    assert_schema("config", &json);
+    assert_eq!(json["text"], toml.stdout.as_str());
+    d.stop();
+
+    let mut again = Daemon::with_config(&toml.stdout);
+    let (after, same) = layout(&mut again).await;
+    again.stop();
+    let untyped = |k: &[Key]| k.iter().map(|k| (k.0.clone(), k.1, k.2, k.3, k.4, k.5, k.6)).collect::<Vec<_>>();
+    if typed_by_toml {
+        assert_eq!(same, keys, "the TOML gives the same layout:\n{}", toml.stdout);
+    } else {
+        assert_eq!(untyped(&same), untyped(&keys), "the TOML gives the same layout:\n{}", toml.stdout);
+    }
+    assert_eq!(
+        (after.output_bytes, after.input_bytes, after.cycle_us),
+        (before.output_bytes, before.input_bytes, before.cycle_us)
+    );
+
+    let dir = temp_dir("config-eni");
+    let file = dir.join("network.xml");
+    std::fs::write(&file, &eni.stdout).unwrap();
+    let text = format!("eni = \"{}\"\n{}", file.display(), config(link, ""));
+    let mut from_eni = Daemon::with_config(&text);
+    let (image, same) = layout(&mut from_eni).await;
+    from_eni.stop();
+    assert_eq!(same, keys, "the ENI gives the same layout:\n{}", eni.stdout);
+    assert!(image.notes.is_empty(), "{:?}", image.notes);
+    let unnamed: Vec<&str> =
+        image.entries.iter().filter(|e| e.index != 0 && e.variable.is_empty()).map(|e| e.name.as_str()).collect();
+    assert!(unnamed.is_empty(), "every entry is named by the ENI's ProcessImage: {unnamed:?}");
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+#[test]
+fn the_demo_network_written_as_toml_and_as_eni_runs_with_the_same_layout() {
+    run(async {
+        let link = "backend = \"sim\"";
+        let mut d = Daemon::with_config(&config(link, ""));
+        round_trip(&mut d, link, true).await;
+    });
+}
+
+#[test]
+fn the_twincat_network_goes_round_too() {
+    let dir = temp_dir("config-twincat");
+    let Some((eni, net)) = ecmxf_e2e::twincat_network(&dir) else { return };
+    run(async {
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
+        let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", eni.display(), config(&link, "")));
+        round_trip(&mut d, &link, false).await;
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}
