@@ -71,6 +71,13 @@ fn the_twincat_export_reads_as_twincat_means_it() {
         assert!(cmds.windows(2).all(|w| w[0].line < w[1].line), "file order");
         let registers = elmo.elements.iter().find(|(e, _)| e.starts_with("InitCmds")).map(|(_, n)| *n);
         assert_eq!(registers, Some(49), "{:?}", elmo.elements);
+        assert_eq!(elmo.register_init_cmds.len(), 49);
+        let watchdog = elmo.register_init_cmds.iter().find(|c| c.ado == 0x0420).expect("the SM watchdog");
+        assert_eq!((watchdog.cmd, watchdog.data.as_slice(), watchdog.writes()), (5, &[0x10, 0x27][..], true));
+        assert_eq!(watchdog.transitions, [Transition::InitPreOp]);
+        let check = elmo.register_init_cmds.iter().find(|c| c.comment == "check vendor id" && c.ado == 0x0508);
+        let check = check.expect("the vendor id check reads the SII data register");
+        assert!(!check.writes() && check.validates, "{check:?}");
     }
     assert!(eni.elements.iter().any(|(e, _)| *e == "ProcessImage"), "{:?}", eni.elements);
     assert!(eni.elements.iter().any(|(e, _)| *e == "Cyclic"), "{:?}", eni.elements);

@@ -98,7 +98,13 @@ fn check_config_says_what_an_eni_applies_and_what_it_does_not() {
     assert_eq!(code, 0, "{text}");
     assert!(text.contains("5 expected slaves"), "{text}");
     assert!(text.contains(r#"slave 1 "WheelRearLeft" (line 784): 12 CoE init commands written"#), "{text}");
-    assert!(text.contains("InitCmds (register) (49) not replayed"), "{text}");
+    assert!(
+        text.contains(
+            "InitCmds (register) (49): 3 replayed by raw datagram (watchdogs: 0x0400 at IP, 0x0410 at IP, 0x0420 at IP)"
+        ),
+        "{text}"
+    );
+    assert!(text.contains("9 sync managers: the chip's ECAT_INIT"), "{text}");
     assert!(text.contains("eni: ProcessImage (1) applied as names"), "{text}");
     assert!(text.contains(r#"slave 0 "Imu" (line 159): no DC block: runs without DC"#), "{text}");
     assert!(text.contains("5 expected slaves, 10000 us cycle"), "the ENI's DC cycle: {text}");
@@ -227,6 +233,18 @@ fn the_twincat_export_brings_its_network_up_with_its_layout() {
             assert_eq!(read(0x60C2, 1).await, [10], "slave {slave}: cycle time");
             assert_eq!(read(0x1A07, 0).await, [0], "slave {slave}: 0x1A07 cleared");
         }
+
+        // The register init commands a host may replay: each drive's
+        // watchdogs (divider 0x09C2, PDI 1000, sync manager 10000), written
+        // at IP by raw datagram; the IMU's file sets none.
+        let mut regs = pb::registers_client::RegistersClient::new(ch.clone());
+        for (slave, want) in [(0u32, [0u8, 0]), (1, [0x10, 0x27]), (4, [0x10, 0x27])] {
+            let read = pb::ReadRegistersRequest { slave, address: 0x0420, length: 2 };
+            let got = regs.read_registers(read).await.unwrap().into_inner();
+            assert_eq!((got.working_counter, got.data.as_slice()), (1, &want[..]), "slave {slave}: SM watchdog");
+        }
+        let divider = pb::ReadRegistersRequest { slave: 2, address: 0x0400, length: 2 };
+        assert_eq!(regs.read_registers(divider).await.unwrap().into_inner().data, [0xC2, 0x09]);
 
         let mut pd = pb::process_data_client::ProcessDataClient::new(ch.clone());
         let layout = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();

@@ -28,12 +28,17 @@
 //!   (the network's mapping is not the file's). The absolute offsets are
 //!   the tool's: the chip packs the slaves' data one after the other.
 //!
+//! - the register init commands a host may replay: the watchdogs (0x0400,
+//!   0x0410, 0x0420), by raw datagram at their transition before its SDOs
+//!   ([`register_fate`]).
+//!
 //! What it does not take, each named by `ecmxfd --check-config`
-//! ([`eni_notes`]): register init commands (the chip's ECAT_INIT does the
-//! slaves' register set-up: addresses, SyncManagers, FMMUs, DC; v049
-//! "ECM-XF 初始化EtherCAT網路"), the mailbox areas (the chip sets them from
-//! the SII), the cyclic frames (the chip builds its own), the master's own
-//! init commands, EoE/FoE/SoE settings.
+//! ([`eni_notes`]): the other register init commands, with the reason for
+//! each kind (the chip's ECAT_INIT does the slaves' register set-up:
+//! addresses, SII hand-over, SyncManagers, FMMUs, DC; its state machine the
+//! AL control and the checks; v049 "ECM-XF 初始化EtherCAT網路"), the mailbox
+//! areas (the chip sets them from the SII), the cyclic frames (the chip
+//! builds its own), the master's own init commands, EoE/FoE/SoE settings.
 //!
 //! Without an ENI, a `[[slave]] esi` device's own CoE init commands
 //! (`Mailbox/CoE/InitCmd` in its ESI: a Delta or Elmo servo sets its mode
@@ -47,10 +52,10 @@
 //! DC settings are kept, and their own `[[slave.sdo]]` run after the ENI's
 //! init commands of the same transition.
 
-use ecmxf_devices::eni::{CcsConvention, CoeAccess, CoeInitCmd, Eni, Transition};
+use ecmxf_devices::eni::{CcsConvention, CoeAccess, CoeInitCmd, Eni, RegisterInitCmd, Transition};
 use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
-use super::{Config, InitTransition, PdoConfig, SlaveConfig, SlaveVariable, StartupSdo};
+use super::{Config, InitTransition, PdoConfig, SlaveConfig, SlaveVariable, StartupRegister, StartupSdo};
 
 /// The start-up SDOs of init commands (an ENI slave's or an ESI device's),
 /// in file order, one per transition a command lists.
@@ -85,6 +90,58 @@ fn startup_sdos(cmds: &[CoeInitCmd], source: &str) -> Vec<StartupSdo> {
     out
 }
 
+/// What becomes of a register init command: replayed at a transition, or
+/// why not. The chip's ECAT_INIT and state machine do a master's ESC set-up
+/// (v049 "ECM-XF 初始化EtherCAT網路": station addresses, SII hand-over,
+/// sync managers, FMMUs, DC; AL control and status checks); a host writing
+/// those registers behind its back would undo its work. The watchdogs
+/// (0x0400 divider, 0x0410 PDI, 0x0420 sync manager) it does not set: an
+/// ENI's values for them are replayed, by raw datagram (RAW_ECAT_FUNC_REQ
+/// 137) to the slave's position.
+pub fn register_fate(c: &RegisterInitCmd) -> Result<InitTransition, &'static str> {
+    let reason = match c.ado {
+        _ if !c.writes() => "checks the chip's state machine makes itself",
+        0x0010..=0x0013 => "station addresses: the chip's ECAT_INIT",
+        0x0103 => "second station address: the chip's ECAT_INIT",
+        0x0120..=0x0121 | 0x0130..=0x0135 => "AL control and status: the chip's state machine",
+        0x0200..=0x0205 => "ECAT event mask: the chip's",
+        0x0300..=0x0313 => "error counters: the chip's (ecmxfctl crc --reset clears them)",
+        0x0400..=0x0443 => {
+            return c
+                .transitions
+                .iter()
+                .find_map(|t| match t {
+                    Transition::InitPreOp => Some(InitTransition::Ip),
+                    Transition::PreOpSafeOp => Some(InitTransition::Ps),
+                    Transition::SafeOpOp => Some(InitTransition::So),
+                    Transition::Other(_) => None,
+                })
+                .ok_or("only at transitions down or to BOOT (ecmxfd brings slaves up)");
+        }
+        0x0500..=0x050F => "SII access: the chip's",
+        0x0600..=0x06FF => "FMMUs: the chip's ECAT_INIT",
+        0x0800..=0x087F => "sync managers: the chip's ECAT_INIT",
+        0x0900..=0x09FF => "DC: the chip's ECAT_INIT_DC",
+        _ => "a register the chip does not hand to the host",
+    };
+    Err(reason)
+}
+
+/// The register init commands of an ENI slave ecmxfd replays.
+fn startup_registers(cmds: &[RegisterInitCmd]) -> Vec<StartupRegister> {
+    cmds.iter()
+        .filter_map(|c| {
+            let transition = register_fate(c).ok()?;
+            Some(StartupRegister {
+                transition,
+                ado: c.ado,
+                data: c.data.clone(),
+                origin: format!("ENI line {}, {:?}", c.line, c.comment),
+            })
+        })
+        .collect()
+}
+
 impl Config {
     /// Takes the ENI's slaves and init commands (see the module doc); the
     /// key and message of what does not fit.
@@ -116,6 +173,7 @@ impl Config {
                     esi_init_cmds: true,
                     esi_init_cmds_skip: Vec::new(),
                     variables: Vec::new(),
+                    registers: startup_registers(&s.register_init_cmds),
                 })
                 .collect();
             return Ok(());
@@ -157,6 +215,7 @@ impl Config {
             let mut sdos = startup_sdos(&theirs.coe_init_cmds, "ENI");
             sdos.append(&mut mine.sdos);
             mine.sdos = sdos;
+            mine.registers = startup_registers(&theirs.register_init_cmds);
         }
         Ok(())
     }
@@ -344,6 +403,31 @@ pub fn esi_init_notes(i: usize, slave: &SlaveConfig, file: &EsiFile) -> Vec<Stri
         .collect()
 }
 
+/// One line on a slave's register init commands: how many are replayed
+/// (which registers, when) and how many not, by reason.
+fn register_notes(who: &str, cmds: &[RegisterInitCmd]) -> String {
+    let mut replayed: Vec<String> = Vec::new();
+    let mut skipped: Vec<(&'static str, usize)> = Vec::new();
+    for c in cmds {
+        match register_fate(c) {
+            Ok(t) => replayed.push(format!("{:#06x} at {}", c.ado, t.letters())),
+            Err(why) => match skipped.iter_mut().find(|(w, _)| *w == why) {
+                Some((_, n)) => *n += 1,
+                None => skipped.push((why, 1)),
+            },
+        }
+    }
+    let not: Vec<String> = skipped.iter().map(|(why, n)| format!("{n} {why}")).collect();
+    format!(
+        "{who}: InitCmds (register) ({}): {} replayed by raw datagram{}{}; not replayed: {}",
+        cmds.len(),
+        replayed.len(),
+        if replayed.is_empty() { "" } else { " (watchdogs: " },
+        if replayed.is_empty() { String::new() } else { format!("{})", replayed.join(", ")) },
+        if not.is_empty() { "none".to_string() } else { not.join("; ") }
+    )
+}
+
 /// What `--check-config` says about an ENI: what is applied, and every
 /// element that is not, by slave.
 pub fn eni_notes(eni: &Eni) -> Vec<String> {
@@ -379,11 +463,11 @@ pub fn eni_notes(eni: &Eni) -> Vec<String> {
         if s.dc.is_none() && eni.slaves.iter().any(|o| o.dc.is_some()) {
             notes.push(format!("{who}: no DC block: runs without DC (dc_assign_activate = 0) unless its entry says"));
         }
-        for (element, n) in &s.elements {
+        if !s.register_init_cmds.is_empty() {
+            notes.push(register_notes(&who, &s.register_init_cmds));
+        }
+        for (element, n) in s.elements.iter().filter(|(e, _)| *e != "InitCmds (register)") {
             let why = match *element {
-                "InitCmds (register)" => {
-                    "not replayed: the chip's ECAT_INIT sets up addresses, SyncManagers, FMMUs and DC"
-                }
                 "ProcessData" => {
                     "applied: its PDOs with an Sm are the assignment, written where the slave does not run it \
                      (the assignment alone where the PDOs map as the file says); names and types name the entries"

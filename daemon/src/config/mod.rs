@@ -490,6 +490,25 @@ pub struct SlaveConfig {
     /// take, and the offsets the layout must match. Not a TOML key.
     #[serde(skip)]
     pub variables: Vec<SlaveVariable>,
+    /// The ENI's register init commands a host may replay (the watchdog
+    /// registers; config/eni.rs says which and why), written by raw
+    /// datagram at their transitions before the start-up SDOs. Not a TOML
+    /// key.
+    #[serde(skip)]
+    pub registers: Vec<StartupRegister>,
+}
+
+/// An ESC register write at a transition (an ENI register init command).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct StartupRegister {
+    /// When.
+    pub transition: InitTransition,
+    /// Register.
+    pub ado: u16,
+    /// Bytes written.
+    pub data: Vec<u8>,
+    /// Where it came from, for errors (`ENI line 2157, "set watchdog divider"`).
+    pub origin: String,
 }
 
 /// A named variable of one slave's process data, as a configuration tool

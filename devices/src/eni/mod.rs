@@ -104,6 +104,38 @@ pub struct CoeInitCmd {
     pub line: u32,
 }
 
+/// One register init command of a slave (`Slave/InitCmds/InitCmd`): an
+/// EtherCAT datagram the configuration tool's master sends at a transition
+/// (ETG.2100 5.3.5): the ESC set-up a master does (addresses, sync
+/// managers, FMMUs, DC, watchdogs) and the checks it makes.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct RegisterInitCmd {
+    /// The transitions it runs at.
+    pub transitions: Vec<Transition>,
+    /// Datagram command (ETG.1000.4 Table 12: 1 APRD, 2 APWR, 4 FPRD, 5
+    /// FPWR, 7 BRD, 8 BWR, ...).
+    pub cmd: u8,
+    /// Address: position (auto-increment) or the tool's station address.
+    pub adp: u16,
+    /// Register.
+    pub ado: u16,
+    /// Data written (or the length read).
+    pub data: Vec<u8>,
+    /// It checks an answer (`Validate`).
+    pub validates: bool,
+    /// `Comment`.
+    pub comment: String,
+    /// Its line in the file.
+    pub line: u32,
+}
+
+impl RegisterInitCmd {
+    /// Whether the datagram writes (APWR, FPWR, BWR, LWR, ARMW...).
+    pub fn writes(&self) -> bool {
+        matches!(self.cmd, 2 | 3 | 5 | 6 | 8 | 9 | 11 | 12 | 13 | 14)
+    }
+}
+
 /// One slave (`Config/Slave`).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct EniSlave {
@@ -125,6 +157,8 @@ pub struct EniSlave {
     pub mailbox: Option<EniMailbox>,
     /// `DC`, when given.
     pub dc: Option<EniDc>,
+    /// Register init commands, in file order.
+    pub register_init_cmds: Vec<RegisterInitCmd>,
     /// Elements of this slave the reader's caller may not apply, with a
     /// count: `("InitCmds (register)", 49)`, `("ProcessData", 1)`, ...
     pub elements: Vec<(&'static str, usize)>,
@@ -210,17 +244,20 @@ fn flag(text: Option<&str>) -> bool {
     matches!(text.map(str::trim), Some("1" | "true"))
 }
 
+/// The `Transition` elements of an init command.
+fn transitions(cmd: Node<'_, '_>, path: &str) -> Result<Vec<Transition>, EniError> {
+    children(cmd, "Transition")
+        .map(|t| {
+            let text = t.text().unwrap_or("").trim();
+            Transition::parse(text).ok_or_else(|| fail(t, format!("{path}/Transition {text:?} is not a transition")))
+        })
+        .collect()
+}
+
 /// One CoE init command element. `ccs_default`: the `Ccs` when the element
 /// has none (ESI files have none: their init commands are downloads).
 pub(crate) fn coe_init_cmd(cmd: Node<'_, '_>, path: &str, ccs_default: Option<u64>) -> Result<CoeInitCmd, EniError> {
-    let mut transitions = Vec::new();
-    for t in children(cmd, "Transition") {
-        let text = t.text().unwrap_or("").trim();
-        transitions.push(
-            Transition::parse(text)
-                .ok_or_else(|| fail(t, format!("{path}/Transition {text:?} is not a transition")))?,
-        );
-    }
+    let transitions = transitions(cmd, path)?;
     if transitions.is_empty() {
         return Err(fail(cmd, format!("{path} has no Transition")));
     }
@@ -249,6 +286,21 @@ pub(crate) fn coe_init_cmd(cmd: Node<'_, '_>, path: &str, ccs_default: Option<u6
         comment: child(cmd, "Comment").and_then(|c| c.text()).unwrap_or("").trim().to_string(),
         disabled: flag(child(cmd, "Disabled").and_then(|d| d.text()))
             || flag(child(cmd, "Data").and_then(|d| d.attribute("AdaptAutomatically"))),
+        line: line_of(cmd),
+    })
+}
+
+/// One register init command element.
+fn register_init_cmd(cmd: Node<'_, '_>, path: &str) -> Result<RegisterInitCmd, EniError> {
+    let transitions = transitions(cmd, path)?;
+    Ok(RegisterInitCmd {
+        transitions,
+        cmd: required(cmd, "Cmd", path, 0xFF)? as u8,
+        adp: number(cmd, "Adp", path, 0xFFFF)?.unwrap_or(0) as u16,
+        ado: required(cmd, "Ado", path, 0xFFFF)? as u16,
+        data: child(cmd, "Data").map(|d| hex_bytes(d, path)).transpose()?.unwrap_or_default(),
+        validates: child(cmd, "Validate").is_some(),
+        comment: child(cmd, "Comment").and_then(|c| c.text()).unwrap_or("").trim().to_string(),
         line: line_of(cmd),
     })
 }
@@ -291,10 +343,17 @@ fn slave(node: Node<'_, '_>, position: usize) -> Result<EniSlave, EniError> {
     let process_data = child(node, "ProcessData").map(|p| process::process_data(p, &path)).transpose()?;
     let mailbox = child(node, "Mailbox").map(|m| process::mailbox(m, &path)).transpose()?;
     let dc = child(node, "DC").map(|d| process::dc(d, &path)).transpose()?;
+    let mut register_init_cmds = Vec::new();
+    if let Some(cmds) = child(node, "InitCmds") {
+        for (k, cmd) in children(cmds, "InitCmd").enumerate() {
+            register_init_cmds.push(register_init_cmd(cmd, &format!("{path}/InitCmds/InitCmd[{k}]"))?);
+        }
+    }
     Ok(EniSlave {
         process_data,
         mailbox,
         dc,
+        register_init_cmds,
         name: child(info, "Name").and_then(|n| n.text()).unwrap_or("").trim().to_string(),
         vendor_id: required(info, "VendorId", &info_path, u64::from(u32::MAX))? as u32,
         product_code: required(info, "ProductCode", &info_path, u64::from(u32::MAX))? as u32,

@@ -16,6 +16,7 @@ use ecmxf_wire::payload::ecat_init::{DcSync, DcTiming, EcatInit, EcatInitDc, Eca
 use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSize, FifoPackSizeGet, FifoSetRxCount, FifoSetTxCount};
 use ecmxf_wire::payload::interrupt::{IntConfig, IntPolarity, IntSetEnable};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoDirection, PdoFifoOp};
+use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RawGet, RawReply, RawRequest};
 use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest};
 use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
@@ -445,10 +446,46 @@ fn sdo_upload<L: Link>(port: &mut Port<L>, slave: u8, index: u16, subindex: u8) 
     Ok(Some(a.data.iter().take(4).enumerate().fold(0u32, |v, (i, b)| v | u32::from(*b) << (8 * i))))
 }
 
+/// The register writes of one transition (an ENI's watchdog settings,
+/// config/eni.rs), before its SDOs: one APWR each, by raw datagram
+/// (RAW_ECAT_FUNC_REQ 137 / GET 138) to the slave's position, which must
+/// answer (working counter 1).
+fn startup_registers<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition) -> Result<(), BringUpError> {
+    for (i, s) in config.slaves.iter().enumerate() {
+        for r in s.registers.iter().filter(|r| r.transition == at) {
+            let head = DatagramHead {
+                command: DatagramCommand::Apwr,
+                length: r.data.len() as u16,
+                // Auto-increment addressing: position n is -n.
+                adp: (i as u16).wrapping_neg(),
+                ado: r.ado,
+                logical: 0,
+                timeout_us: 10_000,
+            };
+            let fail = |why: String| {
+                step(
+                    "start-up register",
+                    format!("slave {i} {:#06x} (transition {}, {}): {why}", r.ado, at.letters(), r.origin),
+                )
+            };
+            blocking(port, &RawRequest { head, data: &r.data }, SLOW).map_err(|e| fail(e.to_string()))?;
+            let a = port.call(&RawGet)?;
+            let fields = ReplyFields { value: a.header.return_value, data_len: a.data.len() as u16 };
+            match RawReply::decode(&fields, a.data) {
+                Ok(reply) if reply.working_counter == 1 => {}
+                Ok(reply) => return Err(fail(format!("working counter {}, not 1", reply.working_counter))),
+                Err(e) => return Err(fail(format!("unreadable answer: {e}"))),
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Step 4: the start-up SDOs of one transition, slave by slave, in the
 /// order the configuration (or its ENI) lists them. Returns whether one
 /// wrote a PDO assignment or mapping object.
 fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition) -> Result<bool, BringUpError> {
+    startup_registers(port, config, at)?;
     let mut pdo_objects = false;
     for (i, s) in config.slaves.iter().enumerate() {
         for sdo in s.sdos.iter().filter(|s| s.transition == at) {
