@@ -641,6 +641,13 @@ pub fn installed_tool(
     None
 }
 
+/// Graphviz's `dot` (`$ECMXF_DOT`, else /usr/bin/dot, which `.ci/run`
+/// installs from Debian): what `ecmxfctl graph` writes for; required where
+/// `ECMXF_REQUIRE_DOT` is set.
+pub fn dot_binary() -> Option<PathBuf> {
+    installed_tool("ECMXF_DOT", "/usr/bin/dot", |_| true, "ECMXF_REQUIRE_DOT", "apt-get install graphviz")
+}
+
 /// `buf` (the Buf CLI, written in Go: its `buf curl` is a gRPC client
 /// built on connect-go, which like grpc-go reads the status from the error
 /// details): `$ECMXF_BUF`, else the copy `.ci/run` installs from the npm

@@ -64,6 +64,22 @@ fn every_command_works_as_a_table_and_as_json() {
         assert!(t.contains("master -> slave0;") && t.contains("slave1 -> slave2;"), "{t}");
         assert!(t.contains("1: TI CiA402 3-axis") && t.contains("0x0000059d:0x00000402"), "{t}");
         assert_eq!(j["dot"].as_str(), Some(t.as_str()));
+        // Graphviz itself reads it: every slave is a node of the SVG.
+        if let Some(dot) = ecmxf_e2e::dot_binary() {
+            use std::io::Write as _;
+            let mut child = std::process::Command::new(dot)
+                .arg("-Tsvg")
+                .stdin(std::process::Stdio::piped())
+                .stdout(std::process::Stdio::piped())
+                .stderr(std::process::Stdio::piped())
+                .spawn()
+                .expect("run dot");
+            child.stdin.take().unwrap().write_all(t.as_bytes()).unwrap();
+            let out = child.wait_with_output().unwrap();
+            let svg = String::from_utf8_lossy(&out.stdout);
+            assert!(out.status.success(), "dot refused the graph: {}", String::from_utf8_lossy(&out.stderr));
+            assert!(svg.contains("<svg") && (0..3).all(|n| svg.contains(&format!("<title>slave{n}</title>"))), "{svg}");
+        }
         // A slave taken down to PRE-OP is brought back to OP by the rescan's
         // bring-up.
         d.ctl(&["states", "2", "preop"]).ok();
