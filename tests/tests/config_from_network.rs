@@ -97,3 +97,24 @@ fn the_twincat_network_goes_round_too() {
         let _ = std::fs::remove_dir_all(&dir);
     });
 }
+
+/// Slaves configured with their ESI (here two Elmo drives): the TOML names
+/// the same files, so the entries keep the names and types the ESI gives.
+#[test]
+fn slaves_with_their_esi_keep_it() {
+    let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
+    run(async {
+        let dir = temp_dir("config-esi");
+        let net = dir.join("net.toml");
+        let device = format!("esi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n", elmo.display());
+        std::fs::write(&net, format!("version = 1\n[[slave]]\n{device}[[slave]]\n{device}")).unwrap();
+        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
+        let slaves = format!("[[slave]]\n{device}[[slave]]\n{device}");
+        let mut d = Daemon::with_config(&config(&link, &slaves));
+        d.connect().await;
+        let toml = d.ctl(&["config"]);
+        assert_eq!(toml.stdout.matches(&format!("esi = \"{}\"", elmo.display())).count(), 2, "{}", toml.stdout);
+        round_trip(&mut d, &link, true).await;
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}

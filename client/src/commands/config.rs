@@ -5,7 +5,8 @@
 //! - `--format toml`: a whole ecmxfd configuration: the daemon's `[link]`
 //!   and `[cycle]` (MasterInfo.link_toml, cycle_toml), and one
 //!   `[[slave]]` per slave with its name and identity (checked against the
-//!   scan when it runs), its DC exceptions, and its PDO assignment and
+//!   scan when it runs), its configured ESI file (names, types and the
+//!   dictionary stay the same), its DC exceptions, and its PDO assignment and
 //!   mapping as read over CoE (`rx_pdos`/`tx_pdos`, which bring-up writes
 //!   only where the slave does not already run it, so a fixed mapping is
 //!   stated without being written). A mapping beyond PDO_CONFIG_SET's 3
@@ -121,6 +122,9 @@ fn toml(net: &Network) -> String {
         let _ = writeln!(out, "vendor_id = {:#010x}", s.vendor_id);
         let _ = writeln!(out, "product_code = {:#010x}", s.product_code);
         let _ = writeln!(out, "revision = {:#010x}", s.revision);
+        if let Some(esi) = s.expected.as_ref().map(|e| e.esi.as_str()).filter(|e| !e.is_empty()) {
+            let _ = writeln!(out, "esi = {}", toml_string(esi));
+        }
         if dc_on(net) && !s.dc.active {
             let _ = writeln!(out, "dc_assign_activate = 0  # runs without DC");
         } else if s.dc.active && s.dc.shift_ns != 0 {

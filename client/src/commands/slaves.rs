@@ -66,6 +66,8 @@ pub struct ExpectedReport {
     pub vendor_id: u32,
     pub product_code: u32,
     pub revision: u32,
+    /// The ESI file configured for it ("" when none).
+    pub esi: String,
 }
 
 impl From<pb::Slave> for SlaveReport {
@@ -92,6 +94,7 @@ impl From<pb::Slave> for SlaveReport {
                 vendor_id: e.vendor_id,
                 product_code: e.product_code,
                 revision: e.revision,
+                esi: e.esi,
             }),
             mismatch: s.mismatch,
         }

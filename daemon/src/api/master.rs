@@ -216,6 +216,7 @@ pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::List
                 vendor_id: e.vendor_id.unwrap_or(0),
                 product_code: e.product_code.unwrap_or(0),
                 revision: e.revision.unwrap_or(0),
+                esi: e.esi.as_ref().map(|p| p.display().to_string()).unwrap_or_default(),
             });
         }
         slaves.push(slave);
