@@ -116,6 +116,20 @@ pub struct InputRecord {
     pub data: Vec<u8>,
 }
 
+/// One input frame (one DC cycle's inputs).
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct InputFrame {
+    /// DC-cycle sequence number: +1 per cycle, across recoveries too.
+    pub seq: u64,
+    /// When the engine received it, ns since start.
+    pub time_ns: u64,
+    /// Cycles just before this frame that the engine never received (the
+    /// network was down, being recovered): 0 in steady operation.
+    pub gap: u64,
+    /// The frame.
+    pub data: Vec<u8>,
+}
+
 /// Reads the next record from the ring's consumer side, if whole.
 pub fn read_record(c: &mut rtrb::Consumer<u8>) -> Option<InputRecord> {
     // Records are committed whole, so a header means its frame is there too;

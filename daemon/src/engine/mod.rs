@@ -6,8 +6,10 @@
 //! one transaction in the blocking slot ([`slot`]) by at most one guarded
 //! call between FIFO exchanges, and judge every answer by the
 //! [`supervisor`]'s rules, which decide when to go back to bring-up (with
-//! back-off). Async code talks to it through bounded channels in and a
-//! wait-free ring of input frames out ([`inputs`]); the status goes out
+//! back-off). It has one door, [`spawn`], which starts it and returns the
+//! [`EngineHandle`]: one bounded channel of commands in (jobs, reconfigure,
+//! network actions, frame streams, stop), the output writes on their own,
+//! and a wait-free ring of input frames out ([`inputs`]); the status goes out
 //! through atomics and a watch of snapshots ([`telemetry`]), supervision
 //! events through a ring of their own ([`events`]). Once running, nothing
 //! on this thread allocates (daemon/tests/zero_alloc.rs).
@@ -18,6 +20,8 @@ pub mod emergencies;
 pub mod error;
 pub mod events;
 pub mod frames;
+mod handle;
+pub use handle::{EVENT_BACKLOG, EngineHandle, QUEUE_DEPTH, SUBSCRIBER_BACKLOG, spawn};
 pub mod held;
 pub mod inputs;
 pub mod layout;
@@ -90,7 +94,7 @@ enum Exit {
 }
 
 /// The engine's state on its thread.
-pub struct Engine<L> {
+pub(crate) struct Engine<L> {
     port: Port<L>,
     config: Config,
     /// A client asked for a state below the configured target: the slaves
@@ -145,7 +149,7 @@ impl<L> std::fmt::Debug for Engine<L> {
 
 /// Everything the engine thread needs.
 #[derive(Debug)]
-pub struct Parts<L> {
+struct Parts<L> {
     /// The link.
     pub link: L,
     /// The configuration.
@@ -172,7 +176,7 @@ pub struct Parts<L> {
 
 impl<L: Link> Engine<L> {
     /// An engine over its parts.
-    pub fn new(p: Parts<L>) -> Self {
+    fn new(p: Parts<L>) -> Self {
         let mut port = Port::new(p.link);
         port.set_ready_timeout(p.config.ready_timeout());
         let epoch = Instant::now();

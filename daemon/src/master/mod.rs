@@ -1,30 +1,28 @@
-//! [`Master`]: the engine as async code sees it. Requests go into a bounded
-//! queue (full: [`EngineError::QueueFull`]) with a deadline; dropping the
-//! future, or the deadline passing, tells the engine to stop caring (it then
-//! finishes or abandons the chip operation cleanly). Input frames come out
-//! of the engine's wait-free ring through a distributor thread into a
-//! broadcast channel: a subscriber that falls behind is told how many frames
-//! it missed and slows no one.
+//! [`Master`]: the engine as async code sees it, over the handle
+//! `crate::engine::spawn` returns (the master wires no channel or thread of
+//! its own). Requests go into the engine's bounded command queue (full:
+//! [`EngineError::QueueFull`]) with a deadline; dropping the future, or the
+//! deadline passing, tells the engine to stop caring (it then finishes or
+//! abandons the chip operation cleanly). Input frames come out of the
+//! engine's wait-free ring through its distributor thread into a broadcast
+//! channel: a subscriber that falls behind is told how many frames it
+//! missed and slows no one.
 //!
 //! The methods are grouped by concern: here the plumbing, process data,
 //! events and status; `transactions` the blocking-slot operations (SDO, SII,
 //! states, PDO assignment, raw datagrams, FoE); `network` re-init, warm
 //! reset and applying a new configuration.
 
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering};
-use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::TrySendError;
 use std::sync::{Arc, Mutex};
-use std::thread::JoinHandle;
 use std::time::{Duration, Instant};
 
 use tokio::sync::{broadcast, oneshot};
 
 use crate::config::{Config, LinkConfig};
-use crate::engine::inputs::read_record;
-use crate::engine::output_writes::Writers;
 use crate::engine::slot::{Job, SlotRequest};
-use crate::engine::telemetry::Telemetry;
-use crate::engine::{Command, Engine, Parts};
+use crate::engine::{Command, EngineHandle};
 use crate::link::SimHandle;
 use crate::link::{Link, LinkError};
 use crate::outputs::OutputSender;
@@ -44,28 +42,9 @@ pub mod transactions;
 /// A slave's identity: (vendor id, product code, revision).
 pub type Identity = (u32, u32, u32);
 
-/// Requests that may wait at once.
-pub const QUEUE_DEPTH: usize = 256;
-/// Input frames a subscriber may fall behind by before losing some.
-pub const SUBSCRIBER_BACKLOG: usize = 4096;
-/// Events a subscriber may fall behind by before losing some.
-pub const EVENT_BACKLOG: usize = 1024;
-
-/// One input frame (one DC cycle's inputs).
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub struct InputFrame {
-    /// DC-cycle sequence number: +1 per cycle, across recoveries too.
-    pub seq: u64,
-    /// When the engine received it, ns since start.
-    pub time_ns: u64,
-    /// Cycles just before this frame that the engine never received (the
-    /// network was down, being recovered): 0 in steady operation.
-    pub gap: u64,
-    /// The frame.
-    pub data: Vec<u8>,
-}
-
+pub use crate::engine::inputs::InputFrame;
 pub use crate::engine::slot::{DAEMON_CLIENT, as_client};
+pub use crate::engine::{EVENT_BACKLOG, QUEUE_DEPTH, SUBSCRIBER_BACKLOG};
 
 // What front ends (the gRPC API, and any other) need of the engine, named
 // here so that they import the master alone (issue 30): errors, phases and
@@ -214,16 +193,11 @@ impl std::error::Error for StartError {}
 /// The running master.
 #[derive(Debug)]
 pub struct Master {
-    commands: SyncSender<Command>,
+    /// The engine (crate::engine::spawn): its one command channel, the
+    /// outputs path and what it publishes.
+    engine: EngineHandle,
+    /// The outputs path as the async side writes it (chunked writes).
     outputs: Arc<OutputSender>,
-    telemetry: Arc<Telemetry>,
-    layout: Arc<Mutex<NetworkLayout>>,
-    inputs: broadcast::Sender<Arc<InputFrame>>,
-    events: broadcast::Sender<Event>,
-    threads: Mutex<Vec<JoinHandle<()>>>,
-    stop_engine: Arc<AtomicBool>,
-    stop_distributor: Arc<AtomicBool>,
-    writers: Arc<Writers>,
     config: Mutex<Config>,
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
@@ -281,73 +255,14 @@ pub fn open_link(config: &Config) -> Result<(Box<dyn Link>, Option<SimHandle>), 
 }
 
 impl Master {
-    /// Starts the engine thread (real-time as configured) over `link`, and
-    /// the input distributor.
+    /// Starts the engine over `link` (`crate::engine::spawn`: its
+    /// real-time thread and the input distributor).
     pub fn start<L: Link + 'static>(link: L, config: Config) -> Self {
-        let (commands, command_rx) = sync_channel(QUEUE_DEPTH);
-        let (output_tx, output_rx) = sync_channel(1024);
-        let outputs = Arc::new(OutputSender::new(output_tx));
-        let telemetry = Arc::new(Telemetry::default());
-        let layout = Arc::new(Mutex::new(NetworkLayout::default()));
-        let writers = Arc::new(Writers::default());
-        let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
-        let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
-        let (events, _) = broadcast::channel(EVENT_BACKLOG);
-        let (event_producer, mut event_consumer) = rtrb::RingBuffer::new(crate::engine::events::RING);
-        let event_tx = events.clone();
-        let stop_distributor = Arc::new(AtomicBool::new(false));
-        let stop_engine = Arc::new(AtomicBool::new(false));
-
-        let tx = inputs.clone();
-        let stop = Arc::clone(&stop_distributor);
-        let distributor = std::thread::Builder::new()
-            .name("ecmxf-inputs".into())
-            .spawn(move || {
-                while !stop.load(Ordering::Relaxed) {
-                    while let Some(r) = read_record(&mut consumer) {
-                        // No subscribers is fine: the frame is dropped.
-                        let frame = InputFrame { seq: r.seq, time_ns: r.time_ns, gap: r.gap, data: r.data };
-                        let _ = tx.send(Arc::new(frame));
-                    }
-                    while let Ok(e) = event_consumer.pop() {
-                        let _ = event_tx.send(e);
-                    }
-                    std::thread::park_timeout(Duration::from_millis(5));
-                }
-            })
-            .expect("spawn the input distributor thread");
-        let parts = Parts {
-            link,
-            config: config.clone(),
-            commands: command_rx,
-            outputs: output_rx,
-            telemetry: Arc::clone(&telemetry),
-            layout: Arc::clone(&layout),
-            ring: producer,
-            distributor: Some(distributor.thread().clone()),
-            writers: Arc::clone(&writers),
-            events: event_producer,
-            stop: Arc::clone(&stop_engine),
-        };
-        let rt = config.realtime.clone();
-        let engine = std::thread::Builder::new()
-            .name("ecmxf-rt".into())
-            .spawn(move || {
-                crate::realtime::apply(&rt);
-                Engine::new(parts).run();
-            })
-            .expect("spawn the engine thread");
+        let engine = crate::engine::spawn(link, config.clone());
+        let outputs = Arc::new(OutputSender::new(engine.outputs.clone()));
         Self {
-            commands,
+            engine,
             outputs,
-            telemetry,
-            layout,
-            inputs,
-            events,
-            threads: Mutex::new(vec![engine, distributor]),
-            stop_engine,
-            stop_distributor,
-            writers,
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
@@ -378,7 +293,7 @@ impl Master {
         let client = crate::engine::slot::current_client();
         let buffer = Vec::with_capacity(crate::engine::slot::request::reply_capacity(&request));
         let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client, buffer };
-        match self.commands.try_send(Command::Job(job)) {
+        match self.engine.commands.try_send(Command::Job(job)) {
             Ok(()) => {}
             Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),
             Err(TrySendError::Disconnected(_)) => return Err(EngineError::Unavailable(NotRunning::Stopped)),
@@ -403,33 +318,33 @@ impl Master {
     /// A counted writer of outputs: when the last one is dropped, the
     /// engine applies `outputs.on_last_writer_gone`.
     pub fn output_writer(&self) -> OutputWriter {
-        self.writers.acquire();
+        self.engine.writers.acquire();
         OutputWriter {
             outputs: Arc::clone(&self.outputs),
-            layout: Arc::clone(&self.layout),
-            writers: Arc::clone(&self.writers),
+            layout: Arc::clone(&self.engine.layout),
+            writers: Arc::clone(&self.engine.writers),
         }
     }
 
     /// Output writers now.
     pub fn output_writers(&self) -> usize {
-        self.writers.count()
+        self.engine.writers.count()
     }
 
     /// A new subscriber to supervision events (state changes, link, DC,
     /// error counters, underruns, recoveries) from now on.
     pub fn events(&self) -> broadcast::Receiver<Event> {
-        self.events.subscribe()
+        self.engine.events.subscribe()
     }
 
     /// A new subscriber to input frames.
     pub fn subscribe(&self) -> broadcast::Receiver<Arc<InputFrame>> {
-        self.inputs.subscribe()
+        self.engine.inputs.subscribe()
     }
 
     /// The engine's status.
     pub fn status(&self) -> Snapshot {
-        self.telemetry.snapshot()
+        self.engine.telemetry.snapshot()
     }
 
     /// The engine's status as it changes: a new snapshot at once when the
@@ -437,7 +352,7 @@ impl Master {
     /// changes, and at least every few ms while the engine exchanges
     /// packets. Await this instead of polling [`Master::status`].
     pub fn watch_status(&self) -> tokio::sync::watch::Receiver<Snapshot> {
-        self.telemetry.watch()
+        self.engine.telemetry.watch()
     }
 
     /// Waits until a snapshot satisfies `done`, for at most `limit`;
@@ -459,7 +374,7 @@ impl Master {
     /// The engine's epoch (time 0 of frame and event times) on the host's
     /// CLOCK_MONOTONIC, ns.
     pub fn epoch_monotonic_ns(&self) -> u64 {
-        self.telemetry.epoch_monotonic_ns.load(Ordering::Relaxed)
+        self.engine.telemetry.epoch_monotonic_ns.load(Ordering::Relaxed)
     }
 
     /// Now, ns since the engine's epoch (the time base of frames, events
@@ -492,7 +407,7 @@ impl Master {
     /// Write-to-wire latency of client output writes over the latest ones
     /// (see `Telemetry::output_latency`); `None` before the first.
     pub fn output_latency(&self) -> Option<crate::engine::telemetry::LatencyStats> {
-        self.telemetry.output_latency.stats()
+        self.engine.telemetry.output_latency.stats()
     }
 
     /// The output latency budget in force (`cycle.output_latency_us`), us;
@@ -520,7 +435,7 @@ impl Master {
             return Err(EngineError::BadArgument { field: "range", reason });
         }
         let (producer, consumer) = crate::engine::frames::channel(start, len, capacity);
-        self.commands.try_send(Command::FrameStream(consumer)).map_err(|e| match e {
+        self.engine.commands.try_send(Command::FrameStream(consumer)).map_err(|e| match e {
             TrySendError::Full(_) => EngineError::QueueFull,
             TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
         })?;
@@ -529,49 +444,31 @@ impl Master {
 
     /// Why bring-up last failed or recovery last started.
     pub fn last_error(&self) -> Option<String> {
-        self.telemetry.last_error()
+        self.engine.telemetry.last_error()
     }
 
     /// Whether the engine stopped because the network can never run with
     /// the configuration in force (see `BringUpError::is_permanent`).
     pub fn refused(&self) -> bool {
-        self.telemetry.refused.load(Ordering::Relaxed)
+        self.engine.telemetry.refused.load(Ordering::Relaxed)
     }
 
     /// (vendor id, product code, revision) of the slave at `position` as
     /// bring-up read them; `None` past the end of the ring.
     pub fn identity(&self, position: u8) -> Option<Identity> {
-        let layout = self.layout.lock().unwrap_or_else(|e| e.into_inner());
+        let layout = self.engine.layout.lock().unwrap_or_else(|e| e.into_inner());
         layout.slaves.get(usize::from(position)).map(|s| (s.vendor_id, s.product_code, s.revision))
     }
 
     /// The network as bring-up found it.
     pub fn layout(&self) -> NetworkLayout {
-        self.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.engine.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     /// Safe stop, then waits for the threads (blocking). A bring-up or
     /// recovery in progress is abandoned at once (see `Port::set_abort`).
     pub fn stop(&self) {
-        self.stop_engine.store(true, Ordering::Relaxed);
-        // A full queue still takes the stop: retry briefly.
-        for _ in 0..100 {
-            match self.commands.try_send(Command::Stop) {
-                Err(TrySendError::Full(_)) => std::thread::sleep(Duration::from_millis(10)),
-                _ => break,
-            }
-        }
-        let mut threads = self.threads.lock().unwrap_or_else(|e| e.into_inner());
-        // The engine thread first (it finishes the safe stop), then the
-        // distributor.
-        if !threads.is_empty() {
-            let _ = threads.remove(0).join();
-        }
-        self.stop_distributor.store(true, Ordering::Relaxed);
-        for t in threads.drain(..) {
-            t.thread().unpark();
-            let _ = t.join();
-        }
+        self.engine.stop();
     }
 }
 
@@ -584,6 +481,7 @@ impl Drop for Master {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::engine::telemetry::Telemetry;
 
     fn running(state: EcatState, newest_ms: u64, limit_ms: u64) -> Snapshot {
         let t = Telemetry::default();

@@ -55,10 +55,12 @@ impl Master {
         }
         let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
         let mut events = self.events();
-        self.commands.try_send(Command::Reconfigure(generation, Box::new(config.clone()))).map_err(|e| match e {
-            TrySendError::Full(_) => EngineError::QueueFull,
-            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
-        })?;
+        self.engine.commands.try_send(Command::Reconfigure(generation, Box::new(config.clone()))).map_err(
+            |e| match e {
+                TrySendError::Full(_) => EngineError::QueueFull,
+                TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
+            },
+        )?;
         *self.config.lock().unwrap_or_else(|e| e.into_inner()) = config;
         // The first bring-up failure with this configuration is the answer
         // (the engine goes on retrying it meanwhile).
@@ -105,7 +107,7 @@ impl Master {
     async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
         self.running_or_unavailable()?;
         let before = self.status().recoveries;
-        self.commands.try_send(Command::Network(action)).map_err(|e| match e {
+        self.engine.commands.try_send(Command::Network(action)).map_err(|e| match e {
             TrySendError::Full(_) => EngineError::QueueFull,
             TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
         })?;

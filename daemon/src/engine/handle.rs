@@ -1,0 +1,153 @@
+//! The engine's one door (issue 30): [`spawn`] starts the real-time thread
+//! over a link, and the input distributor beside it, and returns the
+//! [`EngineHandle`] the rest of the daemon uses. In: one command channel
+//! for every request (jobs, reconfigure, network actions, frame streams,
+//! stop) and the output writes, the hot path, on their own channel. Out:
+//! the telemetry, the layout, input frames and events, each published by
+//! the engine without waiting on a reader.
+//!
+//! The engine thread never blocks on the async side: input frames and
+//! events leave it through lock-free rings (rtrb), and the distributor
+//! thread moves them onto broadcast channels for any number of
+//! subscribers, woken by the engine when there is something to move.
+
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::mpsc::{SyncSender, TrySendError, sync_channel};
+use std::sync::{Arc, Mutex};
+use std::thread::JoinHandle;
+use std::time::Duration;
+
+use tokio::sync::broadcast;
+
+use super::events::{Event, RING as EVENT_RING};
+use super::inputs::{InputFrame, read_record};
+use super::layout::NetworkLayout;
+use super::output_writes::{OutputWrite, Writers};
+use super::telemetry::Telemetry;
+use super::{Command, Engine, Parts};
+use crate::config::Config;
+use crate::link::Link;
+
+/// Requests that may wait for the engine at once.
+pub const QUEUE_DEPTH: usize = 256;
+/// Output writes that may wait for the engine at once.
+const OUTPUT_QUEUE: usize = 1024;
+/// Input frames a subscriber may fall behind by before losing some.
+pub const SUBSCRIBER_BACKLOG: usize = 4096;
+/// Events a subscriber may fall behind by before losing some.
+pub const EVENT_BACKLOG: usize = 1024;
+
+/// The running engine, as the rest of the daemon holds it.
+#[derive(Debug)]
+pub struct EngineHandle {
+    /// Every request in.
+    pub commands: SyncSender<Command>,
+    /// Output writes in (the hot path beside the commands).
+    pub outputs: SyncSender<OutputWrite>,
+    /// Status out, read without the engine.
+    pub telemetry: Arc<Telemetry>,
+    /// Where each slave's data sits, written at bring-up only.
+    pub layout: Arc<Mutex<NetworkLayout>>,
+    /// Input frames out.
+    pub inputs: broadcast::Sender<Arc<InputFrame>>,
+    /// Supervision events out.
+    pub events: broadcast::Sender<Event>,
+    /// Output writer leases, counted for `outputs.on_last_writer_gone`.
+    pub writers: Arc<Writers>,
+    threads: Mutex<Vec<JoinHandle<()>>>,
+    stop_engine: Arc<AtomicBool>,
+    stop_distributor: Arc<AtomicBool>,
+}
+
+/// Starts the engine thread (real-time as configured) over `link`, and the
+/// input distributor.
+pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
+    let (commands, command_rx) = sync_channel(QUEUE_DEPTH);
+    let (outputs, output_rx) = sync_channel(OUTPUT_QUEUE);
+    let telemetry = Arc::new(Telemetry::default());
+    let layout = Arc::new(Mutex::new(NetworkLayout::default()));
+    let writers = Arc::new(Writers::default());
+    let (inputs, _) = broadcast::channel(SUBSCRIBER_BACKLOG);
+    let (producer, mut consumer) = rtrb::RingBuffer::new(1 << 20);
+    let (events, _) = broadcast::channel(EVENT_BACKLOG);
+    let (event_producer, mut event_consumer) = rtrb::RingBuffer::new(EVENT_RING);
+    let stop_distributor = Arc::new(AtomicBool::new(false));
+    let stop_engine = Arc::new(AtomicBool::new(false));
+
+    let (tx, event_tx, stop) = (inputs.clone(), events.clone(), Arc::clone(&stop_distributor));
+    let distributor = std::thread::Builder::new()
+        .name("ecmxf-inputs".into())
+        .spawn(move || {
+            while !stop.load(Ordering::Relaxed) {
+                while let Some(r) = read_record(&mut consumer) {
+                    // No subscribers is fine: the frame is dropped.
+                    let frame = InputFrame { seq: r.seq, time_ns: r.time_ns, gap: r.gap, data: r.data };
+                    let _ = tx.send(Arc::new(frame));
+                }
+                while let Ok(e) = event_consumer.pop() {
+                    let _ = event_tx.send(e);
+                }
+                std::thread::park_timeout(Duration::from_millis(5));
+            }
+        })
+        .expect("spawn the input distributor thread");
+    let parts = Parts {
+        link,
+        config: config.clone(),
+        commands: command_rx,
+        outputs: output_rx,
+        telemetry: Arc::clone(&telemetry),
+        layout: Arc::clone(&layout),
+        ring: producer,
+        distributor: Some(distributor.thread().clone()),
+        writers: Arc::clone(&writers),
+        events: event_producer,
+        stop: Arc::clone(&stop_engine),
+    };
+    let rt = config.realtime.clone();
+    let engine = std::thread::Builder::new()
+        .name("ecmxf-rt".into())
+        .spawn(move || {
+            crate::realtime::apply(&rt);
+            Engine::new(parts).run();
+        })
+        .expect("spawn the engine thread");
+    EngineHandle {
+        commands,
+        outputs,
+        telemetry,
+        layout,
+        inputs,
+        events,
+        writers,
+        threads: Mutex::new(vec![engine, distributor]),
+        stop_engine,
+        stop_distributor,
+    }
+}
+
+impl EngineHandle {
+    /// Safe stop, then waits for the threads (blocking). A bring-up or
+    /// recovery under way ends at once.
+    pub fn stop(&self) {
+        self.stop_engine.store(true, Ordering::Relaxed);
+        // A full queue still takes the stop: retry briefly.
+        for _ in 0..100 {
+            match self.commands.try_send(Command::Stop) {
+                Err(TrySendError::Full(_)) => std::thread::sleep(Duration::from_millis(10)),
+                _ => break,
+            }
+        }
+        let mut threads = self.threads.lock().unwrap_or_else(|e| e.into_inner());
+        // The engine thread first (it finishes the safe stop), then the
+        // distributor.
+        if !threads.is_empty() {
+            let _ = threads.remove(0).join();
+        }
+        self.stop_distributor.store(true, Ordering::Relaxed);
+        for t in threads.drain(..) {
+            t.thread().unpark();
+            let _ = t.join();
+        }
+    }
+}
