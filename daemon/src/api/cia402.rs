@@ -116,7 +116,7 @@ impl Cia402Service {
         t: Option<Duration>,
     ) -> Result<i64, Status> {
         let index = axis_index(base, k);
-        let value = match (image.find(a.slave, index, false), self.0.latest_inputs()) {
+        let value = match (image.find(a.slave, index, false), self.0.master.latest_inputs()) {
             (Some(e), Some(frame)) => entry_value(e, &frame.data),
             _ => {
                 let raw = match self.0.master.sdo_read(a.slave, index, 0, false, t).await {
@@ -236,7 +236,7 @@ impl Cia402Api for Cia402Service {
                             "axis {axis} is {now}, not {target}, at the deadline"
                         )));
                     }
-                    self.0.next_inputs(end.saturating_duration_since(Instant::now())).await;
+                    self.0.master.next_inputs(end.saturating_duration_since(Instant::now())).await;
                 }
             }
             self.status(axis, &a, Some(budget)).await
@@ -267,7 +267,7 @@ impl Cia402Api for Cia402Service {
                         s.mode_display
                     )));
                 }
-                self.0.next_inputs(end.saturating_duration_since(Instant::now())).await;
+                self.0.master.next_inputs(end.saturating_duration_since(Instant::now())).await;
             }
         })
         .await?;

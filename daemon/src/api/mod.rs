@@ -9,12 +9,12 @@
 //! gRPC health (SERVING only while the bus runs) and reflection (v1 and
 //! v1alpha).
 
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
 use std::time::Duration;
 
 use tonic::{Request, Status};
 
-use crate::master::{InputFrame, Master};
+use crate::master::Master;
 
 pub mod admin;
 pub mod auth;
@@ -58,14 +58,8 @@ pub struct Context {
     pub lease_ttl: Duration,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
     pub stream_max_age: Duration,
-    /// The newest input frame (for CiA 402 actual values), and the event
-    /// that a new one arrived (drive states change only with one).
-    pub latest: tokio::sync::watch::Sender<Option<Arc<InputFrame>>>,
     /// The output ranges open `StreamFrames` calls feed.
     pub frame_streams: Arc<frames::StreamClaims>,
-    /// The output image as the API last wrote it (bit-sized entries are
-    /// merged into it, so writing one bit keeps its neighbours).
-    pub shadow: Mutex<Vec<u8>>,
     /// Set when the daemon stops: every open server stream ends with
     /// [`status::stopping`] instead of a connection cut mid-body.
     stopping: tokio::sync::watch::Sender<bool>,
@@ -82,8 +76,6 @@ impl Context {
             leases: crate::master::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
-            latest: tokio::sync::watch::Sender::new(None),
-            shadow: Mutex::new(Vec::new()),
             frame_streams: Arc::default(),
             stopping: tokio::sync::watch::Sender::new(false),
         })
@@ -133,19 +125,6 @@ impl Context {
     /// Authorizes a call for `role`.
     pub fn authorize<T>(&self, request: &Request<T>, role: Role) -> Result<Caller, Status> {
         self.auth.read().unwrap_or_else(|e| e.into_inner()).authorize(request, role)
-    }
-
-    /// The newest input frame, if any arrived.
-    pub fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
-        self.latest.borrow().clone()
-    }
-
-    /// Waits, at most `limit`, for an input frame newer than the newest
-    /// now; false when none came. What a drive reports (its state, its mode)
-    /// changes only with a frame, so a waiter looks again after each one.
-    pub async fn next_inputs(&self, limit: Duration) -> bool {
-        let mut rx = self.latest.subscribe();
-        matches!(tokio::time::timeout(limit, rx.changed()).await, Ok(Ok(())))
     }
 }
 

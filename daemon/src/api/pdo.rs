@@ -166,7 +166,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
     }
     let layout = ctx.master.layout();
     let size = image.output_bytes as usize;
-    let mut shadow = ctx.shadow.lock().unwrap_or_else(|e| e.into_inner());
+    let mut shadow = ctx.master.output_shadow();
     shadow.resize(size, 0);
     let mut staged = shadow.clone();
     let (mut lo, mut hi) = (usize::MAX, 0usize);
@@ -324,7 +324,7 @@ impl ProcessDataApi for ProcessDataService {
             }
             selected.push((name, e));
         }
-        let mut bytes = self.0.shadow.lock().unwrap_or_else(|e| e.into_inner()).clone();
+        let mut bytes = self.0.master.output_shadow().clone();
         bytes.resize(image.output_bytes as usize, 0);
         let values = selected
             .into_iter()

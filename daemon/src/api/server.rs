@@ -237,20 +237,6 @@ async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
     }
 }
 
-/// Keeps the newest input frame for the services.
-async fn track_inputs(ctx: Arc<Context>) {
-    let mut rx = ctx.master.subscribe();
-    loop {
-        match rx.recv().await {
-            Ok(f) => {
-                ctx.latest.send_replace(Some(f));
-            }
-            Err(tokio::sync::broadcast::error::RecvError::Lagged(_)) => {}
-            Err(tokio::sync::broadcast::error::RecvError::Closed) => return,
-        }
-    }
-}
-
 /// Serves the API until `shutdown` changes; removes the socket file after.
 pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Receiver<()>) -> Result<(), ServeError> {
     let (reporter, health) = tonic_health::server::health_reporter();
@@ -264,7 +250,6 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
 
     let mut tasks = tokio::task::JoinSet::new();
     tasks.spawn(track_health(Arc::clone(&ctx.master), reporter));
-    tasks.spawn(track_inputs(Arc::clone(&ctx)));
     let sweeper = Arc::clone(&ctx);
     tasks.spawn(async move {
         let mut tick = tokio::time::interval(Duration::from_millis(50));

@@ -17,7 +17,7 @@ use std::sync::{Arc, Mutex};
 use std::thread::JoinHandle;
 use std::time::Duration;
 
-use tokio::sync::broadcast;
+use tokio::sync::{broadcast, watch};
 
 use super::events::{Event, RING as EVENT_RING};
 use super::inputs::{InputFrame, read_record};
@@ -50,6 +50,9 @@ pub struct EngineHandle {
     pub layout: Arc<Mutex<NetworkLayout>>,
     /// Input frames out.
     pub inputs: broadcast::Sender<Arc<InputFrame>>,
+    /// The newest input frame, kept by the distributor (what a front end
+    /// reads a drive's state from, and waits on for the next one).
+    pub latest: watch::Sender<Option<Arc<InputFrame>>>,
     /// Supervision events out.
     pub events: broadcast::Sender<Event>,
     /// Output writer leases, counted for `outputs.on_last_writer_gone`.
@@ -74,15 +77,23 @@ pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
     let stop_distributor = Arc::new(AtomicBool::new(false));
     let stop_engine = Arc::new(AtomicBool::new(false));
 
-    let (tx, event_tx, stop) = (inputs.clone(), events.clone(), Arc::clone(&stop_distributor));
+    let (latest, _) = watch::channel(None);
+    let (tx, latest_tx) = (inputs.clone(), latest.clone());
+    let (event_tx, stop) = (events.clone(), Arc::clone(&stop_distributor));
     let distributor = std::thread::Builder::new()
         .name("ecmxf-inputs".into())
         .spawn(move || {
             while !stop.load(Ordering::Relaxed) {
+                let mut newest = None;
                 while let Some(r) = read_record(&mut consumer) {
                     // No subscribers is fine: the frame is dropped.
-                    let frame = InputFrame { seq: r.seq, time_ns: r.time_ns, gap: r.gap, data: r.data };
-                    let _ = tx.send(Arc::new(frame));
+                    let frame = Arc::new(InputFrame { seq: r.seq, time_ns: r.time_ns, gap: r.gap, data: r.data });
+                    let _ = tx.send(Arc::clone(&frame));
+                    newest = Some(frame);
+                }
+                // Once per batch: waiters wake for the newest frame only.
+                if newest.is_some() {
+                    latest_tx.send_replace(newest);
                 }
                 while let Ok(e) = event_consumer.pop() {
                     let _ = event_tx.send(e);
@@ -118,6 +129,7 @@ pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
         telemetry,
         layout,
         inputs,
+        latest,
         events,
         writers,
         threads: Mutex::new(vec![engine, distributor]),

@@ -198,6 +198,9 @@ pub struct Master {
     engine: EngineHandle,
     /// The outputs path as the async side writes it (chunked writes).
     outputs: Arc<OutputSender>,
+    /// The output image as front ends last wrote it (bit-sized entries are
+    /// merged into it, so writing one bit keeps its neighbours).
+    shadow: Mutex<Vec<u8>>,
     config: Mutex<Config>,
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
@@ -263,6 +266,7 @@ impl Master {
         Self {
             engine,
             outputs,
+            shadow: Mutex::default(),
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
@@ -469,6 +473,25 @@ impl Master {
     /// recovery in progress is abandoned at once (see `Port::set_abort`).
     pub fn stop(&self) {
         self.engine.stop();
+    }
+
+    /// The newest input frame, if any arrived.
+    pub fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
+        self.engine.latest.borrow().clone()
+    }
+
+    /// Waits, at most `limit`, for an input frame newer than the newest
+    /// now; false when none came. What a drive reports (its state, its mode)
+    /// changes only with a frame, so a waiter looks again after each one.
+    pub async fn next_inputs(&self, limit: Duration) -> bool {
+        let mut rx = self.engine.latest.subscribe();
+        matches!(tokio::time::timeout(limit, rx.changed()).await, Ok(Ok(())))
+    }
+
+    /// The output image as front ends last wrote it (zero-filled at start),
+    /// to stage writes on and read back (ReadOutputs).
+    pub fn output_shadow(&self) -> std::sync::MutexGuard<'_, Vec<u8>> {
+        self.shadow.lock().unwrap_or_else(|e| e.into_inner())
     }
 }
 
