@@ -149,7 +149,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     let ctx = Context::new(Arc::clone(&master), &api, nix::unistd::getuid().as_raw());
     let layout_builder = tokio::spawn({
         let ctx = Arc::clone(&ctx);
-        async move { ctx.image.keep_built(Arc::clone(&ctx.master)).await }
+        async move { Arc::clone(&ctx.master).keep_image_built().await }
     });
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
     if let Some(l) = metrics_listener {

@@ -13,13 +13,14 @@ use tonic::{Request, Response, Status};
 use super::auth::Role;
 use super::bounded;
 use super::convert::decode_value;
-use super::image::{Image, entry_value};
-use super::objects::axis_index;
+use super::image::entry_value;
 use super::status::{bad_argument, to_status};
 use super::{Context, wait_budget};
 use crate::config::AxisConfig;
 use crate::master::EngineError;
 use crate::master::Master;
+use crate::master::image::Image;
+use crate::master::objects::axis_index;
 use crate::master::transactions::Immediate;
 
 /// The `Cia402` service.
@@ -66,7 +67,7 @@ impl Cia402Service {
         lease_id: &str,
         t: Option<Duration>,
     ) -> Result<bool, Status> {
-        let image = self.0.image.get(&self.0.master).await.map_err(to_status)?;
+        let image = self.0.master.image().await.map_err(to_status)?;
         let k = slave_axis(&image, &self.0.master, a);
         let index = axis_index(base, k);
         let v = pb::Value { kind: Some(pb::value::Kind::Integer(value)) };
@@ -76,7 +77,8 @@ impl Cia402Service {
             super::pdo::apply_writes(&self.0, &image, lease_id, &[write])?;
             return Ok(true);
         }
-        let ty = super::objects::lookup(index, 0).map_or(pb::DataType::Integer32, |(o, _)| o.data_type);
+        let ty = crate::master::objects::lookup(index, 0)
+            .map_or(pb::DataType::Integer32, |(o, _)| super::convert::pb_type(o.data_type));
         let bytes = super::convert::encode_value(ty, &v)?;
         self.0.master.sdo_write(a.slave, index, 0, false, bytes, t).await.map_err(to_status)?;
         Ok(false)
@@ -126,7 +128,8 @@ impl Cia402Service {
                     Err(EngineError::SdoAbort { .. }) => return Ok(0),
                     Err(e) => return Err(to_status(e)),
                 };
-                let ty = super::objects::lookup(index, 0).map_or(pb::DataType::Integer32, |(k, _)| k.data_type);
+                let ty = crate::master::objects::lookup(index, 0)
+                    .map_or(pb::DataType::Integer32, |(k, _)| super::convert::pb_type(k.data_type));
                 decode_value(ty, &raw).ok().flatten().unwrap_or_default()
             }
         };
@@ -139,7 +142,7 @@ impl Cia402Service {
     }
 
     async fn status(&self, axis: u8, a: &AxisConfig, t: Option<Duration>) -> Result<pb::AxisStatus, Status> {
-        let image = self.0.image.get(&self.0.master).await.map_err(to_status)?;
+        let image = self.0.master.image().await.map_err(to_status)?;
         let k = slave_axis(&image, &self.0.master, a);
         let state = self.drive_state(axis, t).await?;
         let (_, sw) = self.0.master.immediate(Immediate::Cia402Statusword(axis), t).await.map_err(to_status)?;
@@ -160,7 +163,7 @@ impl Cia402Service {
 impl Cia402Api for Cia402Service {
     async fn list_axes(&self, request: Request<pb::ListAxesRequest>) -> Result<Response<pb::ListAxesResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        let image = bounded(&caller, self.0.master.image()).await?;
         let axes = self
             .0
             .master
@@ -224,7 +227,7 @@ impl Cia402Api for Cia402Service {
                         break;
                     }
                     if now == Cia402State::Fault && Instant::now() + budget / 2 >= end {
-                        let image = self.0.image.get(m).await.map_err(to_status)?;
+                        let image = m.image().await.map_err(to_status)?;
                         let k = slave_axis(&image, m, &a);
                         let code = self.actual(&image, &a, k, 0x603F, Some(budget)).await?;
                         return Err(Status::failed_precondition(format!(

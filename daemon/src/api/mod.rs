@@ -1,6 +1,7 @@
 //! The gRPC API (`ecmxf.v1`, see `proto/`): one service module per
-//! concern, all sharing a [`Context`] — the master, the authenticator, the
-//! process-image cache, the output leases. Every call identifies its caller
+//! concern, all sharing a [`Context`] — the master (which owns the domain:
+//! the process image, the newest inputs, the output image as written, the
+//! leases), the authenticator, the open frame streams. Every call identifies its caller
 //! (see `auth`), runs its chip work as that caller's turn on the blocking
 //! slot (`master::as_client`), with the client's deadline, and maps engine
 //! errors once (`status`).
@@ -26,7 +27,6 @@ pub mod frames;
 pub mod image;
 pub mod leases;
 pub mod master;
-pub mod objects;
 pub mod paced;
 pub mod pdo;
 pub mod peripherals;
@@ -49,8 +49,6 @@ pub struct Context {
     pub auth: std::sync::RwLock<Authenticator>,
     /// SDO transfer durations, for the metrics endpoint.
     pub sdo_latency: Arc<crate::metrics::Histogram>,
-    /// The process image, named.
-    pub image: image::ImageCache,
     /// Output leases: the master's table (domain state), shown through
     /// [`leases`].
     pub leases: crate::master::Leases,
@@ -72,7 +70,6 @@ impl Context {
             master,
             auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
             sdo_latency: Arc::default(),
-            image: image::ImageCache::default(),
             leases: crate::master::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),

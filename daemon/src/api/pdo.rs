@@ -13,11 +13,12 @@ use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::convert::{encode, existing_slave, pb_type};
-use super::image::{Entry, Image, entry_value, write_bits};
+use super::image::entry_value;
 use super::leases;
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
 use crate::master::EngineError;
+use crate::master::image::{Entry, Image, write_bits};
 use crate::master::pdos::{PdoDescription, PdoSource};
 
 /// The `ProcessData` service.
@@ -180,7 +181,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
                 if !e.output {
                     return Err(bad_argument("writes.entry", format!("{name:?} is an input")));
                 }
-                let bytes = encode(e.data_type, value)
+                let bytes = encode(super::image::entry_type(e), value)
                     .map_err(|(_, why)| bad_argument("writes.value", format!("entry {name:?}: {why}")))?;
                 check_fits(name, e.bit_length, &bytes)?;
                 let (b0, b1) = ((e.bit_offset / 8) as usize, (e.bit_offset + e.bit_length).div_ceil(8) as usize);
@@ -256,7 +257,7 @@ impl ProcessDataApi for ProcessDataService {
             Some(s) => vec![existing_slave(s, count, "slave")?],
             None => (0..count as u8).collect(),
         };
-        let image = bounded(&caller, self.0.image.get(m)).await?;
+        let image = bounded(&caller, m.image()).await?;
         let slaves = which
             .into_iter()
             .filter_map(|s| image.mappings.get(usize::from(s)).map(|p| (s, p)))
@@ -305,8 +306,8 @@ impl ProcessDataApi for ProcessDataService {
             };
             return Err(Status::new(e.code(), format!("{}; {how}", e.message())));
         }
-        let image = self.0.image.get(m).await.map_err(to_status)?;
-        Ok(Response::new(pb::SetMappingResponse { image: Some(image.to_pb()) }))
+        let image = m.image().await.map_err(to_status)?;
+        Ok(Response::new(pb::SetMappingResponse { image: Some(super::image::to_pb(&image)) }))
     }
 
     async fn read_outputs(
@@ -314,7 +315,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::ReadOutputsRequest>,
     ) -> Result<Response<pb::OutputImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        let image = bounded(&caller, self.0.master.image()).await?;
         // Each value named as asked for: by entry or by variable name.
         let mut selected: Vec<(&String, &Entry)> = Vec::with_capacity(request.get_ref().entries.len());
         for name in &request.get_ref().entries {
@@ -335,8 +336,8 @@ impl ProcessDataApi for ProcessDataService {
 
     async fn get_layout(&self, request: Request<pb::GetLayoutRequest>) -> Result<Response<pb::ProcessImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
-        Ok(Response::new(image.to_pb()))
+        let image = bounded(&caller, self.0.master.image()).await?;
+        Ok(Response::new(super::image::to_pb(&image)))
     }
 
     type StreamInputsStream = SampleStream;
@@ -347,7 +348,7 @@ impl ProcessDataApi for ProcessDataService {
     ) -> Result<Response<Self::StreamInputsStream>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.into_inner();
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        let image = bounded(&caller, self.0.master.image()).await?;
         if image.input_bytes == 0 {
             // No input frame will ever come: say so instead of a stream
             // that never yields (an output-only network).
@@ -396,7 +397,10 @@ impl ProcessDataApi for ProcessDataService {
                 let key: Vec<u8> = if selected.is_empty() {
                     input.clone()
                 } else {
-                    selected.iter().flat_map(|e| super::image::read_bits(input, e.bit_offset, e.bit_length)).collect()
+                    selected
+                        .iter()
+                        .flat_map(|e| crate::master::image::read_bits(input, e.bit_offset, e.bit_length))
+                        .collect()
                 };
                 if last.as_ref() == Some(&key) {
                     return None;
@@ -460,7 +464,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::WriteOutputsRequest>,
     ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        let image = bounded(&caller, self.0.master.image()).await?;
         let r = request.get_ref();
         apply_writes(&self.0, &image, &r.lease_id, &r.writes)?;
         Ok(Response::new(pb::WriteOutputsResponse { applied: 1 }))
@@ -481,7 +485,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<Streaming<pb::WriteOutputsRequest>>,
     ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let image = bounded(&caller, self.0.image.get(&self.0.master)).await?;
+        let image = bounded(&caller, self.0.master.image()).await?;
         let mut stream = request.into_inner();
         let mut applied = 0;
         while let Some(msg) = stream.next().await {

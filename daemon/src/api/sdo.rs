@@ -9,11 +9,11 @@ use tonic::{Request, Response, Status};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{data_type, decode_value, encode_value, index, subindex, type_size};
-use super::objects::{KNOWN, axis_index, lookup};
+use super::convert::{data_type, decode_value, encode_value, index, pb_type, subindex, type_size};
 use super::status::to_status;
 use crate::master::EngineError;
 use crate::master::Master;
+use crate::master::objects::{KNOWN, axis_index, lookup};
 
 /// The `Sdo` service.
 #[derive(Debug, Clone)]
@@ -24,7 +24,7 @@ fn effective_type(asked: pb::DataType, index: u16, subindex: u8, complete: bool)
     if asked != pb::DataType::Unspecified || complete {
         return asked;
     }
-    lookup(index, subindex).map_or(pb::DataType::Unspecified, |(k, _)| k.data_type)
+    lookup(index, subindex).map_or(pb::DataType::Unspecified, |(k, _)| pb_type(k.data_type))
 }
 
 #[tonic::async_trait]
@@ -132,6 +132,16 @@ fn entry(
     }
 }
 
+/// A known object's size in bits: its type's, or for a string what the
+/// slave answered.
+fn known_bits(t: ecmxf_devices::od::DataType, value: &[u8]) -> u32 {
+    use ecmxf_devices::od::DataType as D;
+    match t {
+        D::VisibleString(_) | D::OctetString(_) => (value.len() * 8) as u32,
+        t => t.bits(),
+    }
+}
+
 /// Lists the standard objects a slave answers: CiA 301 identity and
 /// communication objects, the PDO assignment and every assigned PDO's
 /// mapping, and the CiA 402 objects of each axis found (axis n exists when
@@ -140,8 +150,8 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
     let mut out = Vec::new();
     for k in KNOWN.iter().filter(|k| !k.per_axis) {
         if let Some(v) = try_read(m, s, k.index, k.subindex).await? {
-            let bits = super::convert::type_size(k.data_type).map_or(v.len() * 8, |n| n * 8) as u32;
-            out.push(entry(k.index, k.subindex, k.name.into(), k.data_type, bits, k.access, v));
+            let bits = known_bits(k.data_type, &v);
+            out.push(entry(k.index, k.subindex, k.name.into(), pb_type(k.data_type), bits, k.access, v));
         }
     }
     for assign in [0x1C12u16, 0x1C13] {
@@ -176,9 +186,9 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
         for k in KNOWN.iter().filter(|k| k.per_axis) {
             let i = axis_index(k.index, axis);
             if let Some(v) = try_read(m, s, i, 0).await? {
-                let bits = super::convert::type_size(k.data_type).map_or(v.len() * 8, |n| n * 8) as u32;
+                let bits = known_bits(k.data_type, &v);
                 let name = if axis == 0 { k.name.to_string() } else { format!("axis{axis}.{}", k.name) };
-                out.push(entry(i, 0, name, k.data_type, bits, k.access, v));
+                out.push(entry(i, 0, name, pb_type(k.data_type), bits, k.access, v));
             }
         }
     }

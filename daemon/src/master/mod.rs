@@ -31,9 +31,11 @@ use ecmxf_wire::EcatState;
 pub use transactions::RawAnswer;
 
 pub mod esi;
+pub mod image;
 mod leases;
 pub mod mailbox;
 mod network;
+pub mod objects;
 pub mod pdos;
 pub mod sii;
 pub mod states;
@@ -201,6 +203,8 @@ pub struct Master {
     /// The output image as front ends last wrote it (bit-sized entries are
     /// merged into it, so writing one bit keeps its neighbours).
     shadow: Mutex<Vec<u8>>,
+    /// The process image, named, kept built ([`Master::keep_image_built`]).
+    image: image::ImageCache,
     config: Mutex<Config>,
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
@@ -267,6 +271,7 @@ impl Master {
             engine,
             outputs,
             shadow: Mutex::default(),
+            image: image::ImageCache::default(),
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
@@ -486,6 +491,19 @@ impl Master {
     pub async fn next_inputs(&self, limit: Duration) -> bool {
         let mut rx = self.engine.latest.subscribe();
         matches!(tokio::time::timeout(limit, rx.changed()).await, Ok(Ok(())))
+    }
+
+    /// The process image of the network in force (image::ImageCache::get:
+    /// at once when built, else after the build under way).
+    pub async fn image(&self) -> Result<Arc<image::Image>, EngineError> {
+        self.image.get(self).await
+    }
+
+    /// Keeps the process image built after every bring-up, as the
+    /// daemon's own client on the blocking slot (runs until the status
+    /// channel closes).
+    pub async fn keep_image_built(self: Arc<Self>) {
+        self.image.keep_built(Arc::clone(&self)).await
     }
 
     /// The output image as front ends last wrote it (zero-filled at start),
