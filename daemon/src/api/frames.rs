@@ -11,8 +11,8 @@
 //! the queue), frames taken, the last `seq` taken, dry pushes.
 
 use std::collections::VecDeque;
-use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::{Arc, Mutex};
+use std::sync::Arc;
+use std::sync::atomic::Ordering;
 use std::time::{Duration, Instant};
 
 use ecmxf_proto::v1 as pb;
@@ -22,6 +22,7 @@ use tonic::{Status, Streaming};
 use super::status::{bad_argument, to_status};
 use super::{BoxStream, Context};
 use crate::master::InputFrame;
+use crate::master::frame_claims::ClaimError;
 use crate::master::{FrameError, FrameProducer, MAX_STREAMS, Played};
 
 /// How often the daemon reports credits and progress.
@@ -36,68 +37,6 @@ const DRAIN_LIMIT: Duration = Duration::from_secs(10);
 /// How long, once the client's side ended, the daemon waits for the cycle
 /// numbers of its frames (see the task in [`serve`]).
 const TELL_GRACE: Duration = Duration::from_secs(1);
-
-/// The output ranges open streams have, so two streams never feed the
-/// same bytes and WriteOutputs leaves them alone.
-#[derive(Debug, Default)]
-pub struct StreamClaims(Mutex<Vec<Claim>>);
-
-#[derive(Clone, Copy, Debug)]
-struct Claim {
-    id: u64,
-    start: usize,
-    len: usize,
-}
-
-impl Claim {
-    /// Whether the claim shares a byte with `from..to`.
-    fn overlaps(&self, from: usize, to: usize) -> bool {
-        self.start < to && from < self.start + self.len
-    }
-}
-
-/// A range claimed while its stream is open.
-#[derive(Debug)]
-struct Claimed {
-    claims: Arc<StreamClaims>,
-    id: u64,
-}
-
-impl Drop for Claimed {
-    fn drop(&mut self) {
-        self.claims.lock().retain(|c| c.id != self.id);
-    }
-}
-
-impl StreamClaims {
-    fn lock(&self) -> std::sync::MutexGuard<'_, Vec<Claim>> {
-        self.0.lock().unwrap_or_else(|e| e.into_inner())
-    }
-
-    /// Claims `start..start + len` (the slaves named for errors) for a
-    /// new stream.
-    fn claim(self: &Arc<Self>, start: usize, len: usize, slaves: &[u32]) -> Result<Claimed, Status> {
-        static NEXT: AtomicU64 = AtomicU64::new(1);
-        let mut claims = self.lock();
-        if claims.iter().any(|c| c.overlaps(start, start + len)) {
-            return Err(Status::failed_precondition(format!(
-                "the outputs of slaves {} are (partly) fed by another StreamFrames: one stream per set of slaves",
-                slaves.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
-            )));
-        }
-        if claims.len() >= MAX_STREAMS {
-            return Err(Status::resource_exhausted(format!("{MAX_STREAMS} StreamFrames are open: the most at once")));
-        }
-        let id = NEXT.fetch_add(1, Ordering::Relaxed);
-        claims.push(Claim { id, start, len });
-        Ok(Claimed { claims: Arc::clone(self), id })
-    }
-
-    /// The first claimed range that shares a byte with `from..to`, if any.
-    pub fn overlapping(&self, from: usize, to: usize) -> Option<(usize, usize)> {
-        self.lock().iter().find(|c| c.overlaps(from, to)).map(|c| (c.start, c.len))
-    }
-}
 
 /// The first message's checks: the lease owns the slaves, their output
 /// bytes are contiguous and not empty. Returns (image offset, frame bytes).
@@ -256,7 +195,15 @@ pub async fn serve(
         n if n <= MAX_QUEUE => n,
         n => return Err(bad_argument("queue_frames", format!("{n} is more than {MAX_QUEUE}"))),
     };
-    let claim = ctx.frame_streams.claim(start, len, &first.slaves)?;
+    let claim = ctx.master.frame_claims().claim(start, len).map_err(|e| match e {
+        ClaimError::Overlap => Status::failed_precondition(format!(
+            "the outputs of slaves {} are (partly) fed by another StreamFrames: one stream per set of slaves",
+            first.slaves.iter().map(u32::to_string).collect::<Vec<_>>().join(", ")
+        )),
+        ClaimError::TooMany => {
+            Status::resource_exhausted(format!("{MAX_STREAMS} StreamFrames are open: the most at once"))
+        }
+    })?;
     let mut producer = ctx.master.stream_frames(start, len, capacity as usize).map_err(to_status)?;
     // Subscribed before the first frame can play.
     let mut inputs = first.pair_inputs.then(|| ctx.master.subscribe());

@@ -1,7 +1,8 @@
 //! The gRPC API (`ecmxf.v1`, see `proto/`): one service module per
 //! concern, all sharing a [`Context`] — the master (which owns the domain:
 //! the process image, the newest inputs, the output image as written, the
-//! leases), the authenticator, the open frame streams. Every call identifies its caller
+//! leases, the output ranges frame streams feed), the authenticator. Every
+//! call identifies its caller
 //! (see `auth`), runs its chip work as that caller's turn on the blocking
 //! slot (`master::as_client`), with the client's deadline, and maps engine
 //! errors once (`status`).
@@ -56,8 +57,6 @@ pub struct Context {
     pub lease_ttl: Duration,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
     pub stream_max_age: Duration,
-    /// The output ranges open `StreamFrames` calls feed.
-    pub frame_streams: Arc<frames::StreamClaims>,
     /// Set when the daemon stops: every open server stream ends with
     /// [`status::stopping`] instead of a connection cut mid-body.
     stopping: tokio::sync::watch::Sender<bool>,
@@ -73,7 +72,6 @@ impl Context {
             leases: crate::master::Leases::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
-            frame_streams: Arc::default(),
             stopping: tokio::sync::watch::Sender::new(false),
         })
     }

@@ -87,7 +87,7 @@ fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>,
 /// replace them every cycle: a write there would be lost or, while the
 /// stream is dry, break the policy).
 fn not_streamed(ctx: &Context, from: usize, to: usize) -> Result<(), Status> {
-    match ctx.frame_streams.overlapping(from, to) {
+    match ctx.master.frame_claims().overlapping(from, to) {
         None => Ok(()),
         Some((start, len)) => Err(Status::failed_precondition(format!(
             "output bytes {from}..{to} are fed by a StreamFrames (bytes {start}..{}): send them as frames",

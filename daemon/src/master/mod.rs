@@ -31,6 +31,7 @@ use ecmxf_wire::EcatState;
 pub use transactions::RawAnswer;
 
 pub mod esi;
+pub mod frame_claims;
 pub mod image;
 mod leases;
 pub mod mailbox;
@@ -205,6 +206,8 @@ pub struct Master {
     shadow: Mutex<Vec<u8>>,
     /// The process image, named, kept built ([`Master::keep_image_built`]).
     image: image::ImageCache,
+    /// The output ranges open frame streams feed.
+    frame_claims: Arc<frame_claims::FrameClaims>,
     config: Mutex<Config>,
     config_generation: AtomicU64,
     /// Timeout for requests that give none.
@@ -272,6 +275,7 @@ impl Master {
             outputs,
             shadow: Mutex::default(),
             image: image::ImageCache::default(),
+            frame_claims: Arc::default(),
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),
             default_timeout: Duration::from_secs(3),
@@ -491,6 +495,12 @@ impl Master {
     pub async fn next_inputs(&self, limit: Duration) -> bool {
         let mut rx = self.engine.latest.subscribe();
         matches!(tokio::time::timeout(limit, rx.changed()).await, Ok(Ok(())))
+    }
+
+    /// The output ranges open frame streams feed (one stream per range;
+    /// plain output writes leave them alone).
+    pub fn frame_claims(&self) -> &Arc<frame_claims::FrameClaims> {
+        &self.frame_claims
     }
 
     /// The process image of the network in force (image::ImageCache::get:
