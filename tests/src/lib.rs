@@ -222,23 +222,30 @@ pub fn fixture(name: &str) -> Option<PathBuf> {
     present(fixtures_dir()?.join(name))
 }
 
+/// A simulator network file `dir/net.toml` of `slaves` (`[[slave]]`
+/// tables), and the daemon's `[link]` lines that run it in process.
+pub fn sim_network(dir: &Path, slaves: &str) -> String {
+    let net = dir.join("net.toml");
+    std::fs::write(&net, format!("version = 1\n{slaves}")).expect("write the network file");
+    format!("backend = \"sim\"\nnetwork = \"{}\"", net.display())
+}
+
 /// The network the TwinCAT fixture (eni_twincat_elmo4_imu.xml) was made
-/// for, as a simulator network file in `dir`: its IMU, known only from the
-/// ENI, then four Elmo Gold drives from their ESI. The ENI's path and the
-/// network file's; `None` (skipped) without the fixtures.
-pub fn twincat_network(dir: &Path) -> Option<(PathBuf, PathBuf)> {
+/// for, as a simulator network file in `dir` ([`sim_network`]): its IMU,
+/// known only from the ENI, then four Elmo Gold drives from their ESI. The
+/// ENI's path and the `[link]` lines; `None` (skipped) without the
+/// fixtures.
+pub fn twincat_network(dir: &Path) -> Option<(PathBuf, String)> {
     let eni = fixture("eni_twincat_elmo4_imu.xml")?;
     let elmo = fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml")?;
-    let net = dir.join("net.toml");
-    let mut text = format!("version = 1\n[[slave]]\neni = \"{}\"\neni_slave = \"Imu\"\n", eni.display());
+    let mut slaves = format!("[[slave]]\neni = \"{}\"\neni_slave = \"Imu\"\n", eni.display());
     for _ in 0..4 {
-        text.push_str(&format!(
+        slaves.push_str(&format!(
             "[[slave]]\nesi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n",
             elmo.display()
         ));
     }
-    std::fs::write(&net, text).expect("write the network file");
-    Some((eni, net))
+    Some((eni, sim_network(dir, &slaves)))
 }
 
 /// ../shared/fixtures itself, if there (else as [`fixture`]).

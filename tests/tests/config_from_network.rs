@@ -89,9 +89,8 @@ fn the_demo_network_written_as_toml_and_as_eni_runs_with_the_same_layout() {
 #[test]
 fn the_twincat_network_goes_round_too() {
     let dir = temp_dir("config-twincat");
-    let Some((eni, net)) = ecmxf_e2e::twincat_network(&dir) else { return };
+    let Some((eni, link)) = ecmxf_e2e::twincat_network(&dir) else { return };
     run(async {
-        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
         let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", eni.display(), config(&link, "")));
         round_trip(&mut d, &link, false).await;
         let _ = std::fs::remove_dir_all(&dir);
@@ -105,11 +104,9 @@ fn slaves_with_their_esi_keep_it() {
     let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
     run(async {
         let dir = temp_dir("config-esi");
-        let net = dir.join("net.toml");
         let device = format!("esi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n", elmo.display());
-        std::fs::write(&net, format!("version = 1\n[[slave]]\n{device}[[slave]]\n{device}")).unwrap();
-        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
         let slaves = format!("[[slave]]\n{device}[[slave]]\n{device}");
+        let link = ecmxf_e2e::sim_network(&dir, &slaves);
         let mut d = Daemon::with_config(&config(&link, &slaves));
         d.connect().await;
         let toml = d.ctl(&["config"]);

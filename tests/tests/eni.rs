@@ -164,10 +164,8 @@ fn an_esi_devices_init_commands_are_written_before_the_entrys_own_sdos() {
     let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
     run(async {
         let dir = temp_dir("esi-init");
-        let net = dir.join("net.toml");
         let device = format!("esi = \"{}\"\nproduct_code = 0x30924\n", elmo.display());
-        std::fs::write(&net, format!("version = 1\n[[slave]]\n{device}")).unwrap();
-        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
+        let link = ecmxf_e2e::sim_network(&dir, &format!("[[slave]]\n{device}"));
         for (switch, mode, cycle) in [("", 9u8, Some(2u8)), ("esi_init_cmds = false\n", 9, None)] {
             let slave =
                 format!("[[slave]]\n{device}{switch}  [[slave.sdo]]\n  index = 0x6060\n  value = 9\n  size = 1\n");
@@ -200,10 +198,9 @@ fn an_esi_devices_init_commands_are_written_before_the_entrys_own_sdos() {
 #[test]
 fn the_twincat_export_brings_its_network_up_with_its_layout() {
     let dir = temp_dir("eni-twincat");
-    let Some((eni_path, net)) = ecmxf_e2e::twincat_network(&dir) else { return };
+    let Some((eni_path, link)) = ecmxf_e2e::twincat_network(&dir) else { return };
     let eni = ecmxf_devices::eni::Eni::load(&eni_path).unwrap();
     run(async {
-        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
         // The file's 10 ms cycle with the tests' deep FIFO marks would hold
         // a write back for seconds: a budget of five cycles.
         let cycle = "output_latency_us = 50000\n";
@@ -308,14 +305,13 @@ fn the_twincat_export_brings_its_network_up_with_its_layout() {
 #[test]
 fn a_refused_init_command_is_named_by_its_line_in_the_eni() {
     let dir = temp_dir("eni-refused");
-    let Some((eni_path, net)) = ecmxf_e2e::twincat_network(&dir) else { return };
+    let Some((eni_path, link)) = ecmxf_e2e::twincat_network(&dir) else { return };
     run(async {
         let text = std::fs::read_to_string(&eni_path).unwrap();
         let at = text.find("<Index>24770</Index>").expect("the first drive's 0x60C2 command");
         let line = text[..at].lines().count();
         let bad = dir.join("bad.xml");
         std::fs::write(&bad, text.replacen("<Index>24770</Index>", "<Index>24575</Index>", 1)).unwrap();
-        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
         let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", bad.display(), config(&link, "")));
         // The engine never runs: wait for the API, then for the error.
         let mut status = pb::MasterStatus::default();
@@ -352,13 +348,11 @@ fn soems_sample_brings_its_network_up_with_the_pdos_it_assigns() {
     let Some(eni_path) = ecmxf_e2e::fixture("eni_soem_sample.xml") else { return };
     run(async {
         let dir = temp_dir("eni-soem");
-        let net = dir.join("net.toml");
-        let mut text = String::from("version = 1\n");
+        let mut slaves = String::new();
         for name in ["Sample device A", "Sample device B"] {
-            text.push_str(&format!("[[slave]]\neni = \"{}\"\neni_slave = \"{name}\"\n", eni_path.display()));
+            slaves.push_str(&format!("[[slave]]\neni = \"{}\"\neni_slave = \"{name}\"\n", eni_path.display()));
         }
-        std::fs::write(&net, text).unwrap();
-        let link = format!("backend = \"sim\"\nnetwork = \"{}\"", net.display());
+        let link = ecmxf_e2e::sim_network(&dir, &slaves);
         let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", eni_path.display(), config(&link, "")));
         let ch = d.connect().await;
         let mut pd = pb::process_data_client::ProcessDataClient::new(ch.clone());

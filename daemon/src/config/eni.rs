@@ -57,19 +57,24 @@ use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
 use super::{Config, InitTransition, PdoConfig, SlaveConfig, SlaveVariable, StartupRegister, StartupSdo};
 
+/// The transition ecmxfd replays a command at, if it is one it makes
+/// (it brings slaves up: IP, PS, SO).
+fn replayed_at(t: &Transition) -> Option<InitTransition> {
+    match t {
+        Transition::InitPreOp => Some(InitTransition::Ip),
+        Transition::PreOpSafeOp => Some(InitTransition::Ps),
+        Transition::SafeOpOp => Some(InitTransition::So),
+        Transition::Other(_) => None,
+    }
+}
+
 /// The start-up SDOs of init commands (an ENI slave's or an ESI device's),
 /// in file order, one per transition a command lists.
 fn startup_sdos(cmds: &[CoeInitCmd], source: &str) -> Vec<StartupSdo> {
     let mut out = Vec::new();
     for c in cmds.iter().filter(|c| !c.disabled) {
         let CoeAccess::Download(data) = &c.access else { continue };
-        for t in &c.transitions {
-            let transition = match t {
-                Transition::InitPreOp => InitTransition::Ip,
-                Transition::PreOpSafeOp => InitTransition::Ps,
-                Transition::SafeOpOp => InitTransition::So,
-                Transition::Other(_) => continue,
-            };
+        for transition in c.transitions.iter().filter_map(replayed_at) {
             out.push(StartupSdo {
                 index: c.index,
                 subindex: c.subindex,
@@ -110,12 +115,7 @@ pub fn register_fate(c: &RegisterInitCmd) -> Result<InitTransition, &'static str
             return c
                 .transitions
                 .iter()
-                .find_map(|t| match t {
-                    Transition::InitPreOp => Some(InitTransition::Ip),
-                    Transition::PreOpSafeOp => Some(InitTransition::Ps),
-                    Transition::SafeOpOp => Some(InitTransition::So),
-                    Transition::Other(_) => None,
-                })
+                .find_map(replayed_at)
                 .ok_or("only at transitions down or to BOOT (ecmxfd brings slaves up)");
         }
         0x0500..=0x050F => "SII access: the chip's",
@@ -292,9 +292,10 @@ impl Config {
     }
 }
 
-/// PDO_CONFIG_SET's limits (v049, command 7).
-const SET_PDOS: usize = 3;
-const SET_ENTRIES: usize = 8;
+/// PDO_CONFIG_SET's limits (v049, command 7): the PDOs of its v049 form,
+/// the entries of a slot.
+const SET_PDOS: usize = ecmxf_wire::payload::pdo::PdoConfigForm::Manual.slots();
+const SET_ENTRIES: usize = ecmxf_wire::payload::pdo::MAPPING_ENTRIES;
 
 /// An ENI slave's assignment in one direction (its ProcessData PDOs with
 /// an `Sm`): `Ok(None)` when it gives none or the slave has no CoE to
@@ -448,7 +449,7 @@ pub fn eni_notes(eni: &Eni) -> Vec<String> {
             } else if c.ccs == CcsConvention::Soem {
                 notes.push(format!("{at} has Ccs 2 with data: written, as SOEM's files mean it (ETG.2100: Ccs 1)"));
             }
-            for t in c.transitions.iter().filter(|t| matches!(t, Transition::Other(_))) {
+            for t in c.transitions.iter().filter(|t| replayed_at(t).is_none()) {
                 notes.push(format!(
                     "{at} at transition {}: not replayed (ecmxfd brings slaves up, not down)",
                     t.letters()

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 use std::time::Duration;
 
-use serde::Deserialize;
+use serde::{Deserialize, Serialize};
 
 pub mod api;
 mod eni;
@@ -324,7 +324,7 @@ impl Default for RealtimeConfig {
 }
 
 /// `[cycle]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct CycleConfig {
     /// SYNC0 cycle, us (>= 125).
@@ -356,31 +356,13 @@ pub struct CycleConfig {
 }
 
 impl CycleConfig {
-    /// The `[cycle]` table as TOML lines, every key: what `ecmxfctl
+    /// The `[cycle]` table as TOML lines, every key set: what `ecmxfctl
     /// config` copies into a configuration written from the live network
     /// (MasterInfo.cycle_toml), so it runs with the same cycle and FIFOs.
+    /// Serialized by the same serde names the parser reads, so a key added
+    /// to the table is written too.
     pub fn to_toml(&self) -> String {
-        let target = match self.target_state {
-            TargetState::PreOp => "preop",
-            TargetState::SafeOp => "safeop",
-            TargetState::Op => "op",
-        };
-        let mut out = format!(
-            "sync0_us = {}\ndc_assign_activate = {:#06x}\nshift_ns = {}\nfifo_rx_depth = {}\nfifo_tx_depth = {}\n\
-             fifo_low = {}\nfifo_high = {}\nwkc_error_limit = {}\ntarget_state = \"{target}\"\n",
-            self.sync0_us,
-            self.dc_assign_activate,
-            self.shift_ns,
-            self.fifo_rx_depth,
-            self.fifo_tx_depth,
-            self.fifo_low,
-            self.fifo_high,
-            self.wkc_error_limit
-        );
-        if let Some(us) = self.output_latency_us {
-            out.push_str(&format!("output_latency_us = {us}\n"));
-        }
-        out
+        toml::to_string(self).unwrap_or_default()
     }
 
     /// The DC cycle the chip plays frames at (1 ms free-run without DC).
@@ -402,7 +384,7 @@ impl CycleConfig {
 
 /// `cycle.target_state`: the state bring-up drives the network to. A
 /// closed set, so a typo is refused by the parser with the key and line.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum TargetState {
     /// PRE-OP: mailboxes only, no process data.

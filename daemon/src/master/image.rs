@@ -84,11 +84,13 @@ impl Image {
     /// Reads the PDOs of every slave with process data, `BUILDERS` slaves
     /// at a time, and lays them out as bring-up placed them (`key`).
     pub async fn build(master: &Arc<Master>, key: &LayoutKey) -> Result<Self, EngineError> {
+        // One copy of the configuration for the whole build.
+        let config = master.config();
         let mut image = Image {
             output_bytes: key.rx_size as u32,
             input_bytes: key.tx_size as u32,
             generation: key.generation,
-            cycle_us: master.config().cycle.sync0_us,
+            cycle_us: config.cycle.sync0_us,
             ..Image::default()
         };
         image.mappings = read_all_pdos(master, &key.slaves).await?;
@@ -102,8 +104,8 @@ impl Image {
                 let list = if output { &pdos.rx } else { &pdos.tx };
                 let first = image.entries.len();
                 image.add_slave(i as u8, output, (offset * 8) as u32, (bytes * 8) as u32, list);
-                let config = master.config().slaves.get(i).cloned().unwrap_or_default();
-                image.name_variables(first, &config, output, (offset * 8) as u32);
+                let slave = config.slaves.get(i).cloned().unwrap_or_default();
+                image.name_variables(first, &slave, output, (offset * 8) as u32);
             }
         }
         for n in &image.notes {

@@ -11,6 +11,9 @@ use crate::payload::{Reply, ReplyFields, Request, RequestFields, bare_request, f
 pub const RX_PDO_ASSIGN: u16 = 0x1C12;
 /// Inputs' SyncManager PDO assignment object.
 pub const TX_PDO_ASSIGN: u16 = 0x1C13;
+/// Entries one PDO slot of the PDO_CONFIG commands carries (v049, note
+/// under command 7): a longer mapping is for SDO writes.
+pub const MAPPING_ENTRIES: usize = 8;
 
 /// One mapped object: `index << 16 | subindex << 8 | bit length` (v049
 /// PDO_CONFIG_SET, 物件 layout), as in CoE mapping objects 0x16xx/0x1Axx.
@@ -45,7 +48,7 @@ pub struct PdoMapping {
     /// larger mapping; only 8 are carried).
     pub entry_count: u16,
     /// The entries; those past `entry_count` are zero.
-    pub entries: [PdoEntry; 8],
+    pub entries: [PdoEntry; MAPPING_ENTRIES],
 }
 
 impl PdoMapping {
