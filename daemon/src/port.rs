@@ -31,8 +31,8 @@ use ecmxf_wire::framing::{DATA_DEFAULT, DATA_MAX, OVERHEAD, PacketLayout, find_p
 use ecmxf_wire::payload::control::InfoUpdate;
 use ecmxf_wire::payload::spi::{CrcTypeSet, SpiReconfig};
 use ecmxf_wire::{
-    CheckType, CommandCode, CommandHeader, DecodeError, EncodeError, HEADER_LEN, Request, ResponseHeader,
-    decode_response, encode_request,
+    CheckType, CommandCode, CommandHeader, DecodeError, EncodeError, HEADER_LEN, PayloadError, Request, ResponseHeader,
+    decode_response, encode_request, read_answer,
 };
 
 use crate::link::{Link, LinkError};
@@ -60,6 +60,13 @@ pub enum PortError {
     /// The daemon is stopping: the wait was abandoned (see
     /// [`Port::set_abort`]).
     Aborted,
+    /// An intact answer whose data does not read as its command's reply.
+    BadAnswer {
+        /// The command.
+        code: CommandCode,
+        /// What did not read.
+        error: PayloadError,
+    },
 }
 
 impl std::fmt::Display for PortError {
@@ -76,6 +83,7 @@ impl std::fmt::Display for PortError {
             }
             Self::Unsynchronized => f.write_str("no packet boundary found in the chip's byte stream"),
             Self::Aborted => f.write_str("stopped while waiting for the chip"),
+            Self::BadAnswer { code, error } => write!(f, "the chip's answer to {code} does not read: {error}"),
         }
     }
 }
@@ -113,12 +121,28 @@ enum Received {
 }
 
 /// An answer: header and valid data, borrowed until the next exchange.
+/// The data is read through the request that asked for it
+/// ([`Answer::answer_to`]), as the type that request names: no caller
+/// picks answer bytes apart by hand.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct Answer<'a> {
-    /// The header.
+    /// The header: status, error flags, FIFO counts, return value.
     pub header: ResponseHeader,
-    /// Valid data.
-    pub data: &'a [u8],
+    data: &'a [u8],
+}
+
+impl<'a> Answer<'a> {
+    /// The data read as the answer to `request` ([`Request::Answer`]); an
+    /// answer to another command, or a NOP, is refused.
+    pub fn answer_to<'q, R: Request<'q>>(&self, request: &R) -> Result<R::Answer<'a>, PayloadError> {
+        read_answer(request, &self.header, self.data)
+    }
+
+    /// The valid data untouched, for answers relayed to a client as the chip
+    /// gave them (the peripheral commands' pass-through).
+    pub fn relayed(&self) -> &'a [u8] {
+        self.data
+    }
 }
 
 /// The chip's packet port over a link.
@@ -332,6 +356,14 @@ impl<L: Link> Port<L> {
         let index = self.fresh_index();
         self.encode(req, index, self.check)?;
         self.send_guarded(index, R::CODE, self.check)
+    }
+
+    /// Sends `req` guarded and reads its answer as the type the request
+    /// names; for callers that need nothing of the header but what the
+    /// reply carries.
+    pub fn ask<'a, R: Request<'a>>(&mut self, req: &R) -> Result<R::Answer<'_>, PortError> {
+        let answer = self.call(req)?;
+        answer.answer_to(req).map_err(|error| PortError::BadAnswer { code: R::CODE, error })
     }
 
     fn send_guarded(&mut self, index: u8, code: CommandCode, decode_as: CheckType) -> Result<Answer<'_>, PortError> {

@@ -59,8 +59,7 @@ fn check_type_and_size_changes() {
     assert_eq!(p.check(), CheckType::Crc32);
     assert_eq!(h.with_chip(|c| c.check), CheckType::Crc32);
     p.resize(1408).unwrap();
-    let a = p.call(&SpiPackSizeGet).unwrap();
-    assert_eq!(a.data, &1408u16.to_le_bytes());
+    assert_eq!(p.ask(&SpiPackSizeGet).unwrap().0, 1408);
     p.resize(256).unwrap();
     assert_eq!(h.with_chip(|c| c.spi.data_size), 256);
 }

@@ -46,6 +46,6 @@ pub use framing::{DATA_DEFAULT, DATA_MAX, DATA_MIN, PacketLayout};
 pub use header::{CommandHeader, HEADER_LEN, ResponseHeader};
 pub use packet::{
     CommandPacket, ResponsePacket, decode_command, decode_response, encode_command, encode_reply, encode_request,
-    encode_response,
+    encode_response, read_answer,
 };
-pub use payload::{AnyRequest, Reply, ReplyFields, Request, RequestFields};
+pub use payload::{AnyRequest, Done, FromAnswer, Reply, ReplyFields, Request, RequestFields};

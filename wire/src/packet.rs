@@ -12,7 +12,7 @@ use crate::error::{DecodeError, EncodeError, PayloadError};
 use crate::framing::{END_WORD, PacketLayout};
 use crate::header::{CommandHeader, HEADER_LEN, ResponseHeader};
 use crate::payload::pdo::{PDO_CONFIG_LEN, PdoConfigForm};
-use crate::payload::{AnyRequest, Reply, ReplyFields, Request, RequestFields};
+use crate::payload::{AnyRequest, FromAnswer, Reply, ReplyFields, Request, RequestFields};
 
 fn layout_of(len: usize) -> Result<PacketLayout, EncodeError> {
     PacketLayout::from_packet_len(len).ok_or(EncodeError::PacketLength { len })
@@ -218,6 +218,11 @@ impl<'a> ResponsePacket<'a> {
         ReplyFields { value: self.header.return_value, data_len: self.header.data_len }
     }
 
+    /// Reads it as the answer to `request`, the type its request names.
+    pub fn answer_to<'q, R: Request<'q>>(&self, request: &R) -> Result<R::Answer<'a>, PayloadError> {
+        read_answer(request, &self.header, self.data)
+    }
+
     /// Parses the payload as `R`, refusing NOPs and other commands' answers.
     pub fn reply<R: Reply<'a>>(&self) -> Result<R, PayloadError> {
         if self.header.is_nop() {
@@ -228,6 +233,24 @@ impl<'a> ResponsePacket<'a> {
         }
         R::decode(&self.fields(), self.data)
     }
+}
+
+/// Reads the answer to `request` from a response's header and valid data,
+/// as the type the request names ([`Request::Answer`]); refuses NOPs and
+/// other commands' answers, so an answer is never read as another's.
+pub fn read_answer<'q, 'r, R: Request<'q>>(
+    request: &R,
+    header: &ResponseHeader,
+    data: &'r [u8],
+) -> Result<R::Answer<'r>, PayloadError> {
+    if header.is_nop() {
+        return Err(PayloadError::Nop);
+    }
+    if header.code != R::CODE {
+        return Err(PayloadError::WrongCommand { expected: R::CODE, found: header.code });
+    }
+    let fields = ReplyFields { value: header.return_value, data_len: header.data_len };
+    R::Answer::from_answer(request, &fields, data)
 }
 
 /// Decodes and validates a command packet: length, end word, start word,

@@ -350,3 +350,50 @@ fn a_fixed_layout_is_read_from_its_places_whatever_the_length_declares() {
     let cmd = decode_command(&buf, CheckType::Fixed).unwrap();
     assert_eq!(cmd.parse_declared_len_aside().unwrap().1, None);
 }
+
+/// An answer is read through the request that asked for it, as the type
+/// that request names (`Request::Answer`): SDO_GET's bytes, SLAVE_INFO's
+/// item (which only the request says), a command that only runs; another
+/// command's answer and a NOP are refused, never read as this one's.
+#[test]
+fn an_answer_reads_as_the_type_its_request_names() {
+    use ecmxf_wire::payload::sdo::{SdoGet, SdoGetReply};
+    use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode, SlaveInfoGet};
+    use ecmxf_wire::{Done, encode_reply};
+    let mut buf = vec![0u8; 112 + 32];
+    let status = ecmxf_wire::EcmStatus { check_type: CheckType::Crc32, flags: StatusFlags::empty() };
+    let base = ResponseHeader { index: 3, status, ..ResponseHeader::default() };
+    encode_reply(&SdoGetReply { status: 0, data: &[1, 2, 3, 4] }, base, CheckType::Crc32, &mut buf).unwrap();
+    let r = decode_response(&buf, CheckType::Crc32).unwrap();
+    assert_eq!(r.answer_to(&SdoGet), Ok(SdoGetReply { status: 0, data: &[1, 2, 3, 4] }));
+    assert_eq!(
+        r.answer_to(&InfoUpdate),
+        Err(PayloadError::WrongCommand { expected: CommandCode::InfoUpdate, found: CommandCode::SdoGet })
+    );
+
+    // The same four bytes are a vendor id or a configured address: the
+    // request decides.
+    let vendor = SlaveInfo::VendorId(0x0000_0a5b);
+    let mut data = [0u8; 4];
+    let fields = vendor.encode(&mut data).unwrap();
+    let header = ResponseHeader { code: CommandCode::SlaveInfoGet, data_len: fields.data_len, ..base };
+    let mut buf = vec![0u8; 112 + 32];
+    encode_response(&header, &data[..usize::from(fields.data_len)], CheckType::Crc32, &mut buf).unwrap();
+    let r = decode_response(&buf, CheckType::Crc32).unwrap();
+    assert_eq!(r.answer_to(&SlaveInfoGet { slave: 0, item: SlaveInfoCode::VendorId }), Ok(vendor));
+    assert_eq!(
+        r.answer_to(&SlaveInfoGet { slave: 0, item: SlaveInfoCode::ConfiguredAddress }),
+        Ok(SlaveInfo::ConfiguredAddress(0x0a5b))
+    );
+
+    let nop = ResponseHeader {
+        status: ecmxf_wire::EcmStatus { check_type: CheckType::Crc32, flags: StatusFlags::NOP },
+        ..ResponseHeader::default()
+    };
+    encode_response(&nop, &[], CheckType::Crc32, &mut buf).unwrap();
+    let r = decode_response(&buf, CheckType::Crc32).unwrap();
+    assert_eq!(r.answer_to(&InfoUpdate), Err(PayloadError::Nop));
+    let done = ResponseHeader { code: CommandCode::InfoUpdate, ..base };
+    encode_response(&done, &[], CheckType::Crc32, &mut buf).unwrap();
+    assert_eq!(decode_response(&buf, CheckType::Crc32).unwrap().answer_to(&InfoUpdate), Ok(Done));
+}

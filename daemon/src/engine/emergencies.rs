@@ -16,9 +16,10 @@
 
 use std::time::Duration;
 
-use ecmxf_wire::payload::emergency::{CoeEmergencyGet, EMERGENCY_MAX, EMERGENCY_RECORD_LEN, EmergencyRecord};
+use ecmxf_wire::payload::emergency::{CoeEmergencyGet, EMERGENCY_MAX, EmergencyRecord};
 
-use ecmxf_wire::CommandCode;
+/// The watch's question: the newest record only.
+const NEWEST: CoeEmergencyGet = CoeEmergencyGet(1);
 
 use crate::link::Link;
 use crate::port::{Port, PortError};
@@ -57,7 +58,7 @@ impl EmergencyWatch {
     /// (see [`EmergencyWatch::check`]). The exchange refreshes the status
     /// header like any other, so it can stand in for a status poll.
     pub fn ask<L: Link>(&mut self, port: &mut Port<L>) -> Result<(), PortError> {
-        port.send_once(&CoeEmergencyGet(1))?;
+        port.send_once(&NEWEST)?;
         self.asked = Some(port.stats().exchanges);
         Ok(())
     }
@@ -83,14 +84,9 @@ impl EmergencyWatch {
             Some(n) if port.stats().exchanges == n => return Ok(()),
             Some(_) => self.asked = None,
         }
-        let newest = match port.previous() {
-            Some(a) if a.header.code == CommandCode::CoeEmergency => match a.data.first_chunk() {
-                Some(b) => EmergencyRecord::read(b),
-                None => return Ok(()),
-            },
-            // Lost, or another answer came first: asked again next time.
-            _ => return Ok(()),
-        };
+        // Lost, or another answer came first: asked again next time.
+        let Some(Ok(reply)) = port.previous().map(|a| a.answer_to(&NEWEST)) else { return Ok(()) };
+        let Some(newest) = reply.records().next() else { return Ok(()) };
         let first_look = !std::mem::replace(&mut self.looked, true);
         if newest.is_empty() || self.newest == Some(newest.number) {
             return Ok(());
@@ -104,11 +100,7 @@ impl EmergencyWatch {
         let mut records = [EmergencyRecord::default(); EMERGENCY_MAX as usize];
         let mut n = 0;
         {
-            let a = port.call(&CoeEmergencyGet(EMERGENCY_MAX))?;
-            for chunk in a.data.chunks_exact(EMERGENCY_RECORD_LEN) {
-                let mut b = [0u8; EMERGENCY_RECORD_LEN];
-                b.copy_from_slice(chunk);
-                let r = EmergencyRecord::read(&b);
+            for r in port.ask(&CoeEmergencyGet(EMERGENCY_MAX))?.records() {
                 if !r.is_empty() && is_new(r.number) && n < records.len() {
                     records[n] = r;
                     n += 1;

@@ -12,7 +12,6 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::CommandCode;
 use ecmxf_wire::flags::{ControlFlags, StatusFlags};
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
@@ -459,7 +458,8 @@ impl<L: Link> Engine<L> {
         // The first frame pushed now plays after the ones queued before it.
         let ahead = c.estimate(now).max(0) as u32;
         let outputs = c.push_frames(n, &mut self.frames);
-        let a = self.port.call(&PdoFifoOp { op, frames: n, outputs })?;
+        let req = PdoFifoOp { op, frames: n, outputs };
+        let a = self.port.call(&req)?;
         let count = a.header.rx_fifo_count;
         let waiting = a.header.tx_fifo_count;
         // Inputs out, their freshness noted and judged (a network without
@@ -467,13 +467,13 @@ impl<L: Link> Engine<L> {
         // frames the chip dropped are numbered as a gap before them, so
         // `seq` keeps counting DC cycles.
         let mut read = 0;
-        if a.header.code == CommandCode::PdoDataFifoOp {
+        if let Ok(reply) = a.answer_to(&req) {
             let lost = if c.tx_size > 0 { c.inputs_lost(count, waiting) } else { 0 };
             if lost > 0 {
                 self.intake.inputs.lost(lost);
                 self.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
             }
-            read = self.intake.inputs.publish(a.data, c.tx_size, now);
+            read = self.intake.inputs.publish(reply.inputs, c.tx_size, now);
             self.telemetry.input_frames.fetch_add(read as u64, Relaxed);
             if self.supervisor.fifo_answer(read, c.tx_size > 0, now) {
                 self.telemetry.newest_input_ns.store(self.intake.ns(now), Relaxed);

@@ -122,6 +122,7 @@ pub struct Cia402ConfigSet {
 
 impl<'a> Request<'a> for Cia402ConfigSet {
     const CODE: CommandCode = CommandCode::Cia402ConfigSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -156,6 +157,7 @@ pub struct Cia402StateSet {
 
 impl<'a> Request<'a> for Cia402StateSet {
     const CODE: CommandCode = CommandCode::Cia402StateSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields { parameter: self.axis, param: [self.state.to_u8(), 0, 0, 0], ..RequestFields::default() })
@@ -168,11 +170,11 @@ impl<'a> Request<'a> for Cia402StateSet {
 
 parameter_request! {
     /// 402_STATE_GET (28): an axis' state (parameter = axis).
-    Cia402StateGet => Cia402StateGet;
+    Cia402StateGet => Cia402StateGet -> Cia402StateReply;
     /// 402_CTL_GET (30): an axis' helper control byte (parameter = axis).
-    Cia402CtlGet => Cia402CtlGet;
+    Cia402CtlGet => Cia402CtlGet -> Cia402CtlReply;
     /// 402_GET_STATUSWORD (74): an axis' statusword (parameter = axis).
-    Cia402GetStatusword => Cia402GetStatusword;
+    Cia402GetStatusword => Cia402GetStatusword -> StatuswordReply;
 }
 
 /// 402_STATE_GET's reply: the state in the return value.
@@ -210,6 +212,7 @@ pub const CTL_SET_MAGIC: u8 = 0x5A;
 
 impl<'a> Request<'a> for Cia402CtlSet {
     const CODE: CommandCode = CommandCode::Cia402CtlSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;

@@ -10,16 +10,16 @@ use crate::payload::{Reply, ReplyFields, Request, RequestFields, bare_request, v
 bare_request! {
     /// INFO_UPDATE (0): only refresh the response header. Also what a packet
     /// repeating the previous index and code turns into.
-    InfoUpdate => InfoUpdate;
+    InfoUpdate => InfoUpdate -> crate::payload::Done;
     /// FW_VERSION_GET (56).
-    FwVersionGet => FwVersionGet;
+    FwVersionGet => FwVersionGet -> FirmwareVersion;
     /// WARM_RESET (127): the chip resets to its power-up state and takes the
     /// next command only after initialising.
-    WarmReset => WarmReset;
+    WarmReset => WarmReset -> crate::payload::Done;
     /// WKC_CONTI_ERR_CNT_GET (130).
-    WkcErrorCountGet => WkcContiErrCountGet;
+    WkcErrorCountGet => WkcContiErrCountGet -> WkcErrorCount;
     /// WKC_CONTI_ERR_MAX_GET (131).
-    WkcErrorLimitGet => WkcContiErrMaxGet;
+    WkcErrorLimitGet => WkcContiErrMaxGet -> WkcErrorLimitReply;
 }
 
 value_reply! {
@@ -48,6 +48,7 @@ pub struct AsyncCmdReset(pub AsyncReset);
 
 impl<'a> Request<'a> for AsyncCmdReset {
     const CODE: CommandCode = CommandCode::AsyncCmdReset;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(self.0.bits()))
@@ -85,6 +86,7 @@ pub struct WkcErrorLimitSet(pub WkcErrorLimit);
 
 impl<'a> Request<'a> for WkcErrorLimitSet {
     const CODE: CommandCode = CommandCode::WkcContiErrMaxSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         crate::bytes::check_range("WKC error limit", self.0.0.into(), 1, 255)?;
@@ -120,6 +122,7 @@ pub struct EnableLrw(pub bool);
 
 impl<'a> Request<'a> for EnableLrw {
     const CODE: CommandCode = CommandCode::EnableLrw;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(u8::from(self.0)))

@@ -67,6 +67,7 @@ pub struct EcatInit {
 
 impl<'a> Request<'a> for EcatInit {
     const CODE: CommandCode = CommandCode::EcatInit;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let mut w = Writer::new(data);
@@ -110,6 +111,7 @@ pub struct DcSync {
 
 impl<'a> Request<'a> for DcSync {
     const CODE: CommandCode = CommandCode::DcSync;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         crate::bytes::check_range("slave", self.slave.into(), 0, 127)?;
@@ -133,14 +135,14 @@ impl<'a> Request<'a> for DcSync {
 bare_request! {
     /// ECAT_RECONFIG (2): re-plan the chip's memory after a PDO change
     /// (blocking). Slaves that reset their mapping on it need CONFIG_MAP.
-    EcatReconfig => EcatReconfig;
+    EcatReconfig => EcatReconfig -> crate::payload::Done;
     /// ECAT_INIT_DC (3): initialise distributed clocks (blocking).
-    EcatInitDc => EcatInitDc;
+    EcatInitDc => EcatInitDc -> crate::payload::Done;
     /// CONFIG_MAP (73): apply the PDO mapping (blocking).
-    ConfigMap => ConfigMap;
+    ConfigMap => ConfigMap -> crate::payload::Done;
     /// ECAT_STATE_UPDATE (57): refresh the slaves' states into the chip
     /// (blocking).
-    StateUpdate => StateUpdate;
+    StateUpdate => StateUpdate -> crate::payload::Done;
 }
 
 #[cfg(test)]

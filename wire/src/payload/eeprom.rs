@@ -40,6 +40,7 @@ pub struct EepromRequest {
 
 impl<'a> Request<'a> for EepromRequest {
     const CODE: CommandCode = CommandCode::EepromReq;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -76,7 +77,7 @@ impl<'a> Request<'a> for EepromRequest {
 
 bare_request! {
     /// EEPROM_GET (39): fetch the result of EEPROM_REQ.
-    EepromGet => EepromGet;
+    EepromGet => EepromGet -> EepromReply<'r>;
 }
 
 /// EEPROM_GET's reply: error code (0 = ok) and the data read (ESCs read 4

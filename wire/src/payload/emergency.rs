@@ -21,6 +21,7 @@ pub struct CoeEmergencyGet(pub u8);
 
 impl<'a> Request<'a> for CoeEmergencyGet {
     const CODE: CommandCode = CommandCode::CoeEmergency;
+    type Answer<'r> = CoeEmergencyReply<'r>;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("emergency count", self.0.into(), 1, EMERGENCY_MAX.into())?;

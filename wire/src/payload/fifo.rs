@@ -23,6 +23,7 @@ pub struct FifoEnable(pub bool);
 
 impl<'a> Request<'a> for FifoEnable {
     const CODE: CommandCode = CommandCode::FifoEnable;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(u8::from(self.0)))
@@ -44,6 +45,7 @@ pub struct FifoPackSizeGet(pub PdoDirection);
 
 impl<'a> Request<'a> for FifoPackSizeGet {
     const CODE: CommandCode = CommandCode::FifoPackSizeGet;
+    type Answer<'r> = FifoPackSize;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(u8::from(self.0 == PdoDirection::Inputs)))
@@ -76,6 +78,7 @@ pub enum FifoClear {
 
 impl<'a> Request<'a> for FifoClear {
     const CODE: CommandCode = CommandCode::FifoClear;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(match self {
@@ -97,19 +100,19 @@ impl<'a> Request<'a> for FifoClear {
 
 parameter_request! {
     /// FIFO_SET_TX_CNT (52): TxFIFO depth in frames.
-    FifoSetTxCount => FifoSetTxCount;
+    FifoSetTxCount => FifoSetTxCount -> crate::payload::Done;
     /// FIFO_SET_RX_CNT (54): RxFIFO depth in frames.
-    FifoSetRxCount => FifoSetRxCount;
+    FifoSetRxCount => FifoSetRxCount -> crate::payload::Done;
 }
 
 bare_request! {
     /// FIFO_GET_TX_CNT (53).
-    FifoGetTxCount => FifoGetTxCount;
+    FifoGetTxCount => FifoGetTxCount -> TxFifoDepth;
     /// FIFO_GET_RX_CNT (55).
-    FifoGetRxCount => FifoGetRxCount;
+    FifoGetRxCount => FifoGetRxCount -> RxFifoDepth;
     /// FIFO_INIT (66): build the FIFOs from their depths and frame sizes
     /// (blocking).
-    FifoInit => FifoInit;
+    FifoInit => FifoInit -> crate::payload::Done;
 }
 
 value_reply! {
@@ -132,6 +135,7 @@ pub struct SetFifoThreshold {
 
 impl<'a> Request<'a> for SetFifoThreshold {
     const CODE: CommandCode = CommandCode::SetFifoThreshold;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let parameter = u8::from(self.tx_high.is_some()) | u8::from(self.rx_low.is_some()) << 1;

@@ -79,6 +79,7 @@ fn check_offset(offset: u32, len: u32) -> Result<(), EncodeError> {
 
 impl<'a> Request<'a> for FoeRequest<'a> {
     const CODE: CommandCode = CommandCode::FoeReq;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, out: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let mut w = Writer::new(out);
@@ -154,7 +155,7 @@ impl<'a> Request<'a> for FoeRequest<'a> {
 
 bare_request! {
     /// FOE_FUNC_GET (140): the bytes of the last flash read.
-    FoeGet => FoeGet;
+    FoeGet => FoeGet -> FoeReply<'r>;
 }
 
 /// FOE_FUNC_GET's reply: n bytes of staging flash.

@@ -147,6 +147,7 @@ pub enum GpioConfig {
 
 impl<'a> Request<'a> for GpioConfig {
     const CODE: CommandCode = CommandCode::GpioConfigSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, param) = match *self {
@@ -249,6 +250,7 @@ pub enum GpioFunc {
 
 impl<'a> Request<'a> for GpioFunc {
     const CODE: CommandCode = CommandCode::GpioFuncOp;
+    type Answer<'r> = GpioReply;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, param) = match *self {

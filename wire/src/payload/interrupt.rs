@@ -97,6 +97,7 @@ pub struct IntSetEnable(pub IntConfig);
 
 impl<'a> Request<'a> for IntSetEnable {
     const CODE: CommandCode = CommandCode::IntSetEnable;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let data_len = self.0.write(data)?;
@@ -111,7 +112,7 @@ impl<'a> Request<'a> for IntSetEnable {
 
 bare_request! {
     /// INT_GET_ENABLE (59).
-    IntGetEnable => IntGetEnable;
+    IntGetEnable => IntGetEnable -> IntConfigReply;
 }
 
 /// INT_GET_ENABLE's reply: polarity in the return value, masks in the data.

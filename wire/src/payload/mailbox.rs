@@ -42,6 +42,7 @@ fn split64(field: &'static str, v: u16) -> Result<[u8; 2], EncodeError> {
 
 impl<'a> Request<'a> for RecvMailbox {
     const CODE: CommandCode = CommandCode::RecvMailbox;
+    type Answer<'r> = MailboxData<'r>;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, param) = match *self {
@@ -123,6 +124,7 @@ pub enum MbxStat<'a> {
 
 impl<'a> Request<'a> for MbxStat<'a> {
     const CODE: CommandCode = CommandCode::MbxStat;
+    type Answer<'r> = MbxStatReply<'r>;
 
     fn encode(&self, out: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(match self {

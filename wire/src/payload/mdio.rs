@@ -30,6 +30,7 @@ pub enum Mdio {
 
 impl<'a> Request<'a> for Mdio {
     const CODE: CommandCode = CommandCode::Mdio;
+    type Answer<'r> = MdioReply;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, phy, register, value) = match *self {

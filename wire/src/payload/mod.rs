@@ -7,6 +7,11 @@
 //! is the same for the response's return value and data. Both directions are
 //! implemented for every type, so every type round-trips in tests.
 //!
+//! Each request names what answers it ([`Request::Answer`]: a reply, or
+//! [`Done`]), so the host reads an answer through the request that asked
+//! (`ResponsePacket::answer_to`, [`crate::read_answer`]) and never picks
+//! answer bytes apart by hand.
+//!
 //! Modules follow the manual's grouping: network and DC, PDO, SDO, state,
 //! slave info, FIFO, SPI link, CiA402 helper, GPIO, QEI/DAC/ADC, EEPROM,
 //! interrupts, CoE emergencies, raw datagrams, FoE, MDIO, mailbox, chip
@@ -76,6 +81,39 @@ pub trait Request<'a>: Sized {
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError>;
     /// Reads it back from a received command's fields and whole data section.
     fn decode(fields: &RequestFields, data: &'a [u8]) -> Result<Self, PayloadError>;
+
+    /// What the chip answers to it: a [`Reply`], or [`Done`] where the
+    /// answer's header is all there is (v049: each command's "回傳值" and
+    /// "回傳資料" paragraphs). Naming it here is what lets the host decode
+    /// an answer by the request that asked for it, never by hand.
+    type Answer<'r>: FromAnswer<'r, Self>;
+}
+
+/// What the host reads out of the answer to a request `Q`: its return
+/// value and valid data, read with the request at hand, since some answers
+/// do not say what they are (SLAVE_INFO's data is the item asked for).
+/// Every [`Reply`] is one, whatever asked; [`Done`] is the answer that
+/// carries nothing.
+pub trait FromAnswer<'r, Q>: Sized {
+    /// Reads it from a response's fields and valid data.
+    fn from_answer(request: &Q, fields: &ReplyFields, data: &'r [u8]) -> Result<Self, PayloadError>;
+}
+
+impl<'r, Q, T: Reply<'r>> FromAnswer<'r, Q> for T {
+    fn from_answer(_request: &Q, fields: &ReplyFields, data: &'r [u8]) -> Result<Self, PayloadError> {
+        T::decode(fields, data)
+    }
+}
+
+/// The answer of a command that only runs: whether it ran is in the
+/// header's error flags, and there is nothing else to read.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
+pub struct Done;
+
+impl<Q> FromAnswer<'_, Q> for Done {
+    fn from_answer(_request: &Q, _fields: &ReplyFields, _data: &[u8]) -> Result<Self, PayloadError> {
+        Ok(Self)
+    }
 }
 
 /// The chip's answer to a command: return value and data.
@@ -91,13 +129,14 @@ pub trait Reply<'a>: Sized {
 
 /// A request with no payload at all: only the code matters.
 macro_rules! bare_request {
-    ($($(#[$doc:meta])* $name:ident => $code:ident;)*) => {$(
+    ($($(#[$doc:meta])* $name:ident => $code:ident -> $answer:ty;)*) => {$(
         $(#[$doc])*
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
         pub struct $name;
 
         impl<'a> $crate::payload::Request<'a> for $name {
             const CODE: $crate::CommandCode = $crate::CommandCode::$code;
+            type Answer<'r> = $answer;
             fn encode(&self, _data: &mut [u8]) -> Result<$crate::payload::RequestFields, $crate::EncodeError> {
                 Ok($crate::payload::RequestFields::default())
             }
@@ -131,13 +170,14 @@ pub(crate) use value_reply;
 
 /// A request whose only content is the header's parameter byte.
 macro_rules! parameter_request {
-    ($($(#[$doc:meta])* $name:ident => $code:ident;)*) => {$(
+    ($($(#[$doc:meta])* $name:ident => $code:ident -> $answer:ty;)*) => {$(
         $(#[$doc])*
         #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Hash)]
         pub struct $name(pub u8);
 
         impl<'a> $crate::payload::Request<'a> for $name {
             const CODE: $crate::CommandCode = $crate::CommandCode::$code;
+            type Answer<'r> = $answer;
             fn encode(&self, _data: &mut [u8]) -> Result<$crate::payload::RequestFields, $crate::EncodeError> {
                 Ok($crate::payload::RequestFields::parameter(self.0))
             }

@@ -243,6 +243,7 @@ impl PdoConfig {
 
 impl<'a> Request<'a> for PdoConfig {
     const CODE: CommandCode = CommandCode::PdoConfigSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields { data_len: self.write(data)?, ..RequestFields::default() })
@@ -290,6 +291,7 @@ pub struct PdoConfigReq {
 
 impl<'a> Request<'a> for PdoConfigReq {
     const CODE: CommandCode = CommandCode::PdoConfigReq;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -325,7 +327,7 @@ impl<'a> Request<'a> for PdoConfigReq {
 
 bare_request! {
     /// PDO_CONFIG_GET (9): fetch the configuration requested with 8.
-    PdoConfigGet => PdoConfigGet;
+    PdoConfigGet => PdoConfigGet -> PdoConfigReply;
 }
 
 /// What PDO_WC_GET (4) reports (its parameter).
@@ -345,6 +347,7 @@ pub struct PdoWcGet(pub WcQuery);
 
 impl<'a> Request<'a> for PdoWcGet {
     const CODE: CommandCode = CommandCode::PdoWcGet;
+    type Answer<'r> = WcReply;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let p = match self.0 {
@@ -400,6 +403,7 @@ pub struct PdoFifoOp<'a> {
 
 impl<'a> Request<'a> for PdoFifoOp<'a> {
     const CODE: CommandCode = CommandCode::PdoDataFifoOp;
+    type Answer<'r> = PdoFifoReply<'r>;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let mut w = Writer::new(data);
@@ -474,6 +478,7 @@ pub struct PdoDataOp<'a> {
 
 impl<'a> Request<'a> for PdoDataOp<'a> {
     const CODE: CommandCode = CommandCode::PdoDataOp;
+    type Answer<'r> = PdoDataReply<'r>;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let mut w = Writer::new(data);
@@ -530,6 +535,7 @@ pub struct ConfigSm {
 
 impl<'a> Request<'a> for ConfigSm {
     const CODE: CommandCode = CommandCode::ConfigSm;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -571,6 +577,7 @@ pub struct ConfigFmmu {
 
 impl<'a> Request<'a> for ConfigFmmu {
     const CODE: CommandCode = CommandCode::ConfigFmmu;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -621,6 +628,7 @@ pub enum DirectAssign {
 
 impl<'a> Request<'a> for DirectAssign {
     const CODE: CommandCode = CommandCode::DirectAssign;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, param) = match *self {

@@ -47,6 +47,7 @@ fn data_word(fields: &RequestFields, data: &[u8], field: &'static str, code: Com
 
 impl<'a> Request<'a> for QeiOp {
     const CODE: CommandCode = CommandCode::QeiFuncOp;
+    type Answer<'r> = QeiCount;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, data_len) = match self {
@@ -137,6 +138,7 @@ pub enum DacOp {
 
 impl<'a> Request<'a> for DacOp {
     const CODE: CommandCode = CommandCode::DacFuncOp;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, data_len) = match *self {
@@ -216,6 +218,7 @@ pub const ADC_CONV_WORD: u32 = 12;
 
 impl<'a> Request<'a> for AdcOp {
     const CODE: CommandCode = CommandCode::AdcFuncOp;
+    type Answer<'r> = AdcReply;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         let (parameter, data_len) = match self {

@@ -160,6 +160,7 @@ pub struct RawRequest<'a> {
 
 impl<'a> Request<'a> for RawRequest<'a> {
     const CODE: CommandCode = CommandCode::RawEcatReq;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, out: &mut [u8]) -> Result<RequestFields, EncodeError> {
         if !self.data.is_empty() && self.data.len() != usize::from(self.head.length) {
@@ -189,7 +190,7 @@ impl<'a> Request<'a> for RawRequest<'a> {
 
 bare_request! {
     /// RAW_ECAT_FUNC_GET (138): fetch the answer to 137.
-    RawGet => RawEcatGet;
+    RawGet => RawEcatGet -> RawReply<'r>;
 }
 
 /// RAW_ECAT_FUNC_GET's reply: the datagram as it came back.

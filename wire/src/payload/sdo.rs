@@ -57,6 +57,7 @@ pub struct SdoRequest<'a> {
 
 impl<'a> Request<'a> for SdoRequest<'a> {
     const CODE: CommandCode = CommandCode::SdoReq;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -110,9 +111,9 @@ impl<'a> Request<'a> for SdoRequest<'a> {
 
 bare_request! {
     /// SDO_GET (11): fetch the data of the last SDO read.
-    SdoGet => SdoGet;
+    SdoGet => SdoGet -> SdoGetReply<'r>;
     /// SDO_ABORTCODE_GET (69): the abort code of the last failed SDO.
-    SdoAbortCodeGet => SdoAbortCodeGet;
+    SdoAbortCodeGet => SdoAbortCodeGet -> SdoAbortReply;
 }
 
 /// SDO_GET's reply: the bytes read (data length = their count). The return

@@ -10,7 +10,7 @@ use crate::CommandCode;
 use crate::bytes::{Writer, check_range, expect_range};
 use crate::error::{EncodeError, PayloadError};
 use crate::flags::EcatState;
-use crate::payload::{ReplyFields, Request, RequestFields, bare_request, value_reply};
+use crate::payload::{FromAnswer, ReplyFields, Request, RequestFields, bare_request, value_reply};
 
 /// What SLV_INFO_GET asks for (command data 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -89,6 +89,7 @@ pub struct SlaveInfoGet {
 
 impl<'a> Request<'a> for SlaveInfoGet {
     const CODE: CommandCode = CommandCode::SlaveInfoGet;
+    type Answer<'r> = SlaveInfo<'r>;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("slave", self.slave.into(), 0, 127)?;
@@ -222,9 +223,16 @@ impl<'a> SlaveInfo<'a> {
     }
 }
 
+/// The answer says nothing of which item it is: the request does.
+impl<'r> FromAnswer<'r, SlaveInfoGet> for SlaveInfo<'r> {
+    fn from_answer(request: &SlaveInfoGet, _fields: &ReplyFields, data: &'r [u8]) -> Result<Self, PayloadError> {
+        Self::decode(request.item, data)
+    }
+}
+
 bare_request! {
     /// SLV_CNT_GET (16): the number of slaves found.
-    SlaveCountGet => SlaveCountGet;
+    SlaveCountGet => SlaveCountGet -> SlaveCount;
 }
 
 value_reply! {

@@ -10,9 +10,9 @@ use crate::payload::{Request, RequestFields, bare_request, int_data_reply, value
 
 bare_request! {
     /// SPI_PACK_SIZE_GET (20): the data-section size in force.
-    SpiPackSizeGet => SpiPackSizeGet;
+    SpiPackSizeGet => SpiPackSizeGet -> SpiPackSize;
     /// CRC_ERR_CNT_CLR (24): clear the SPI CRC error counter.
-    CrcErrCountClear => CrcErrCountClear;
+    CrcErrCountClear => CrcErrCountClear -> CrcErrorsCleared;
 }
 
 int_data_reply! {
@@ -38,6 +38,7 @@ pub struct SpiReconfig {
 
 impl<'a> Request<'a> for SpiReconfig {
     const CODE: CommandCode = CommandCode::SpiReconfig;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         check_range("SPI data size", self.data_size.into(), DATA_MIN as u32, DATA_MAX as u32)?;
@@ -58,6 +59,7 @@ pub struct CrcTypeSet(pub CheckType);
 
 impl<'a> Request<'a> for CrcTypeSet {
     const CODE: CommandCode = CommandCode::CrcTypeSet;
+    type Answer<'r> = crate::payload::Done;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(self.0.bits()))

@@ -70,6 +70,7 @@ macro_rules! state_command {
 
         impl<'a> Request<'a> for $name {
             const CODE: CommandCode = CommandCode::$code;
+            type Answer<'r> = crate::payload::Done;
 
             fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
                 Ok(RequestFields {
@@ -104,6 +105,7 @@ pub struct StateGet(pub SlaveSelector);
 
 impl<'a> Request<'a> for StateGet {
     const CODE: CommandCode = CommandCode::StateGet;
+    type Answer<'r> = StateReply;
 
     fn encode(&self, _data: &mut [u8]) -> Result<RequestFields, EncodeError> {
         Ok(RequestFields::parameter(self.0.to_u8()?))

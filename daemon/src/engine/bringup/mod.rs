@@ -13,14 +13,14 @@ use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::cia402::{Cia402ConfigSet, Cia402Control, Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{FwVersionGet, InfoUpdate, WkcErrorLimit, WkcErrorLimitSet};
 use ecmxf_wire::payload::ecat_init::{DcSync, DcTiming, EcatInit, EcatInitDc, EcatReconfig};
-use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSize, FifoPackSizeGet, FifoSetRxCount, FifoSetTxCount};
+use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSizeGet, FifoSetRxCount, FifoSetTxCount};
 use ecmxf_wire::payload::interrupt::{IntConfig, IntPolarity, IntSetEnable};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoDirection, PdoFifoOp};
-use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RawGet, RawReply, RawRequest};
-use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest};
+use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RawGet, RawRequest};
+use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAccess, SdoGet, SdoRequest};
 use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
-use ecmxf_wire::{CheckType, EcatState, Reply, ReplyFields, Request};
+use ecmxf_wire::{CheckType, EcatState, Request};
 
 use tracing::warn;
 
@@ -143,10 +143,6 @@ fn step(step: &'static str, detail: impl Into<String>) -> BringUpError {
     BringUpError::Step { step, detail: detail.into() }
 }
 
-fn reply<'a, R: Reply<'a>>(h: &ecmxf_wire::ResponseHeader, data: &'a [u8]) -> Option<R> {
-    R::decode(&ReplyFields { value: h.return_value, data_len: h.data_len }, data).ok()
-}
-
 /// How long all slaves get to reach a state.
 const STATE_TIMEOUT: Duration = Duration::from_secs(5);
 
@@ -203,10 +199,7 @@ fn enter<L: Link>(port: &mut Port<L>, state: EcatState, slaves: usize) -> Result
 pub fn slave_states<L: Link>(port: &mut Port<L>, slaves: usize) -> Vec<(u8, EcatState, u16)> {
     let mut out = Vec::new();
     for i in 0..slaves.min(usize::from(u8::MAX)) as u8 {
-        let mut read = |item| {
-            let a = port.call(&SlaveInfoGet { slave: i, item }).ok()?;
-            SlaveInfo::decode(item, a.data).ok()?.number()
-        };
+        let mut read = |item| port.ask(&SlaveInfoGet { slave: i, item }).ok()?.number();
         if let (Some(state), Some(code)) = (read(SlaveInfoCode::State), read(SlaveInfoCode::AlStatus)) {
             out.push((i, EcatState::from_u8(state as u8), code as u16));
         }
@@ -226,8 +219,17 @@ pub fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
 /// One numeric item of a slave (command 21; [`SlaveInfo::number`]); 0 when
 /// the answer does not decode.
 pub fn number<L: Link>(port: &mut Port<L>, slave: u8, item: SlaveInfoCode) -> Result<u32, PortError> {
-    let a = port.call(&SlaveInfoGet { slave, item })?;
-    Ok(SlaveInfo::decode(item, a.data).ok().and_then(|i| i.number()).unwrap_or(0))
+    let req = SlaveInfoGet { slave, item };
+    Ok(port.call(&req)?.answer_to(&req).ok().and_then(|i| i.number()).unwrap_or(0))
+}
+
+/// A slave's name (command 21, its SII string), up to the first NUL.
+fn name<L: Link>(port: &mut Port<L>, slave: u8) -> Result<String, PortError> {
+    let req = SlaveInfoGet { slave, item: SlaveInfoCode::Name };
+    Ok(match port.call(&req)?.answer_to(&req) {
+        Ok(SlaveInfo::Name(bytes)) => String::from_utf8_lossy(bytes).into_owned(),
+        _ => String::new(),
+    })
 }
 
 /// Clears the chip's latched errors, initialises the network with the
@@ -248,7 +250,7 @@ pub fn init_network<L: Link>(port: &mut Port<L>, config: &Config) -> Result<u8, 
     };
     blocking(port, &EcatInit { special_slaves: false, master_shift: false, disable_lrw: false, dc }, SLOW)
         .map_err(|e| step("ECAT_INIT", format!("{e} (are slaves connected and powered?)")))?;
-    Ok(port.call(&SlaveCountGet)?.header.return_value)
+    Ok(port.ask(&SlaveCountGet)?.0)
 }
 
 /// Reads the identity (vendor, product, revision, name) of the first
@@ -260,9 +262,7 @@ pub fn identify<L: Link>(port: &mut Port<L>, count: u8) -> Result<Vec<SlaveSumma
             vendor_id: number(port, i, SlaveInfoCode::VendorId)?,
             product_code: number(port, i, SlaveInfoCode::ProductCode)?,
             revision: number(port, i, SlaveInfoCode::Revision)?,
-            name: String::from_utf8_lossy(port.call(&SlaveInfoGet { slave: i, item: SlaveInfoCode::Name })?.data)
-                .trim_end_matches('\0')
-                .to_string(),
+            name: name(port, i)?,
             ..SlaveSummary::default()
         };
         slaves.push(s);
@@ -439,11 +439,11 @@ fn sdo_upload<L: Link>(port: &mut Port<L>, slave: u8, index: u16, subindex: u8) 
         abort_code(port)?;
         return Ok(None);
     }
-    let a = port.call(&SdoGet)?;
-    if a.header.return_value != 0 {
+    let reply = port.ask(&SdoGet)?;
+    if reply.status != 0 {
         return Ok(None);
     }
-    Ok(Some(a.data.iter().take(4).enumerate().fold(0u32, |v, (i, b)| v | u32::from(*b) << (8 * i))))
+    Ok(Some(reply.data.iter().take(4).enumerate().fold(0u32, |v, (i, b)| v | u32::from(*b) << (8 * i))))
 }
 
 /// The register writes of one transition (an ENI's watchdog settings,
@@ -469,9 +469,7 @@ fn startup_registers<L: Link>(port: &mut Port<L>, config: &Config, at: InitTrans
                 )
             };
             blocking(port, &RawRequest { head, data: &r.data }, SLOW).map_err(|e| fail(e.to_string()))?;
-            let a = port.call(&RawGet)?;
-            let fields = ReplyFields { value: a.header.return_value, data_len: a.data.len() as u16 };
-            match RawReply::decode(&fields, a.data) {
+            match port.call(&RawGet)?.answer_to(&RawGet) {
                 Ok(reply) if reply.working_counter == 1 => {}
                 Ok(reply) => return Err(fail(format!("working counter {}, not 1", reply.working_counter))),
                 Err(e) => return Err(fail(format!("unreadable answer: {e}"))),
@@ -553,10 +551,11 @@ struct FifoPlan {
 /// FIFO memory, FIFO_INIT.
 fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, BringUpError> {
     let c = &config.cycle;
-    let rx = port.call(&FifoPackSizeGet(PdoDirection::Outputs))?;
-    let rx_size = reply::<FifoPackSize>(&rx.header, rx.data).map_or(0, |r| usize::from(r.0));
-    let tx = port.call(&FifoPackSizeGet(PdoDirection::Inputs))?;
-    let tx_size = reply::<FifoPackSize>(&tx.header, tx.data).map_or(0, |r| usize::from(r.0));
+    let mut frame_size = |direction| -> Result<usize, PortError> {
+        let req = FifoPackSizeGet(direction);
+        Ok(port.call(&req)?.answer_to(&req).map_or(0, |r| usize::from(r.0)))
+    };
+    let (rx_size, tx_size) = (frame_size(PdoDirection::Outputs)?, frame_size(PdoDirection::Inputs)?);
     let (cycle_ns, data_size) = (u64::from(c.sync0_us) * 1000, port.data_size());
     let check =
         |packet: Duration| super::link_budget::check(data_size, rx_size, tx_size, packet.as_nanos() as u64, cycle_ns);
@@ -672,6 +671,5 @@ fn packet_time<L: Link>(port: &mut Port<L>) -> Result<Duration, PortError> {
 }
 
 fn abort_code<L: Link>(port: &mut Port<L>) -> Result<SdoAbortCode, PortError> {
-    let a = port.call(&SdoAbortCodeGet)?;
-    Ok(reply::<SdoAbortReply>(&a.header, a.data).map_or(SdoAbortCode::GENERAL, |r| r.0))
+    Ok(port.call(&SdoAbortCodeGet)?.answer_to(&SdoAbortCodeGet).map_or(SdoAbortCode::GENERAL, |r| r.0))
 }

@@ -25,7 +25,6 @@ use ecmxf_wire::payload::ecat_init::EcatReconfig;
 use ecmxf_wire::payload::pdo::{
     PdoConfig, PdoConfigForm, PdoConfigGet, PdoConfigReply, PdoConfigReq, PdoEntry, RX_PDO_ASSIGN, TX_PDO_ASSIGN,
 };
-use ecmxf_wire::{Reply, ReplyFields};
 
 use super::{BringUpError, SLOW, abort_code, blocking, sdo_download, sdo_upload, step};
 use crate::config::Config;
@@ -85,9 +84,7 @@ fn in_force<L: Link>(port: &mut Port<L>, cfg: &PdoConfig) -> Result<bool, BringU
     if blocking(port, &req, SLOW).is_err() {
         return Ok(false);
     }
-    let a = port.call(&PdoConfigGet)?;
-    let fields = ReplyFields { value: a.header.return_value, data_len: a.data.len() as u16 };
-    let Ok(PdoConfigReply(now)) = PdoConfigReply::decode(&fields, a.data) else { return Ok(false) };
+    let Ok(PdoConfigReply(now)) = port.call(&PdoConfigGet)?.answer_to(&PdoConfigGet) else { return Ok(false) };
     let same = now.pdo_count == cfg.pdo_count
         && now.used().len() == cfg.used().len()
         && now.used().iter().zip(cfg.used()).all(|(a, b)| a.index == b.index && a.used() == b.used());

@@ -39,21 +39,21 @@
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
+use ecmxf_wire::CommandCode;
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
 use ecmxf_wire::payload::cia402::{Cia402GetStatusword, Cia402StateGet};
 use ecmxf_wire::payload::control::{AsyncCmdReset, AsyncReset, InfoUpdate};
 use ecmxf_wire::payload::ecat_init::StateUpdate;
-use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromReply, EepromRequest};
+use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromRequest};
 use ecmxf_wire::payload::emergency::CoeEmergencyGet;
 use ecmxf_wire::payload::foe::{FOE_FLASH_SIZE, FoeRequest, FoeTransfer};
 use ecmxf_wire::payload::pdo::{PdoConfigForm, PdoConfigGet, PdoConfigReq};
-use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawReply, RawRequest};
+use ecmxf_wire::payload::raw::{RAW_HEADER_LEN, RawGet, RawRequest};
 use ecmxf_wire::payload::sdo::{
-    SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAbortReply, SdoAccess, SdoGet, SdoRequest,
+    SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAccess, SdoGet, SdoGetReply, SdoRequest,
 };
 use ecmxf_wire::payload::slave_info::SlaveInfoGet;
-use ecmxf_wire::payload::state::{StateCheck, StateGet};
-use ecmxf_wire::{CommandCode, Reply, ReplyFields};
+use ecmxf_wire::payload::state::{StateCheck, StateGet, StateReply};
 
 use super::request::{Immediate, Job, SlotRequest, TransferProgress};
 use crate::engine::error::{EngineError, WrongState};
@@ -134,10 +134,6 @@ fn fill(buffer: &mut Vec<u8>, parts: &[&[u8]]) -> Vec<u8> {
 /// Whether the chip refused the command (error bit7: bad parameter).
 fn refused(a: &Answer<'_>) -> bool {
     a.header.errors.contains(ErrorFlags::COMMAND_ERROR)
-}
-
-fn fields(a: &Answer<'_>) -> ReplyFields {
-    ReplyFields { value: a.header.return_value, data_len: a.header.data_len }
 }
 
 /// A repeatable GET that reads a blocking operation's result and polls
@@ -328,13 +324,16 @@ impl Active {
                 if refused(&a) {
                     return Ok(self.refused_by_chip(port));
                 }
-                let out = fill(&mut self.buffer, &[&[a.header.return_value], a.data]);
+                // Relayed as the chip gave it: the client reads the
+                // peripheral's answer (api/peripherals.rs).
+                let out = fill(&mut self.buffer, &[&[a.header.return_value], a.relayed()]);
                 return Ok((None, self.finish(Ok(out))));
             }
             SlotRequest::SlaveInfo { slave, item } => {
                 let a = port.call(&SlaveInfoGet { slave: *slave, item: *item })?;
                 let refused = a.header.errors.contains(ErrorFlags::COMMAND_ERROR);
-                let data = fill(&mut self.buffer, &[a.data]);
+                // Relayed: the master reads it by its item (master/transactions.rs).
+                let data = fill(&mut self.buffer, &[a.relayed()]);
                 if refused {
                     port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
                     return Ok((
@@ -543,8 +542,8 @@ impl Active {
                 | SlotRequest::SdoWrite { slave, index, subindex, .. },
                 true,
             ) => {
-                let a = port.call(&SdoAbortCodeGet)?;
-                let code = SdoAbortReply::decode(&fields(&a), a.data).map_or(SdoAbortCode::GENERAL, |r| r.0);
+                let answer = port.call(&SdoAbortCodeGet)?.answer_to(&SdoAbortCodeGet);
+                let code = answer.map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
             (SlotRequest::SdoRead { .. }, false) => {
@@ -554,9 +553,10 @@ impl Active {
                 };
                 // SDO_GET's return value is the read's error code: data
                 // with a nonzero code is not this read's value.
-                match a.header.return_value {
-                    0 => Ok(fill(&mut self.buffer, &[a.data])),
-                    code => {
+                match a.answer_to(&SdoGet) {
+                    Ok(SdoGetReply { status: 0, data }) => Ok(fill(&mut self.buffer, &[data])),
+                    Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
+                    Ok(SdoGetReply { status: code, .. }) => {
                         let what = self.request.to_string();
                         Err(EngineError::Failed(format!("{what}: SDO_GET reports error code {code}")))
                     }
@@ -583,7 +583,7 @@ impl Active {
                     Some(a) => a,
                     None => port.call(&EepromGet)?,
                 };
-                let reply = EepromReply::decode(&fields(&a), a.data).ok();
+                let reply = a.answer_to(&EepromGet).ok();
                 match reply {
                     Some(r) if r.error == 0 && r.data.len() >= 2 => match &self.request {
                         SlotRequest::EepromWrite { value, .. } if r.data[..2] != value.to_le_bytes() => {
@@ -609,12 +609,14 @@ impl Active {
                 Err(EngineError::Failed("the slaves' states could not be refreshed".into()))
             }
             (SlotRequest::GetState { target }, false) => {
-                let a = port.call(&StateGet(*target))?;
-                if refused(&a) {
-                    port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-                    Err(EngineError::BadArgument { field: "slave", reason: format!("no such slave: {target}") })
-                } else {
-                    Ok(fill(&mut self.buffer, &[&[a.header.return_value]]))
+                let req = StateGet(*target);
+                let a = port.call(&req)?;
+                match a.answer_to(&req) {
+                    Ok(StateReply(state)) if !refused(&a) => Ok(fill(&mut self.buffer, &[&[state.to_u8()]])),
+                    _ => {
+                        port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
+                        Err(EngineError::BadArgument { field: "slave", reason: format!("no such slave: {target}") })
+                    }
                 }
             }
             (SlotRequest::SlaveInfo { .. } | SlotRequest::Immediate(_), _) => Ok(Vec::new()),
@@ -622,17 +624,16 @@ impl Active {
                 "PDO assignment {assign_index:#06x} of slave {slave} could not be read"
             ))),
             (SlotRequest::PdoConfigRead { .. }, false) => {
+                // Relayed: the master reads it as PDO_CONFIG_GET's reply
+                // (master/pdos.rs).
                 let a = port.call(&PdoConfigGet)?;
-                Ok(fill(&mut self.buffer, &[a.data]))
+                Ok(fill(&mut self.buffer, &[a.relayed()]))
             }
             (SlotRequest::Raw { .. }, true) => Err(EngineError::Failed(self.describe())),
-            (SlotRequest::Raw { .. }, false) => {
-                let a = port.call(&RawGet)?;
-                match RawReply::decode(&fields(&a), a.data) {
-                    Ok(r) => Ok(fill(&mut self.buffer, &[&r.working_counter.to_le_bytes(), r.data])),
-                    Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
-                }
-            }
+            (SlotRequest::Raw { .. }, false) => match port.call(&RawGet)?.answer_to(&RawGet) {
+                Ok(r) => Ok(fill(&mut self.buffer, &[&r.working_counter.to_le_bytes(), r.data])),
+                Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
+            },
             // Handled above.
             (SlotRequest::FoeWrite { .. } | SlotRequest::FoeRead { .. }, _) => Ok(Vec::new()),
         };

@@ -6,12 +6,9 @@
 
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::Reply;
-use ecmxf_wire::payload::foe::{
-    FOE_FLASH_SIZE, FOE_HEADER_LEN, FOE_MAX_CHUNK, FoeGet, FoeReply, FoeRequest, FoeTransfer,
-};
+use ecmxf_wire::payload::foe::{FOE_FLASH_SIZE, FOE_HEADER_LEN, FOE_MAX_CHUNK, FoeGet, FoeRequest, FoeTransfer};
 
-use super::{Active, Progress, Step, fields, refused};
+use super::{Active, Progress, Step, refused};
 use crate::engine::error::EngineError;
 use crate::engine::slot::SlotRequest;
 use crate::link::Link;
@@ -77,8 +74,7 @@ impl Active {
             }
             Step::FoeSend => Ok((None, self.finish(Ok(Vec::new())))),
             Step::FoeUpload => {
-                let a = port.call(&FoeGet)?;
-                let stored = a.data.first_chunk::<4>().map(|b| u32::from_le_bytes(*b));
+                let stored = port.ask(&FoeGet)?.0.first_chunk::<4>().map(|b| u32::from_le_bytes(*b));
                 let max = match &self.request {
                     SlotRequest::FoeRead { max_len, .. } => *max_len,
                     _ => 0,
@@ -100,8 +96,7 @@ impl Active {
             }
             Step::FoeFetch => {
                 let want = ((self.total - self.cursor) as usize).min(foe_chunk(port.data_size()));
-                let a = port.call(&FoeGet)?;
-                let got = FoeReply::decode(&fields(&a), a.data).map(|r| r.0).unwrap_or_default();
+                let got = port.call(&FoeGet)?.answer_to(&FoeGet).map(|r| r.0).unwrap_or_default();
                 if got.len() < want {
                     let what = format!("{}: a flash read returned {} of {want} bytes", self.describe(), got.len());
                     return Ok((None, self.finish(Err(EngineError::Failed(what)))));
