@@ -9,11 +9,12 @@
 //!   exchange, the blocking-slot transactions, supervision and recovery.
 //! - [`master`]: the async handle to the engine ([`master::Master`]), and
 //!   the one door front ends use: it re-exports what they need of the
-//!   engine (errors, phases, events, layout, frame streams).
+//!   engine (errors, phases, events, layout, frame streams); it owns the
+//!   domain: leases, the process image, output writers
+//!   ([`master::outputs`]), device descriptions.
 //! - [`api`]: the gRPC front end (tonic): protobuf to and from the master's
 //!   domain, errors to status codes, authentication; imports the master
 //!   only (daemon/tests/layers.rs checks it).
-//! - [`outputs`]: client writes into the output image, and writer leases.
 //! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
 //! - [`config`]: the configuration file.
 //! - [`metrics`]: the Prometheus endpoint.
@@ -32,7 +33,6 @@ pub mod lifecycle;
 pub mod link;
 pub mod master;
 pub mod metrics;
-pub mod outputs;
 pub mod port;
 pub mod probe;
 pub mod realtime;

@@ -22,8 +22,7 @@ use tracing::{info, warn};
 use crate::api::Context;
 use crate::api::server::ServeError;
 use crate::config::Config;
-use crate::engine::telemetry::{Phase, Snapshot};
-use crate::master::{Master, StartError};
+use crate::master::{Failure, Master, Phase, Snapshot, StartError};
 use crate::service::{Liveness, Logging, Notifier, ReloadPlan};
 
 /// Why the daemon could not start, or ended without being asked to.
@@ -46,12 +45,12 @@ pub enum DaemonError {
     Task(&'static str, tokio::task::JoinError),
     /// The engine stopped by itself (recovery disabled or given up); why it
     /// last failed, if it said.
-    EngineStopped(Option<String>),
+    EngineStopped(Option<Failure>),
     /// The embedding program could not listen for signals (SIGTERM, SIGHUP).
     Signals(std::io::Error),
     /// The network can never run with this configuration (the link cannot
     /// carry its process data): why. Exit status [`EXIT_REFUSED`].
-    NetworkRefused(String),
+    NetworkRefused(Failure),
 }
 
 /// The exit status of a daemon whose configuration can never work: a
@@ -168,7 +167,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     let mut changes = master.watch_status();
     let mut events = master.events();
     let mut events_open = true;
-    let mut event_log = crate::engine::events::EventLog::default();
+    let mut event_log = crate::master::EventLog::default();
     let mut reloads = options.reloads;
     let logging = options.logging;
     info!(logs = logging.as_ref().map_or("(embedded)", |l| l.sink), systemd = notifier.enabled(), watchdog = ?watchdog_every, "service");
@@ -276,8 +275,7 @@ impl Announcer {
             notifier.send(&format!("READY=1\nSTATUS={}", self.status_sent));
         }
         if s.phase == Phase::Stopped {
-            if master.refused() {
-                let why = master.last_error().unwrap_or_default();
+            if let Some(why) = master.last_error().filter(|f| master.refused() && f.is_permanent()) {
                 notifier.send(&format!("STOPPING=1\nSTATUS=refused: {why}"));
                 return Err(DaemonError::NetworkRefused(why));
             }
@@ -319,7 +317,7 @@ fn service_status(m: &Master) -> String {
         Phase::Running => {
             format!("{}: {} slaves, cycle {} us", s.ecat_state, l.slaves.len(), m.config().cycle.sync0_us)
         }
-        Phase::Recovering => format!("recovering: {}", m.last_error().unwrap_or_default()),
+        Phase::Recovering => format!("recovering: {}", m.last_error().map(|f| f.to_string()).unwrap_or_default()),
         p => format!("{p:?}"),
     }
 }
@@ -370,8 +368,8 @@ mod tests {
         };
         assert!(e.to_string().starts_with("metrics.listen 127.0.0.1:9: "), "{e}");
         assert_eq!(
-            DaemonError::EngineStopped(Some("bring-up: no slave".into())).to_string(),
-            "the engine stopped: bring-up: no slave"
+            DaemonError::EngineStopped(Some(Failure::Recovery(crate::master::RecoverCause::ChipReset))).to_string(),
+            "the engine stopped: recovery: chip reset (status back to power-up values)"
         );
     }
 }

@@ -32,8 +32,8 @@ use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::{CheckType, DATA_MAX, EcatState, al_status_text};
 
 use crate::config::{Config, LinkConfig};
-use crate::engine::bringup::{self, BringUpError};
 use crate::link::{Link, LinkError};
+use crate::master::bring_up_steps::{self as bringup, BringUpError};
 use crate::master::{StartError, open_link};
 use crate::port::{Port, PortError};
 

@@ -12,8 +12,7 @@ use tracing_subscriber::util::SubscriberInitExt;
 use tracing_subscriber::{EnvFilter, Registry, reload};
 
 use crate::config::Config;
-use crate::engine::telemetry::{Phase, Snapshot};
-use crate::master::Health;
+use crate::master::{Health, Phase, Snapshot};
 
 /// The sender side of sd_notify; inert when not started by systemd.
 #[derive(Debug)]
@@ -224,10 +223,8 @@ mod tests {
 
     #[test]
     fn the_watchdog_wants_flowing_process_data_while_running() {
-        let t = crate::engine::telemetry::Telemetry::default();
-        t.set_phase(Phase::Running);
         let mut l = Liveness::default();
-        let mut s = t.snapshot();
+        let mut s = Snapshot { phase: Phase::Running, ..Snapshot::default() };
         assert!(l.verdict(&s, Health::Healthy).is_ok());
         s.exchanges += 1;
         let stalled = Health::Stalled { age: Duration::from_millis(900), limit: Duration::from_millis(50) };

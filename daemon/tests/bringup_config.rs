@@ -128,7 +128,8 @@ fn a_different_network_is_named() {
     let t = Instant::now();
     let e = loop {
         if let Some(e) = m.last_error() {
-            break e;
+            assert!(e.bring_up().is_some() && !e.is_permanent(), "a bring-up failure, retried: {e}");
+            break e.to_string();
         }
         assert!(t.elapsed() < Duration::from_secs(20), "no error reported");
         std::thread::sleep(Duration::from_millis(20));
@@ -154,7 +155,8 @@ fn a_frame_bigger_than_the_spi_packet_is_refused_naming_the_sizes() {
     let t = Instant::now();
     let e = loop {
         if let Some(e) = m.last_error() {
-            break e;
+            assert!(e.is_permanent(), "only the configuration can change it: {e}");
+            break e.to_string();
         }
         assert!(t.elapsed() < Duration::from_secs(20), "no error reported: {:?}", m.status());
         std::thread::sleep(Duration::from_millis(20));

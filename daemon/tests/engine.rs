@@ -614,7 +614,7 @@ fn a_bring_up_refusal_names_the_slave_its_state_and_al_status() {
     let m = Master::start(link, config);
     let t = Instant::now();
     let error = loop {
-        if let Some(e) = m.last_error().filter(|e| e.contains("SAFE")) {
+        if let Some(e) = m.last_error().map(|e| e.to_string()).filter(|e| e.contains("SAFE")) {
             break e;
         }
         assert!(t.elapsed() < Duration::from_secs(20), "no refusal reported: {:?}", m.status());

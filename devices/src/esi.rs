@@ -69,21 +69,7 @@ impl fmt::Display for EsiError {
 
 impl std::error::Error for EsiError {}
 
-/// Reads an ESI number: `#x1A`, `0x1A`, `1A` with a hex prefix only, or
-/// decimal.
-pub fn parse_number(text: &str) -> Option<u64> {
-    let t = text.trim();
-    if let Some(h) = t
-        .strip_prefix("#x")
-        .or_else(|| t.strip_prefix("#X"))
-        .or_else(|| t.strip_prefix("0x"))
-        .or_else(|| t.strip_prefix("0X"))
-    {
-        u64::from_str_radix(h, 16).ok()
-    } else {
-        t.parse::<i64>().ok().map(|v| v as u64)
-    }
-}
+pub use crate::xml::parse_number;
 
 fn number(what: &'static str, text: Option<&str>) -> Result<u64, EsiError> {
     let text = text.ok_or(EsiError::Missing(what))?;
@@ -192,7 +178,7 @@ pub struct EsiDevice {
     /// CoE init commands (`Mailbox/CoE/InitCmd`): what a configuration
     /// tool writes into an ENI for this device (e.g. the mode of operation
     /// at PRE-OP -> SAFE-OP).
-    pub init_cmds: Vec<crate::eni::CoeInitCmd>,
+    pub init_cmds: Vec<crate::init_cmd::CoeInitCmd>,
     /// What the loader had to leave out or correct, in words a user can
     /// act on (a PDO listed twice, a PDO on a sync manager the device does
     /// not have).
@@ -370,7 +356,7 @@ fn parse_device(d: Node<'_, '_>) -> Result<EsiDevice, EsiError> {
                     complete_access =
                         p.attribute("CompleteAccess").is_none_or(|v| v == "1" || v.eq_ignore_ascii_case("true"));
                     for (k, cmd) in children(p, "InitCmd").enumerate() {
-                        match crate::eni::coe_init_cmd(cmd, &format!("Mailbox/CoE/InitCmd[{k}]"), Some(1)) {
+                        match crate::init_cmd::coe_init_cmd(cmd, &format!("Mailbox/CoE/InitCmd[{k}]"), Some(1)) {
                             Ok(c) => init_cmds.push(c),
                             Err(e) => init_warnings.push(format!("init command left out: {e}")),
                         }

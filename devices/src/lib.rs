@@ -25,6 +25,8 @@ pub mod catalog;
 pub mod config_file;
 pub mod eni;
 pub mod esi;
+pub mod init_cmd;
 pub mod od;
 pub mod pdo;
 pub mod sii;
+mod xml;

@@ -77,6 +77,18 @@ pub enum SiiError {
         /// Its byte offset.
         offset: usize,
     },
+    /// A category runs past the EEPROM's own size (word 0x3E: (n + 1) x 128
+    /// bytes): found while reading it from the slave, before the image ends.
+    PastEepromSize {
+        /// Category type.
+        kind: u16,
+        /// Its byte offset.
+        offset: usize,
+        /// Its length in bytes, as declared.
+        len: usize,
+        /// The EEPROM's size in bytes.
+        size: usize,
+    },
     /// A category's content does not fit its declared layout.
     BadCategory {
         /// Category type.
@@ -93,6 +105,11 @@ impl fmt::Display for SiiError {
             Self::CategoryOverrun { kind, offset } => {
                 write!(f, "SII category {kind} at byte {offset:#x} runs past the end of the image")
             }
+            Self::PastEepromSize { kind, offset, len, size } => write!(
+                f,
+                "category {kind:#06x} at byte offset {offset:#06x} is {len} bytes long and runs past the EEPROM's \
+                 size of {size} bytes (word 0x3E)"
+            ),
             Self::BadCategory { kind, what } => write!(f, "SII category {kind}: {what}"),
         }
     }

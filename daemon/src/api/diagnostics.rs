@@ -76,7 +76,7 @@ pub fn event_pb(e: &Event) -> pb::Event {
         }
         EventKind::FifoUnderrun => K::FifoUnderrun,
         EventKind::BringUpFailed(why) => {
-            out.detail = why.clone();
+            out.detail = why.to_string();
             K::BringUpFailed
         }
         EventKind::Recovering(why) => {

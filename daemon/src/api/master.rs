@@ -43,7 +43,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
         rx_fifo_level: s.rx_fifo.into(),
         tx_fifo_level: s.tx_fifo.into(),
         counters: Some(counters_pb(&s)),
-        last_error: m.last_error().unwrap_or_default(),
+        last_error: m.last_error().map(|f| f.to_string()).unwrap_or_default(),
         output_writers: m.output_writers() as u32,
         config_generation: s.config_generation,
         process_data_flowing: v.flowing(),

@@ -89,7 +89,7 @@ impl SdoApi for SdoService {
         // An ESI without a `<Dictionary>` (older files, e.g. NI 9144) says
         // nothing of the objects: the slave is probed as without one.
         if let Some(esi) = self.0.master.esi_device(s).await {
-            let esi = esi.map_err(Status::failed_precondition)?;
+            let esi = esi.map_err(|e| Status::failed_precondition(e.to_string()))?;
             if esi.device().dictionary.objects().next().is_some() {
                 let entries = esi_objects(esi.device());
                 let source = pb::DictionarySource::Esi as i32;

@@ -34,8 +34,8 @@ use crate::master::Master;
 /// Why the API could not be served.
 #[derive(Debug)]
 pub enum ServeError {
-    /// The socket could not be set up; what and why.
-    Socket(PathBuf, String),
+    /// The socket could not be set up: where, and what went wrong.
+    Socket(PathBuf, SocketProblem),
     /// A TLS file `api.tcp` needs is not configured (the key).
     TlsNotSet(&'static str),
     /// A TLS file could not be read: its key, path and the OS error.
@@ -65,7 +65,66 @@ impl std::fmt::Display for ServeError {
     }
 }
 
-impl std::error::Error for ServeError {}
+impl std::error::Error for ServeError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Socket(_, p) => p.source(),
+            Self::TlsFile { source, .. } => Some(source),
+            Self::Reflection(e) => Some(e),
+            Self::Transport(e) => Some(e),
+            Self::TlsNotSet(_) => None,
+        }
+    }
+}
+
+/// What went wrong setting up the API socket, with the OS's error where
+/// there is one.
+#[derive(Debug)]
+pub enum SocketProblem {
+    /// Its folder could not be created.
+    CreateFolder(std::io::Error),
+    /// Something that is not a socket is at the path (what it is).
+    NotASocket(&'static str),
+    /// Another daemon serves the socket.
+    Served,
+    /// A stale socket could not be removed.
+    RemoveStale(std::io::Error),
+    /// Binding failed.
+    Bind(std::io::Error),
+    /// `api.socket_mode` could not be applied.
+    Mode(u32, std::io::Error),
+    /// `api.socket_group` names no group.
+    NoGroup(String),
+    /// The socket could not be given to the group.
+    Chown(String, nix::Error),
+}
+
+impl SocketProblem {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::CreateFolder(e) | Self::RemoveStale(e) | Self::Bind(e) | Self::Mode(_, e) => Some(e),
+            Self::Chown(_, e) => Some(e),
+            Self::NotASocket(_) | Self::Served | Self::NoGroup(_) => None,
+        }
+    }
+}
+
+impl std::fmt::Display for SocketProblem {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::CreateFolder(e) => write!(f, "cannot create its folder: {e}"),
+            Self::NotASocket(what) => {
+                write!(f, "something that is not a socket is there ({what}); remove it or give another api.socket")
+            }
+            Self::Served => f.write_str("another daemon is serving it (stop it, or give another api.socket)"),
+            Self::RemoveStale(e) => write!(f, "cannot remove the stale socket: {e}"),
+            Self::Bind(e) => write!(f, "cannot bind: {e}"),
+            Self::Mode(mode, e) => write!(f, "cannot set mode {mode:#o}: {e}"),
+            Self::NoGroup(group) => write!(f, "api.socket_group {group:?} does not exist"),
+            Self::Chown(group, e) => write!(f, "cannot give it to group {group}: {e}"),
+        }
+    }
+}
 
 /// Every service name, for health.
 const SERVICES: [&str; 12] = [
@@ -142,38 +201,36 @@ fn routes(
 /// Binds the Unix socket: parent folder created if missing, a stale file
 /// replaced, mode and group applied.
 fn bind_socket(path: &Path, config: &ApiConfig) -> Result<UnixListener, ServeError> {
-    let err = |why: String| ServeError::Socket(path.to_owned(), why);
+    use SocketProblem as P;
+    let err = |problem: SocketProblem| ServeError::Socket(path.to_owned(), problem);
     if let Some(dir) = path.parent() {
-        std::fs::create_dir_all(dir).map_err(|e| err(format!("cannot create its folder: {e}")))?;
+        std::fs::create_dir_all(dir).map_err(|e| err(P::CreateFolder(e)))?;
     }
     // Only a socket nobody serves may be replaced: anything else at that
     // path (a regular file, a folder, a typo pointing at a config) stays.
     if let Ok(meta) = std::fs::symlink_metadata(path) {
         use std::os::unix::fs::FileTypeExt;
         if !meta.file_type().is_socket() {
-            return Err(err(format!(
-                "something that is not a socket is there ({}); remove it or give another api.socket",
-                describe(&meta.file_type())
-            )));
+            return Err(err(P::NotASocket(describe(&meta.file_type()))));
         }
         if std::os::unix::net::UnixStream::connect(path).is_ok() {
-            return Err(err("another daemon is serving it (stop it, or give another api.socket)".into()));
+            return Err(err(P::Served));
         }
-        std::fs::remove_file(path).map_err(|e| err(format!("cannot remove the stale socket: {e}")))?;
+        std::fs::remove_file(path).map_err(|e| err(P::RemoveStale(e)))?;
     }
-    let listener = UnixListener::bind(path).map_err(|e| err(format!("cannot bind: {e}")))?;
+    let listener = UnixListener::bind(path).map_err(|e| err(P::Bind(e)))?;
     use std::os::unix::fs::PermissionsExt;
     std::fs::set_permissions(path, std::fs::Permissions::from_mode(config.socket_mode))
-        .map_err(|e| err(format!("cannot set mode {:#o}: {e}", config.socket_mode)))?;
+        .map_err(|e| err(P::Mode(config.socket_mode, e)))?;
     if let Some(group) = &config.socket_group {
         let gid = match group.parse::<u32>() {
             Ok(g) => nix::unistd::Gid::from_raw(g),
             Err(_) => match nix::unistd::Group::from_name(group) {
                 Ok(Some(g)) => g.gid,
-                _ => return Err(err(format!("api.socket_group {group:?} does not exist"))),
+                _ => return Err(err(P::NoGroup(group.clone()))),
             },
         };
-        nix::unistd::chown(path, None, Some(gid)).map_err(|e| err(format!("cannot give it to group {group}: {e}")))?;
+        nix::unistd::chown(path, None, Some(gid)).map_err(|e| err(P::Chown(group.clone(), e)))?;
     }
     Ok(listener)
 }

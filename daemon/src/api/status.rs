@@ -41,12 +41,17 @@ pub fn to_status(e: EngineError) -> Status {
                 [("abort_code", abort.as_str()), ("meaning", meaning), ("slave", &slave), ("object", &object)];
             (Code::Aborted, info("SDO_ABORT", &metadata))
         }
-        EngineError::Failed(_) => (Code::Internal, info("CHIP_FAILED", &[])),
+        // Said as the chip failing, as before these had types of their own.
+        EngineError::Failed(_) | EngineError::BadAnswer { .. } | EngineError::NotUp { .. } => {
+            (Code::Internal, info("CHIP_FAILED", &[]))
+        }
         EngineError::Refused(_) => (Code::FailedPrecondition, info("REFUSED", &[])),
         EngineError::Timeout => (Code::DeadlineExceeded, info("TIMEOUT", &[])),
         EngineError::QueueFull => (Code::ResourceExhausted, info("QUEUE_FULL", &[])),
         EngineError::Unavailable(_) => (Code::Unavailable, info("NOT_RUNNING", &[])),
-        EngineError::BadDeviceData(_) => (Code::FailedPrecondition, info("BAD_DEVICE_DATA", &[])),
+        EngineError::BadDeviceData { slave, .. } => {
+            (Code::FailedPrecondition, info("BAD_DEVICE_DATA", &[("slave", &slave.to_string())]))
+        }
     };
     Status::with_error_details(code, message, details)
 }
@@ -183,7 +188,13 @@ mod tests {
             (EngineError::Timeout, Code::DeadlineExceeded),
             (EngineError::QueueFull, Code::ResourceExhausted),
             (EngineError::Unavailable(crate::master::NotRunning::Stopped), Code::Unavailable),
-            (EngineError::BadDeviceData("x".into()), Code::FailedPrecondition),
+            (
+                EngineError::BadDeviceData {
+                    slave: 1,
+                    error: ecmxf_devices::sii::SiiError::CategoryOverrun { kind: 10, offset: 0x80 },
+                },
+                Code::FailedPrecondition,
+            ),
         ];
         for (e, code) in cases {
             assert_eq!(to_status(e.clone()).code(), code, "{e}");

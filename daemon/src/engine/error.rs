@@ -3,9 +3,11 @@
 
 use std::fmt;
 
-use ecmxf_wire::EcatState;
+use ecmxf_devices::sii::SiiError;
 use ecmxf_wire::payload::sdo::SdoAbortCode;
+use ecmxf_wire::{EcatState, PayloadError};
 
+use super::failure::Failure;
 use super::supervisor::RecoverCause;
 use super::telemetry::Phase;
 
@@ -43,7 +45,26 @@ pub enum EngineError {
     /// The engine is not running (stopped, or recovering from a fault).
     Unavailable(NotRunning),
     /// What a slave describes itself with (its SII) is corrupt; says where.
-    BadDeviceData(String),
+    BadDeviceData {
+        /// The slave.
+        slave: u8,
+        /// What is wrong with it.
+        error: SiiError,
+    },
+    /// An answer of the chip does not read as its command's reply.
+    BadAnswer {
+        /// What was asked, in words.
+        what: String,
+        /// What did not read.
+        error: PayloadError,
+    },
+    /// The network did not come (back) up; the failure that stopped it.
+    NotUp {
+        /// What was waited for.
+        waited_for: &'static str,
+        /// The last failure.
+        failure: Failure,
+    },
 }
 
 impl fmt::Display for EngineError {
@@ -59,7 +80,9 @@ impl fmt::Display for EngineError {
             Self::Timeout => f.write_str("deadline exceeded"),
             Self::QueueFull => f.write_str("request queue full"),
             Self::Unavailable(s) => write!(f, "engine unavailable: {s}"),
-            Self::BadDeviceData(s) => f.write_str(s),
+            Self::BadDeviceData { slave, error } => write!(f, "slave {slave}'s SII is corrupt: {error}"),
+            Self::BadAnswer { what, error } => write!(f, "{what}: unreadable answer: {error}"),
+            Self::NotUp { waited_for, failure } => write!(f, "{waited_for}: {failure}"),
         }
     }
 }
@@ -141,7 +164,7 @@ pub enum NotRunning {
         /// The phase.
         phase: Phase,
         /// The last bring-up or recovery failure.
-        last_error: Option<String>,
+        last_error: Option<Failure>,
     },
 }
 

@@ -22,6 +22,7 @@ use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::{EcatState, ResponseHeader};
 
+use super::failure::Failure;
 use super::supervisor::RecoverCause;
 use super::telemetry::Phase;
 use crate::config::WriterGoneAction;
@@ -89,7 +90,7 @@ pub enum EventKind {
     /// The RxFIFO ran dry: the slaves got repeated outputs.
     FifoUnderrun,
     /// Bring-up failed; the reason.
-    BringUpFailed(String),
+    BringUpFailed(Failure),
     /// A fault was seen; recovery starts. Why.
     Recovering(RecoverCause),
     /// The last output writer went away and this was done.

@@ -24,7 +24,7 @@ use super::inputs::{InputFrame, read_record};
 use super::layout::NetworkLayout;
 use super::output_writes::{OutputWrite, Writers};
 use super::telemetry::Telemetry;
-use super::{Command, Engine, Parts};
+use super::{Command, Engine, Inbound, Outbound};
 use crate::config::Config;
 use crate::link::Link;
 
@@ -58,7 +58,7 @@ pub struct EngineHandle {
     /// Output writer leases, counted for `outputs.on_last_writer_gone`.
     pub writers: Arc<Writers>,
     threads: Mutex<Vec<JoinHandle<()>>>,
-    stop_engine: Arc<AtomicBool>,
+    pub(super) stop_engine: Arc<AtomicBool>,
     stop_distributor: Arc<AtomicBool>,
 }
 
@@ -102,28 +102,7 @@ pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
             }
         })
         .expect("spawn the input distributor thread");
-    let parts = Parts {
-        link,
-        config: config.clone(),
-        commands: command_rx,
-        outputs: output_rx,
-        telemetry: Arc::clone(&telemetry),
-        layout: Arc::clone(&layout),
-        ring: producer,
-        distributor: Some(distributor.thread().clone()),
-        writers: Arc::clone(&writers),
-        events: event_producer,
-        stop: Arc::clone(&stop_engine),
-    };
-    let rt = config.realtime.clone();
-    let engine = std::thread::Builder::new()
-        .name("ecmxf-rt".into())
-        .spawn(move || {
-            crate::realtime::apply(&rt);
-            Engine::new(parts).run();
-        })
-        .expect("spawn the engine thread");
-    EngineHandle {
+    let handle = EngineHandle {
         commands,
         outputs,
         telemetry,
@@ -132,10 +111,24 @@ pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
         latest,
         events,
         writers,
-        threads: Mutex::new(vec![engine, distributor]),
+        threads: Mutex::new(Vec::new()),
         stop_engine,
         stop_distributor,
-    }
+    };
+    let inbound = Inbound { commands: command_rx, outputs: output_rx };
+    let outbound = Outbound { ring: producer, events: event_producer, distributor: distributor.thread().clone() };
+    let rt = config.realtime.clone();
+    let engine = Engine::new(link, config, inbound, outbound, &handle);
+    let engine = std::thread::Builder::new()
+        .name("ecmxf-rt".into())
+        .spawn(move || {
+            crate::realtime::apply(&rt);
+            engine.run();
+        })
+        .expect("spawn the engine thread");
+    // The engine thread first: `stop` joins it before the distributor.
+    handle.threads.lock().unwrap_or_else(|e| e.into_inner()).extend([engine, distributor]);
+    handle
 }
 
 impl EngineHandle {

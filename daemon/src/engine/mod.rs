@@ -19,6 +19,7 @@ pub mod cyclic;
 pub mod emergencies;
 pub mod error;
 pub mod events;
+pub mod failure;
 pub mod frames;
 mod handle;
 pub use handle::{EVENT_BACKLOG, EngineHandle, QUEUE_DEPTH, SUBSCRIBER_BACKLOG, spawn};
@@ -48,11 +49,12 @@ use tracing::{error, info, warn};
 
 use crate::config::{Config, WriterGoneAction};
 use crate::link::Link;
-use crate::port::Port;
+use crate::port::{Port, PortError};
 use bringup::bring_up;
 use cyclic::Cyclic;
 use error::{EngineError, NotRunning};
 use events::{Event, EventKind, EventSink};
+use failure::Failure;
 use inputs::InputPublisher;
 use layout::NetworkLayout;
 use network_action::NetworkAction;
@@ -147,58 +149,51 @@ impl<L> std::fmt::Debug for Engine<L> {
     }
 }
 
-/// Everything the engine thread needs.
+/// The engine's ends of its two ways in: one command channel for every
+/// request, and the output writes, the hot path, on their own.
 #[derive(Debug)]
-struct Parts<L> {
-    /// The link.
-    pub link: L,
-    /// The configuration.
-    pub config: Config,
-    /// Requests in.
-    pub commands: Receiver<Command>,
-    /// Output writes in.
-    pub outputs: Receiver<OutputWrite>,
-    /// Status out.
-    pub telemetry: Arc<Telemetry>,
-    /// Layout out (written at bring-up only).
-    pub layout: Arc<Mutex<NetworkLayout>>,
-    /// Input frames out.
-    pub ring: rtrb::Producer<u8>,
-    /// Woken when input frames were published.
-    pub distributor: Option<Thread>,
-    /// Output writer leases.
-    pub writers: Arc<Writers>,
-    /// Supervision events out.
-    pub events: rtrb::Producer<Event>,
-    /// Set when the daemon stops: bring-up and recovery waits end at once.
-    pub stop: Arc<AtomicBool>,
+struct Inbound {
+    commands: Receiver<Command>,
+    outputs: Receiver<OutputWrite>,
+}
+
+/// Where the engine publishes without waiting on a reader: the input-frame
+/// and event rings, drained by the distributor thread it wakes.
+#[derive(Debug)]
+struct Outbound {
+    ring: rtrb::Producer<u8>,
+    events: rtrb::Producer<Event>,
+    distributor: Thread,
 }
 
 impl<L: Link> Engine<L> {
-    /// An engine over its parts.
-    fn new(p: Parts<L>) -> Self {
-        let mut port = Port::new(p.link);
-        port.set_ready_timeout(p.config.ready_timeout());
+    /// An engine over `link`, fed by `inbound`, publishing to `outbound`
+    /// and to what it shares with `handle` (telemetry, layout, writers,
+    /// the stop flag).
+    fn new(link: L, config: Config, inbound: Inbound, outbound: Outbound, handle: &EngineHandle) -> Self {
+        let mut port = Port::new(link);
+        port.set_ready_timeout(config.ready_timeout());
         let epoch = Instant::now();
-        p.telemetry.epoch_monotonic_ns.store(crate::realtime::monotonic_ns(), Relaxed);
-        let events = EventSink::new(p.events, epoch, p.distributor.clone());
+        handle.telemetry.epoch_monotonic_ns.store(crate::realtime::monotonic_ns(), Relaxed);
+        let distributor = Some(outbound.distributor);
+        let events = EventSink::new(outbound.events, epoch, distributor.clone());
         Self {
             port,
-            config: p.config,
-            commands: p.commands,
-            outputs: p.outputs,
-            telemetry: p.telemetry,
-            layout: p.layout,
-            intake: running::Intake::new(InputPublisher::new(p.ring, epoch), epoch),
+            config,
+            commands: inbound.commands,
+            outputs: inbound.outputs,
+            telemetry: Arc::clone(&handle.telemetry),
+            layout: Arc::clone(&handle.layout),
+            intake: running::Intake::new(InputPublisher::new(outbound.ring, epoch), epoch),
             supervisor: supervisor::Supervisor::new(supervisor::RunShape::idle(), 0, epoch),
             held: held::HeldOutputs::default(),
             crc_errors: CounterTotal::default(),
             wkc_errors: CounterTotal::default(),
             emergencies: emergencies::EmergencyWatch::default(),
-            stop: p.stop,
-            distributor: p.distributor,
+            stop: Arc::clone(&handle.stop_engine),
+            distributor,
             held_below_target: false,
-            writers: p.writers,
+            writers: Arc::clone(&handle.writers),
             action: None,
             new_config: None,
             frames: Vec::with_capacity(frames::MAX_STREAMS),
@@ -247,14 +242,17 @@ impl<L: Link> Engine<L> {
                         // A permanent one is said once, by the daemon as it exits.
                         error!(error = %e, "bring-up failed");
                     }
-                    self.telemetry.set_error(format!("bring-up: {e}"));
-                    self.events.emit(EventKind::BringUpFailed(e.to_string()));
-                    if e.is_permanent() {
+                    let permanent = e.is_permanent();
+                    let reopen = matches!(&e, bringup::BringUpError::Port(PortError::Link(_)));
+                    let failure = Failure::BringUp(Arc::new(e));
+                    self.telemetry.set_error(failure.clone());
+                    self.events.emit(EventKind::BringUpFailed(failure));
+                    if permanent {
                         self.telemetry.refused.store(true, Relaxed);
                         return self.stopped();
                     }
-                    if let bringup::BringUpError::Port(p) = &e {
-                        self.reopen_if_needed(&RecoverCause::from_port(p));
+                    if reopen {
+                        self.reopen_link();
                     }
                     if !self.config.recovery.enabled || !self.pause(backoff) {
                         return self.stopped();
@@ -307,7 +305,7 @@ impl<L: Link> Engine<L> {
                         // The client accepts the network as the bring-up finds it.
                         self.telemetry.slaves_seen.store(0, Relaxed);
                     }
-                    self.telemetry.set_error(format!("recovery: {why}"));
+                    self.telemetry.set_error(Failure::Recovery(why.clone()));
                     // Phase first: no one may see "running" while recovering.
                     self.set_phase(Phase::Recovering);
                     self.telemetry.forget_network();
@@ -336,9 +334,12 @@ impl<L: Link> Engine<L> {
     /// next bring-up fails on the link again and tries again after its
     /// back-off.
     fn reopen_if_needed(&mut self, why: &RecoverCause) {
-        if !why.needs_reopen() {
-            return;
+        if why.needs_reopen() {
+            self.reopen_link();
         }
+    }
+
+    fn reopen_link(&mut self) {
         match self.port.link_mut().reopen() {
             Ok(()) => info!(link = %self.port.link_mut().describe(), "link opened again"),
             Err(e) => warn!(error = %e, "link could not be opened again; retrying after the back-off"),

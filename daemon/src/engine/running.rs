@@ -25,7 +25,7 @@ use super::events::EventKind;
 use super::inputs::InputPublisher;
 use super::network_action::NetworkAction;
 use super::slot::{Active, Progress, SlotRequest};
-use super::supervisor::{RecoverCause, RunShape, Supervisor, flow_limit};
+use super::supervisor::{RecoverCause, RunShape, SlaveFault, Supervisor, flow_limit};
 use super::telemetry::{Phase, Telemetry};
 use super::{Command, Engine, Exit, Taken};
 use crate::config::WriterGoneAction;
@@ -38,7 +38,7 @@ const IDLE: Duration = Duration::from_millis(50);
 
 impl From<PortError> for Exit {
     fn from(e: PortError) -> Self {
-        Exit::Recover(RecoverCause::from_port(&e))
+        Exit::Recover(RecoverCause::from_port(e))
     }
 }
 
@@ -96,7 +96,7 @@ impl<L: Link> Engine<L> {
     /// handled: the time is not the cycle's), reports the codes as events,
     /// and returns them as text, e.g. "slave 2 SAFE-OP, AL status 0x001a
     /// (...)". Read failures are left out.
-    fn al_report(&mut self, slaves: usize) -> String {
+    fn al_report(&mut self, slaves: usize) -> Vec<SlaveFault> {
         let faulty: Vec<_> = super::bringup::slave_states(&mut self.port, slaves)
             .into_iter()
             .filter(|&(_, _, code)| code != 0)
@@ -104,7 +104,7 @@ impl<L: Link> Engine<L> {
         for &(slave, state, code) in &faulty {
             self.events.emit(EventKind::AlStatus { slave, state, code });
         }
-        super::bringup::describe_states(&faulty)
+        faulty
     }
 
     /// The cause, with the slaves' AL status codes read and reported where
@@ -118,11 +118,10 @@ impl<L: Link> Engine<L> {
             RecoverCause::SlaveError(_) | RecoverCause::WkcStreak(_) | RecoverCause::ExchangeStopped => {
                 let report = self.al_report(slaves);
                 match why {
-                    RecoverCause::SlaveError(_) if report.is_empty() => {
-                        RecoverCause::SlaveError("no slave reports an AL status code".into())
-                    }
+                    RecoverCause::SlaveError(_) if report.is_empty() => RecoverCause::SlaveError(Vec::new()),
                     _ if !report.is_empty() => {
-                        warn!(symptom = %why, slaves = %report, "AL status");
+                        let slaves = super::bringup::describe_states(&report);
+                        warn!(symptom = %why, slaves = %slaves, "AL status");
                         RecoverCause::SlaveError(report)
                     }
                     other => other,

@@ -7,6 +7,7 @@
 //! generation or recovery count changes, and at least every
 //! [`ANNOUNCE_EVERY`] while it runs, so counters reach waiters too.
 
+use super::failure::Failure;
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU8, AtomicU32, AtomicU64, Ordering::Relaxed};
 use std::time::Duration;
@@ -132,7 +133,7 @@ pub struct Telemetry {
     pub epoch_monotonic_ns: AtomicU64,
     /// The last bring-up or recovery reason; written only when something
     /// fails, never on the cycle path.
-    last_error: Mutex<Option<String>>,
+    last_error: Mutex<Option<Failure>>,
     /// Snapshots for waiters (see the module comment).
     changes: watch::Sender<Snapshot>,
     /// The latest write-to-wire latencies of client output writes.
@@ -340,12 +341,12 @@ impl Telemetry {
     }
 
     /// Records why bring-up failed or recovery started.
-    pub fn set_error(&self, e: String) {
+    pub fn set_error(&self, e: Failure) {
         *self.last_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
     }
 
     /// The last failure, if any.
-    pub fn last_error(&self) -> Option<String> {
+    pub fn last_error(&self) -> Option<Failure> {
         self.last_error.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 

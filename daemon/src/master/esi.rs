@@ -8,8 +8,8 @@ use std::collections::HashMap;
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};
 
-use ecmxf_devices::eni::Eni;
-use ecmxf_devices::esi::{EsiDevice, EsiFile};
+use ecmxf_devices::eni::{Eni, EniError};
+use ecmxf_devices::esi::{EsiDevice, EsiError, EsiFile};
 
 use super::Master;
 
@@ -34,20 +34,83 @@ impl EsiRef {
     }
 }
 
+/// Why a device description the configuration names cannot be used:
+/// which file, and the cause with its type.
+#[derive(Clone, Debug)]
+pub enum DescriptionError {
+    /// The file could not be read.
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// The OS's error.
+        error: Arc<std::io::Error>,
+    },
+    /// The ESI file does not parse, or has no device for the slave.
+    Esi {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong.
+        error: EsiError,
+    },
+    /// The ESI is another vendor's.
+    OtherVendor {
+        /// The file.
+        path: PathBuf,
+        /// Its vendor.
+        file: u32,
+        /// The slave's.
+        slave: u32,
+    },
+    /// The ENI does not parse.
+    Eni {
+        /// The file.
+        path: PathBuf,
+        /// What is wrong, and where.
+        error: EniError,
+    },
+    /// The parsing thread stopped (panicked or was cancelled).
+    Stopped(PathBuf),
+}
+
+impl std::fmt::Display for DescriptionError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Read { path, error } => write!(f, "ESI {}: {error}", path.display()),
+            Self::Esi { path, error } => write!(f, "ESI {}: {error}", path.display()),
+            Self::OtherVendor { path, file, slave } => {
+                write!(f, "ESI {}: vendor {file:#010x}, the slave's is {slave:#010x}", path.display())
+            }
+            Self::Eni { path, error } => write!(f, "ENI {}: {error}", path.display()),
+            Self::Stopped(path) => write!(f, "{}: parsing stopped", path.display()),
+        }
+    }
+}
+
+impl std::error::Error for DescriptionError {
+    fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
+        match self {
+            Self::Read { error, .. } => Some(&**error),
+            Self::Esi { error, .. } => Some(error),
+            Self::Eni { error, .. } => Some(error),
+            Self::OtherVendor { .. } | Self::Stopped(_) => None,
+        }
+    }
+}
+
 impl EsiLibrary {
     /// The file at `path`, parsed (on a blocking thread the first time).
-    pub async fn file(&self, path: &Path) -> Result<Arc<EsiFile>, String> {
+    pub async fn file(&self, path: &Path) -> Result<Arc<EsiFile>, DescriptionError> {
         if let Some(f) = self.files.lock().unwrap_or_else(|e| e.into_inner()).get(path) {
             return Ok(Arc::clone(f));
         }
         let owned = path.to_path_buf();
         let parsed = tokio::task::spawn_blocking(move || {
-            let xml = ecmxf_devices::esi::read_xml(&owned).map_err(|e| e.to_string())?;
-            EsiFile::parse(&xml).map_err(|e| e.to_string())
+            let xml = ecmxf_devices::esi::read_xml(&owned)
+                .map_err(|e| DescriptionError::Read { path: owned.clone(), error: Arc::new(e) })?;
+            EsiFile::parse(&xml).map_err(|error| DescriptionError::Esi { path: owned, error })
         })
         .await
-        .map_err(|e| format!("parsing stopped: {e}"))?
-        .map_err(|e| format!("ESI {}: {e}", path.display()))?;
+        .map_err(|_| DescriptionError::Stopped(path.to_path_buf()))??;
         for skipped in &parsed.skipped {
             tracing::warn!(esi = %path.display(), "{skipped}");
         }
@@ -58,16 +121,25 @@ impl EsiLibrary {
 
     /// The device of the file at `path` with this identity: the same
     /// revision when the file has it, else the highest of that product.
-    pub async fn device(&self, path: &Path, vendor: u32, product: u32, revision: u32) -> Result<EsiRef, String> {
+    pub async fn device(
+        &self,
+        path: &Path,
+        vendor: u32,
+        product: u32,
+        revision: u32,
+    ) -> Result<EsiRef, DescriptionError> {
         let file = self.file(path).await?;
-        let fail = |why: String| format!("ESI {}: {why}", path.display());
         if file.vendor_id != vendor {
-            return Err(fail(format!("vendor {:#010x}, the slave's is {vendor:#010x}", file.vendor_id)));
+            return Err(DescriptionError::OtherVendor {
+                path: path.to_path_buf(),
+                file: file.vendor_id,
+                slave: vendor,
+            });
         }
         let device = file
             .device(product, Some(revision))
             .or_else(|_| file.device(product, None))
-            .map_err(|e| fail(e.to_string()))?;
+            .map_err(|error| DescriptionError::Esi { path: path.to_path_buf(), error })?;
         let at = file.devices.iter().position(|d| std::ptr::eq(d, device)).unwrap_or(0);
         for w in &device.warnings {
             tracing::warn!(esi = %path.display(), device = %device.type_name, "{w}");
@@ -78,15 +150,16 @@ impl EsiLibrary {
 
 impl EsiLibrary {
     /// The ENI at `path`, parsed (on a blocking thread the first time).
-    pub async fn eni(&self, path: &Path) -> Result<Arc<Eni>, String> {
+    pub async fn eni(&self, path: &Path) -> Result<Arc<Eni>, DescriptionError> {
         if let Some(f) = self.enis.lock().unwrap_or_else(|e| e.into_inner()).get(path) {
             return Ok(Arc::clone(f));
         }
         let owned = path.to_path_buf();
-        let parsed = tokio::task::spawn_blocking(move || Eni::load(&owned).map_err(|e| e.to_string()))
-            .await
-            .map_err(|e| format!("parsing stopped: {e}"))?
-            .map_err(|e| format!("ENI {}: {e}", path.display()))?;
+        let parsed = tokio::task::spawn_blocking(move || {
+            Eni::load(&owned).map_err(|error| DescriptionError::Eni { path: owned, error })
+        })
+        .await
+        .map_err(|_| DescriptionError::Stopped(path.to_path_buf()))??;
         let eni = Arc::new(parsed);
         self.enis.lock().unwrap_or_else(|e| e.into_inner()).insert(path.to_path_buf(), Arc::clone(&eni));
         Ok(eni)
@@ -113,7 +186,7 @@ impl Master {
 
     /// The ESI device configured for `slave`, matched to the identity the
     /// slave reported: `None` when no ESI is configured for it.
-    pub async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, String>> {
+    pub async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, DescriptionError>> {
         let path = {
             let config = self.config.lock().unwrap_or_else(|e| e.into_inner());
             config.slaves.get(usize::from(slave)).and_then(|c| c.esi.clone())?

@@ -25,9 +25,9 @@ use crate::engine::slot::{Job, SlotRequest};
 use crate::engine::{Command, EngineHandle};
 use crate::link::SimHandle;
 use crate::link::{Link, LinkError};
-use crate::outputs::OutputSender;
-pub use crate::outputs::OutputWriter;
 use ecmxf_wire::EcatState;
+use outputs::OutputSender;
+pub use outputs::OutputWriter;
 pub use transactions::RawAnswer;
 
 pub mod esi;
@@ -37,6 +37,7 @@ mod leases;
 pub mod mailbox;
 mod network;
 pub mod objects;
+pub mod outputs;
 pub mod pdos;
 pub mod sii;
 pub mod states;
@@ -53,12 +54,20 @@ pub use crate::engine::{EVENT_BACKLOG, QUEUE_DEPTH, SUBSCRIBER_BACKLOG};
 // here so that they import the master alone (issue 30): errors, phases and
 // snapshots, events, the layout, frame streams and transfer progress.
 pub use crate::engine::error::{EngineError, NotRunning, WrongState};
-pub use crate::engine::events::{Event, EventKind};
+pub use crate::engine::events::{Event, EventKind, EventLog};
+pub use crate::engine::failure::Failure;
 pub use crate::engine::frames::{FrameError, FrameProducer, MAX_STREAMS, Played};
 pub use crate::engine::layout::{NetworkLayout, SlaveSummary};
 pub use crate::engine::link_budget;
 pub use crate::engine::slot::{Immediate, TransferProgress};
+pub use crate::engine::supervisor::RecoverCause;
 pub use crate::engine::telemetry::{Phase, Snapshot};
+
+/// The steps of bring-up, for `ecmxfd probe`: it walks them one by one on a
+/// chip no engine runs, to say which one fails and why.
+pub mod bring_up_steps {
+    pub use crate::engine::bringup::{BringUpError, check_identity, identify, init_network, number};
+}
 pub use leases::{Lease, LeaseError, Leases};
 
 /// [`Master::verdict`]: the health, and the input age it was judged on.
@@ -456,7 +465,7 @@ impl Master {
     }
 
     /// Why bring-up last failed or recovery last started.
-    pub fn last_error(&self) -> Option<String> {
+    pub fn last_error(&self) -> Option<Failure> {
         self.engine.telemetry.last_error()
     }
 

@@ -70,7 +70,8 @@ impl Master {
                     Ok(e) => {
                         if let EventKind::BringUpFailed(why) = e.kind {
                             if self.status().config_generation >= generation {
-                                return EngineError::Failed(format!("bring-up with the new configuration: {why}"));
+                                let waited_for = "bring-up with the new configuration";
+                                return EngineError::NotUp { waited_for, failure: why };
                             }
                         }
                     }
@@ -122,8 +123,8 @@ impl Master {
             Ok(s) if s.phase != Phase::Stopped || done(&s) => Ok(()),
             Ok(_) => Err(EngineError::Unavailable(NotRunning::Stopped)),
             Err(s) => Err(match self.last_error() {
-                Some(why) if s.phase != Phase::Running => {
-                    EngineError::Failed(format!("the network is not back up yet: {why}"))
+                Some(failure) if s.phase != Phase::Running => {
+                    EngineError::NotUp { waited_for: "the network is not back up yet", failure }
                 }
                 _ => EngineError::Timeout,
             }),

@@ -92,7 +92,8 @@ fn source_lacks(e: &EngineError) -> bool {
         EngineError::Failed(_)
             | EngineError::SdoAbort { .. }
             | EngineError::Refused(_)
-            | EngineError::BadDeviceData(_)
+            | EngineError::BadDeviceData { .. }
+            | EngineError::BadAnswer { .. }
             | EngineError::WrongState(crate::engine::error::WrongState::NoCoe { .. })
     )
 }

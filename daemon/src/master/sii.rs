@@ -10,7 +10,7 @@
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 
-use ecmxf_devices::sii::{Sii, category};
+use ecmxf_devices::sii::{Sii, SiiError, category};
 use tokio::sync::OnceCell;
 
 use super::{Identity, Master};
@@ -90,13 +90,9 @@ impl Master {
             }
             let len = u32::from(head[1]);
             if at + 2 + len > size {
-                return Err(EngineError::BadDeviceData(format!(
-                    "slave {slave}'s SII is corrupt: category {:#06x} at byte offset {:#06x} is {} bytes long and runs past the EEPROM's size of {} bytes (word 0x3E)",
-                    head[0],
-                    at * 2,
-                    len * 2,
-                    size * 2
-                )));
+                let (offset, len, size) = (at as usize * 2, len as usize * 2, size as usize * 2);
+                let error = SiiError::PastEepromSize { kind: head[0], offset, len, size };
+                return Err(EngineError::BadDeviceData { slave, error });
             }
             if which.wants(head[0]) {
                 let body = self.eeprom_read_words(slave, (at + 2) as u16, len as u16, None).await?;
@@ -113,7 +109,7 @@ impl Master {
     pub async fn sii(&self, slave: u8, which: Categories<'_>) -> Result<Sii, EngineError> {
         let words = self.sii_words(slave, which).await?;
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
-        Sii::parse(&bytes).map_err(|e| EngineError::BadDeviceData(format!("slave {slave}'s SII: {e}")))
+        Sii::parse(&bytes).map_err(|error| EngineError::BadDeviceData { slave, error })
     }
 
     /// The categories `which` asks for, read once per slave identity (see

@@ -136,7 +136,8 @@ impl Master {
     /// [`Master::slave_name`] decode it for callers.
     pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
         let d = self.request(SlotRequest::SlaveInfo { slave, item }, None).await?;
-        SlaveInfo::decode(item, &d).map_err(|e| EngineError::Failed(format!("{item} of slave {slave}: {e}")))?;
+        SlaveInfo::decode(item, &d)
+            .map_err(|error| EngineError::BadAnswer { what: format!("{item} of slave {slave}"), error })?;
         Ok(d)
     }
 
@@ -176,9 +177,10 @@ impl Master {
         self.check_coe(slave).await?;
         let d = self.request(SlotRequest::PdoConfigRead { slave, assign_index }, timeout).await?;
         let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
-        PdoConfigReply::decode(&fields, &d)
-            .map(|r| r.0)
-            .map_err(|e| EngineError::Failed(format!("PDO assignment {assign_index:#06x} of slave {slave}: {e}")))
+        PdoConfigReply::decode(&fields, &d).map(|r| r.0).map_err(|error| EngineError::BadAnswer {
+            what: format!("PDO assignment {assign_index:#06x} of slave {slave}"),
+            error,
+        })
     }
 
     /// Sends one raw EtherCAT datagram and returns what came back. A reading

@@ -22,8 +22,8 @@ use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::watch;
 
-use crate::engine::telemetry::Phase;
 use crate::master::Master;
+use crate::master::Phase;
 
 mod histogram;
 pub use histogram::Histogram;

@@ -12,7 +12,7 @@
 
 use roxmltree::Node;
 
-use super::{Eni, EniError, child, children, fail, number};
+use super::{Eni, EniError, child, children, fail, line_of, number};
 use crate::esi::{EsiDevice, EsiPdo, EsiSm, parse_pdo};
 use crate::od::ObjectDictionary;
 use crate::sii::{protocol, sm_type};
@@ -194,7 +194,7 @@ pub(super) fn process_image(node: Node<'_, '_>) -> Result<Vec<EniVariable>, EniE
                 bit_offset: required("BitOffs")?,
                 bit_size: required("BitSize")?,
                 data_type: child(v, "DataType").and_then(|n| n.text()).unwrap_or("").trim().to_string(),
-                line: super::line_of(v),
+                line: line_of(v),
                 name,
             });
         }

@@ -350,3 +350,25 @@ pub fn coupler(serial: u32) -> Slave {
     });
     Slave::new(eeprom, ObjectDictionary::new(), Device::Passive, false)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::net::esm::AlState;
+    use ecmxf_devices::sii::protocol;
+    use ecmxf_wire::payload::sdo::SdoAbortCode;
+
+    #[test]
+    fn a_slave_whose_sii_lists_no_coe_never_answers_coe() {
+        let mut drive = ti_three_axis(1, 1);
+        drive.esm.state = AlState::PreOp;
+        assert!(drive.sdo_upload(0x1018, 1, false).is_ok());
+        // The same device with FoE and SoE only in its SII (word 0x1C).
+        let mut eeprom = drive.eeprom.clone();
+        eeprom[0x38..0x3A].copy_from_slice(&(protocol::FOE | protocol::SOE).to_le_bytes());
+        let mut other = Slave::new(eeprom, drive.od.clone(), drive.device.clone(), drive.has_dc);
+        other.esm.state = AlState::PreOp;
+        assert!(other.has_mailbox && !other.has_coe);
+        assert_eq!(other.sdo_upload(0x1018, 1, false), Err(SdoAbortCode::TIMEOUT));
+    }
+}

@@ -555,7 +555,7 @@ impl Active {
                 // with a nonzero code is not this read's value.
                 match a.answer_to(&SdoGet) {
                     Ok(SdoGetReply { status: 0, data }) => Ok(fill(&mut self.buffer, &[data])),
-                    Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
+                    Err(error) => Err(EngineError::BadAnswer { what: self.describe(), error }),
                     Ok(SdoGetReply { status: code, .. }) => {
                         let what = self.request.to_string();
                         Err(EngineError::Failed(format!("{what}: SDO_GET reports error code {code}")))
@@ -632,7 +632,7 @@ impl Active {
             (SlotRequest::Raw { .. }, true) => Err(EngineError::Failed(self.describe())),
             (SlotRequest::Raw { .. }, false) => match port.call(&RawGet)?.answer_to(&RawGet) {
                 Ok(r) => Ok(fill(&mut self.buffer, &[&r.working_counter.to_le_bytes(), r.data])),
-                Err(e) => Err(EngineError::Failed(format!("{}: unreadable answer: {e}", self.describe()))),
+                Err(error) => Err(EngineError::BadAnswer { what: self.describe(), error }),
             },
             // Handled above.
             (SlotRequest::FoeWrite { .. } | SlotRequest::FoeRead { .. }, _) => Ok(Vec::new()),

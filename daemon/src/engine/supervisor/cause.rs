@@ -2,23 +2,51 @@
 //! events (`EventKind::Recovering`), the log and the API (`Event.cause`).
 
 use std::fmt;
+use std::sync::Arc;
 use std::time::Duration;
 
+use ecmxf_wire::EcatState;
+
 use crate::port::PortError;
+
+/// A port error carried by a cause, shared (it holds an I/O error, which
+/// cannot be copied) and kept with its type.
+#[derive(Clone, Debug)]
+pub struct PortFault(pub Arc<PortError>);
+
+/// The same fault, or one that reads the same (I/O errors have no
+/// equality of their own).
+impl PartialEq for PortFault {
+    fn eq(&self, other: &Self) -> bool {
+        Arc::ptr_eq(&self.0, &other.0) || self.0.to_string() == other.0.to_string()
+    }
+}
+
+impl Eq for PortFault {}
+
+impl fmt::Display for PortFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        self.0.fmt(f)
+    }
+}
+
+/// (position, state, AL status code) of a slave at fault, as it answered.
+pub type SlaveFault = (u8, EcatState, u16);
 
 /// Why the engine left the running loop to bring the network up again.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub enum RecoverCause {
     /// The link to the chip failed (I/O error, far end gone): it is opened
     /// again before the next bring-up.
-    Link(String),
+    Link(PortFault),
     /// The chip stopped answering in time or coherently (INT0 stuck, no
     /// intact answer).
-    Chip(String),
+    Chip(PortFault),
     /// The chip's status is back to its power-up values.
     ChipReset,
-    /// The network state is ERROR; which slaves and their AL status codes.
-    SlaveError(String),
+    /// The network state is ERROR; which slaves and their AL status codes
+    /// (empty until they are read, or when none reports a code).
+    SlaveError(Vec<SlaveFault>),
     /// The number of slaves on the ring changed.
     SlaveCount {
         /// Slaves at bring-up.
@@ -48,10 +76,10 @@ pub enum RecoverCause {
 
 impl RecoverCause {
     /// The cause of a failed exchange.
-    pub fn from_port(e: &PortError) -> Self {
+    pub fn from_port(e: PortError) -> Self {
         match e {
-            PortError::Link(l) => Self::Link(l.to_string()),
-            other => Self::Chip(other.to_string()),
+            e @ PortError::Link(_) => Self::Link(PortFault(Arc::new(e))),
+            other => Self::Chip(PortFault(Arc::new(other))),
         }
     }
 
@@ -84,7 +112,12 @@ impl fmt::Display for RecoverCause {
             Self::Link(e) => write!(f, "link failed: {e}"),
             Self::Chip(e) => write!(f, "chip: {e}"),
             Self::ChipReset => f.write_str("chip reset (status back to power-up values)"),
-            Self::SlaveError(s) => write!(f, "a slave reports an error or is missing: {s}"),
+            Self::SlaveError(s) if s.is_empty() => {
+                f.write_str("a slave reports an error or is missing: no slave reports an AL status code")
+            }
+            Self::SlaveError(s) => {
+                write!(f, "a slave reports an error or is missing: {}", crate::engine::bringup::describe_states(s))
+            }
             Self::SlaveCount { from, to } => write!(f, "slave count changed from {from} to {to}"),
             Self::WkcStreak(d) => write!(f, "working-counter errors for {d:?}: a slave is not exchanging"),
             Self::ExchangeStopped => f.write_str("process-data exchange stopped (working-counter limit)"),
@@ -114,7 +147,14 @@ mod tests {
             c.to_string(),
             "process data stalled: no input frame for 80 ms (limit 62 ms) while the chip answers"
         );
-        assert!(RecoverCause::Link("link closed".into()).needs_reopen());
+        let closed = std::io::Error::from(std::io::ErrorKind::BrokenPipe);
+        let link = RecoverCause::from_port(PortError::Link(crate::link::LinkError::io("read", closed)));
+        assert!(link.needs_reopen(), "{link}");
+        assert!(!RecoverCause::from_port(PortError::Aborted).needs_reopen());
+        assert_eq!(
+            RecoverCause::SlaveError(vec![(2, EcatState::SafeOp, 0x1b)]).to_string(),
+            "a slave reports an error or is missing: slave 2 SAFEOP, AL status 0x001b (sync manager watchdog)"
+        );
         assert!(!RecoverCause::ChipReset.needs_reopen());
     }
 }

@@ -25,7 +25,7 @@ use std::time::{Duration, Instant};
 use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 use ecmxf_wire::{EcatState, ResponseHeader};
 
-pub use cause::RecoverCause;
+pub use cause::{RecoverCause, SlaveFault};
 #[cfg(test)]
 use flow::STALL_ANSWERS;
 pub use flow::{FlowWatch, flow_limit};
@@ -113,7 +113,7 @@ impl Supervisor {
             return Err(RecoverCause::ChipReset);
         }
         if h.ecat_state == EcatState::Error {
-            return Err(RecoverCause::SlaveError(String::new()));
+            return Err(RecoverCause::SlaveError(Vec::new()));
         }
         if held {
             self.wkc_streak = None;
