@@ -17,6 +17,9 @@
 //!   validate.
 //! - [`payload`]: one typed request/reply per command code, behind the
 //!   [`Request`] and [`Reply`] traits; [`AnyRequest`] parses any command.
+//! - [`mbx`]: EtherCAT mailbox messages (ETG.1000.4/.6): header, CoE, SDO
+//!   transfers and SDO Information, for what the host sends a slave's
+//!   mailbox through raw datagrams and what an ETG.8200 gateway carries.
 //! - [`error`]: the three error enums (encode, decode, payload).
 #![no_std]
 #![forbid(unsafe_code)]
@@ -34,6 +37,7 @@ pub mod flags;
 pub mod framing;
 pub mod header;
 pub mod limits;
+pub mod mbx;
 pub mod packet;
 pub mod payload;
 
