@@ -26,6 +26,9 @@ outputs SLAVE                   the output bytes the slave holds (hex) and its s
 record SLAVE|all [MAX]          record the output frames played from now (MAX, default 100000)
 recorded [FROM [COUNT]]         the recorded frames: cycle, bytes (hex), \"repeat\" when the RxFIFO was empty
 record off                      stop recording and forget the frames
+mailbox SLAVE                   the slave's mailbox counters: requests, duplicates, answers read, repeats, waiting
+mailbox-lose SLAVE N            the next N answers in its mailbox are read out and lost on the way back
+mailbox-emergency SLAVE N       the next N mailbox requests are answered after a CoE emergency
 help                            this list";
 
 fn num(s: Option<&str>, what: &str) -> Result<u64, String> {
@@ -253,6 +256,30 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 out.push_str(&format!("\n{} {hex}{}", f.cycle, if f.repeated { " repeat" } else { "" }));
             }
             Ok(out)
+        }
+        "mailbox" => {
+            let i = slave_index(chip, w.next())?;
+            let m = &chip.net.slaves[i].mailboxes;
+            let s = m.stats;
+            Ok(format!(
+                "ok requests={} duplicates={} answers_read={} repeats={} waiting={}",
+                s.requests,
+                s.duplicates,
+                s.answers_read,
+                s.repeats,
+                m.waiting()
+            ))
+        }
+        "mailbox-lose" | "mailbox-emergency" => {
+            let i = slave_index(chip, w.next())?;
+            let n = num(w.next(), "count")? as u32;
+            let faults = &mut chip.net.slaves[i].mailboxes.faults;
+            if cmd == "mailbox-lose" {
+                faults.lose_answers = n;
+            } else {
+                faults.emergency_first = n;
+            }
+            ok()
         }
         other => Err(format!("unknown command {other:?}; try help")),
     }

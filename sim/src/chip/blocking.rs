@@ -349,6 +349,7 @@ impl Chip {
             }
             BlockingOp::Sdo { slave, index, sub, complete, write } => {
                 let s = &mut self.net.slaves[slave];
+                s.mailboxes.chip_request();
                 let result = match write {
                     Some(data) => s.sdo_download(index, sub, complete, &data).map(|()| Vec::new()),
                     None => s.sdo_upload(index, sub, complete),
@@ -550,10 +551,12 @@ impl Chip {
         for i in targets.into_iter().filter(|i| *i < reachable) {
             let Some(s) = self.net.slaves.get_mut(i) else { continue };
             if write {
-                s.write_registers(head.ado, &out);
+                s.esc_write(head.ado, &out);
             } else {
                 let mut buf = vec![0u8; len];
-                s.read_registers(head.ado, &mut buf);
+                if !s.esc_read(head.ado, &mut buf) {
+                    continue;
+                }
                 if head.command == DatagramCommand::Brd {
                     for (o, b) in out.iter_mut().zip(&buf) {
                         *o |= b;

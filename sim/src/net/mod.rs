@@ -5,9 +5,11 @@ pub mod cia402;
 pub mod eni_slave;
 pub mod esi;
 pub mod esm;
+pub mod mailbox;
 pub mod od;
 pub mod pdo_map;
 pub mod profiles;
+pub mod sdo_info;
 pub mod sii_slave;
 pub mod slave;
 

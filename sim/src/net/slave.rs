@@ -11,6 +11,7 @@ use super::esm::{
     AL_INVALID_INPUTS, AL_INVALID_MAILBOX, AL_INVALID_OUTPUTS, AL_INVALID_SYNC_CYCLE, AL_SM_WATCHDOG, AlState, Esm,
     TransitionCheck,
 };
+use super::mailbox::{Mailboxes, SM1_ACTIVATE, SM1_PDI_CONTROL, SM1_STATUS};
 use super::od::{ObjectDictionary, SdoResult, SdoServer};
 use super::pdo_map::{self, Layout};
 use super::sii::Sii;
@@ -92,6 +93,10 @@ pub struct Slave {
     pub present: bool,
     /// The DC cycle the master configured, ns.
     pub dc_cycle_ns: u32,
+    /// The ESC's two mailboxes, for raw datagrams from the master.
+    pub mailboxes: Mailboxes,
+    /// Whether it answers CoE SDO Information (SII CoE details bit 1).
+    pub sdo_info: bool,
 }
 
 /// Register addresses the simulation keeps live.
@@ -166,6 +171,8 @@ impl Slave {
             emergencies: Vec::new(),
             present: true,
             dc_cycle_ns: 0,
+            mailboxes: Mailboxes::new(sii.mailbox),
+            sdo_info: sii.general.as_ref().is_some_and(|g| g.coe_details & 0x02 != 0),
         };
         s.relayout();
         s.sync_registers();
@@ -266,6 +273,145 @@ impl Slave {
     pub fn read_registers(&self, ado: u16, out: &mut [u8]) {
         for (i, b) in out.iter_mut().enumerate() {
             *b = *self.registers.get(usize::from(ado) + i).unwrap_or(&0);
+        }
+    }
+
+    /// A datagram's write into the ESC: its mailboxes (a request handed to
+    /// the slave when the receive mailbox's last byte is written) and its
+    /// registers (SM1's repeat request among them).
+    pub fn esc_write(&mut self, ado: u16, data: &[u8]) {
+        if self.mailboxes.touches(ado, data.len()) {
+            if let Some(request) = self.mailboxes.write(ado, data) {
+                self.take_mailbox(&request);
+            }
+        } else {
+            self.write_registers(ado, data);
+            let at = usize::from(SM1_ACTIVATE);
+            if usize::from(ado) <= at && at < usize::from(ado) + data.len() {
+                let ack = self.mailboxes.repeat_request(self.registers[at] & 0x02 != 0);
+                let pdi = &mut self.registers[usize::from(SM1_PDI_CONTROL)];
+                *pdi = (*pdi & !0x02) | if ack { 0x02 } else { 0 };
+            }
+        }
+        self.sync_mailbox_status();
+    }
+
+    /// A datagram's read of the ESC; false when it is not counted (an
+    /// empty send mailbox, or the receive mailbox, which the master does
+    /// not read).
+    pub fn esc_read(&mut self, ado: u16, out: &mut [u8]) -> bool {
+        self.sync_mailbox_status();
+        if self.mailboxes.touches(ado, out.len()) {
+            let counted = self.mailboxes.read(ado, out);
+            self.sync_mailbox_status();
+            return counted;
+        }
+        self.read_registers(ado, out);
+        true
+    }
+
+    /// SM1's status: "mailbox full" (bit 3) while an answer waits.
+    fn sync_mailbox_status(&mut self) {
+        let full = self.mailboxes.full();
+        let status = &mut self.registers[usize::from(SM1_STATUS)];
+        *status = (*status & !0x08) | if full { 0x08 } else { 0 };
+    }
+
+    /// A request the receive mailbox handed over (ETG.1000.4 5.6): CoE
+    /// SDO transfers and SDO Information are answered, anything else with
+    /// a mailbox error. Below PRE-OP the mailbox is not running: nothing
+    /// answers.
+    fn take_mailbox(&mut self, request: &[u8]) {
+        use ecmxf_wire::mbx::{MailboxError, MailboxType, Message};
+        if !self.present || !self.has_mailbox || matches!(self.esm.state, AlState::Init | AlState::Boot) {
+            return;
+        }
+        let Ok(m) = Message::parse(request) else {
+            self.mailboxes.post(MailboxType::Error, 0, &MailboxError::SYNTAX.body());
+            return;
+        };
+        let address = m.header.address;
+        if self.mailboxes.faults.emergency_first > 0 {
+            self.mailboxes.faults.emergency_first -= 1;
+            let e =
+                ecmxf_wire::mbx::coe::CoeEmergency { error_code: 0xFF00, error_register: 0x80, data: [1, 2, 3, 4, 5] };
+            let mut body = [0u8; 10];
+            if e.encode(&mut body).is_ok() {
+                self.mailboxes.post(MailboxType::Coe, address, &body);
+            }
+        }
+        match m.header.kind {
+            MailboxType::Coe if self.has_coe => self.take_coe(address, m.body),
+            _ => self.mailboxes.post(MailboxType::Error, address, &MailboxError::UNSUPPORTED_PROTOCOL.body()),
+        }
+    }
+
+    fn take_coe(&mut self, address: u16, body: &[u8]) {
+        use ecmxf_wire::mbx::coe::{CoeHeader, CoeService};
+        use ecmxf_wire::mbx::sdo::{SdoRequest, SdoResponse};
+        use ecmxf_wire::mbx::sdo_info::{InfoFragment, InfoHeader, InfoOpcode, InfoRequest};
+        use ecmxf_wire::mbx::{MailboxError, MailboxType};
+        let tx_size = usize::from(self.mailboxes.area.tx_size);
+        let mut out = vec![0u8; tx_size.max(64)];
+        match CoeHeader::decode(body).map(|h| h.service) {
+            Ok(CoeService::SdoRequest) => {
+                let answer = match SdoRequest::decode(body) {
+                    Ok(SdoRequest::Upload { index, subindex, complete_access }) => {
+                        match self.sdo_upload(index, subindex, complete_access) {
+                            // Size, then the data, in one message.
+                            Ok(data) if data.len() + 16 <= tx_size => {
+                                let r = SdoResponse::Uploaded { index, subindex, complete_access, data: &data };
+                                r.encode(&mut out)
+                            }
+                            Ok(_) => {
+                                SdoResponse::Abort { index, subindex, code: SdoAbortCode::GENERAL.0 }.encode(&mut out)
+                            }
+                            Err(code) => SdoResponse::Abort { index, subindex, code: code.0 }.encode(&mut out),
+                        }
+                    }
+                    Ok(SdoRequest::Download { index, subindex, complete_access, data }) => {
+                        let data = data.to_vec();
+                        match self.sdo_download(index, subindex, complete_access, &data) {
+                            Ok(()) => SdoResponse::Downloaded { index, subindex }.encode(&mut out),
+                            Err(code) => SdoResponse::Abort { index, subindex, code: code.0 }.encode(&mut out),
+                        }
+                    }
+                    Err(_) => {
+                        let (index, subindex) = (
+                            u16::from_le_bytes([*body.get(3).unwrap_or(&0), *body.get(4).unwrap_or(&0)]),
+                            *body.get(5).unwrap_or(&0),
+                        );
+                        let code = SdoAbortCode::COMMAND_SPECIFIER.0;
+                        SdoResponse::Abort { index, subindex, code }.encode(&mut out)
+                    }
+                };
+                if let Ok(n) = answer {
+                    self.mailboxes.post(MailboxType::Coe, address, &out[..n]);
+                }
+            }
+            Ok(CoeService::SdoInformation) if self.sdo_info => {
+                let Ok(request) = InfoRequest::decode(body) else {
+                    self.mailboxes.post(MailboxType::Error, address, &MailboxError::INVALID_HEADER.body());
+                    return;
+                };
+                match super::sdo_info::answer(&self.od, request) {
+                    Ok((opcode, payload)) => {
+                        for f in InfoFragment::split(opcode, &payload, tx_size) {
+                            if let Ok(n) = f.encode(&mut out) {
+                                self.mailboxes.post(MailboxType::Coe, address, &out[..n]);
+                            }
+                        }
+                    }
+                    Err(code) => {
+                        let payload = code.0.to_le_bytes();
+                        let f = InfoFragment { header: InfoHeader::whole(InfoOpcode::Error), payload: &payload };
+                        if let Ok(n) = f.encode(&mut out) {
+                            self.mailboxes.post(MailboxType::Coe, address, &out[..n]);
+                        }
+                    }
+                }
+            }
+            _ => self.mailboxes.post(MailboxType::Error, address, &MailboxError::SERVICE_NOT_SUPPORTED.body()),
         }
     }
 
