@@ -132,10 +132,15 @@ pub enum Command {
     Upload(Upload),
     /// Write an SDO: `download -p 1 0x6060 0 8`.
     Download(Download),
-    /// A slave's object dictionary (from its ESI, or probed).
+    /// A slave's object dictionary: as the slave describes it (CoE SDO
+    /// Information), else from its ESI, else probed.
     Sdos {
         #[command(flatten)]
         slave: Position,
+        /// Only this source: the device itself, its ESI, or probing
+        /// standard objects (default: the best there is).
+        #[arg(long, value_enum)]
+        source: Option<DictionarySource>,
     },
     /// The SII EEPROM: read, write (with backup and verify), dump, decode.
     #[command(subcommand)]
@@ -761,4 +766,15 @@ mod tests {
         assert_eq!(split("ecmxfctl reg read -p 0 0x130:2"), "ecmxfctl reg read -p 0 0x130:2");
         assert_eq!(split("ecmxfctl upload -- 0x1018:01"), "ecmxfctl upload -- 0x1018:01");
     }
+}
+
+/// Where `sdos` takes a dictionary from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq, ValueEnum)]
+pub enum DictionarySource {
+    /// The slave's own description (CoE SDO Information).
+    Device,
+    /// The ESI file the configuration names for the slave.
+    Esi,
+    /// Standard objects probed with SDO uploads.
+    Probe,
 }

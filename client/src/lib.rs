@@ -117,7 +117,7 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
         Command::States { args, no_wait } => out.report(&states::run(&api, args, *no_wait).await?)?,
         Command::Upload(u) => out.report(&sdo::upload(&api, u).await?)?,
         Command::Download(d) => out.report(&sdo::download(&api, d).await?)?,
-        Command::Sdos { slave } => out.report(&sdo::sdos(&api, slave.position).await?)?,
+        Command::Sdos { slave, source } => out.report(&sdo::sdos(&api, slave.position, *source).await?)?,
         Command::Sii(c) => sii::run(&api, out, c).await?,
         Command::Pdos { position } => out.report(&pdo::fetch(&api, *position).await?)?,
         Command::Data { entries, variables, raw } => {

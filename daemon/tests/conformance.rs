@@ -16,7 +16,10 @@
 //! tests/tests/conformance.rs. Skipped without the fixtures unless
 //! ECMXF_REQUIRE_FIXTURES is set.
 
-use std::path::{Path, PathBuf};
+mod common;
+use common::fixtures;
+
+use std::path::Path;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
@@ -26,16 +29,6 @@ use ecmxfd::config::{Config, LinkConfig, SlaveConfig};
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 use ecmxfd::master::pdos::{PdoSource, SlavePdos};
-
-fn fixtures() -> Option<PathBuf> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "{} missing", dir.display());
-    eprintln!("skipped: {} missing", dir.display());
-    None
-}
 
 /// Networks of devices in file order: up to 24 slaves and 128 bytes of
 /// process data each way, a device with more alone.

@@ -310,6 +310,11 @@ pub struct ObjectDictionary {
     /// beside the identity object): the device maps with them, CoE reads
     /// the other object. See [`ObjectDictionary::mapping`].
     pub mappings_aside: BTreeMap<u16, Object>,
+    /// Entries the device's own PDOs map (an ESI's `<RxPdo>`/`<TxPdo>`
+    /// lists) although its dictionary does not flag them mappable: the
+    /// device maps them all the same, and its description says what the
+    /// file says.
+    pub mapped_anyway: std::collections::BTreeSet<(u16, u8)>,
 }
 
 impl ObjectDictionary {

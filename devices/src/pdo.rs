@@ -25,9 +25,37 @@ pub fn is_tx_mapping(index: u16) -> bool {
     (0x1A00..=0x1BFF).contains(&index)
 }
 
-/// Adds a mapping object with `entries`; `fixed` makes it read-only.
+/// Sets an existing object's values to `values` (subindex 1 on, and the
+/// count in subindex 0), keeping its names and access as described: an
+/// ESI's `<Dictionary>` that has the object says how the device describes
+/// it. Subindices it lacks are added as `make` builds them.
+fn fill_described(object: &mut Object, values: &[i64], make: impl Fn(usize) -> Entry) {
+    for (i, v) in values.iter().enumerate() {
+        let fresh = make(i + 1);
+        let e = object.entries.entry(i as u8 + 1).or_insert_with(|| fresh.clone());
+        // A subindex described at another size cannot hold the value: the
+        // device's own layout wins, under the described name.
+        if e.dtype.bits() != fresh.dtype.bits() {
+            *e = Entry { name: e.name.clone(), ..fresh };
+        }
+        e.set_int(*v);
+    }
+    if let Some(e0) = object.entries.get_mut(&0) {
+        e0.set_int(values.len() as i64);
+    }
+}
+
+/// Adds a mapping object with `entries`; `fixed` makes it read-only. One
+/// the dictionary already describes keeps its names and access.
 pub fn add_mapping(od: &mut ObjectDictionary, index: u16, name: &str, entries: &[PdoEntry], fixed: bool) {
     let access = if fixed { Access::RO } else { Access::RW_PREOP };
+    if let Some(described) = od.object(index).filter(|o| o.kind != ObjectKind::Var) {
+        let mut object = described.clone();
+        let values: Vec<i64> = entries.iter().map(|e| e.to_u32().into()).collect();
+        fill_described(&mut object, &values, |i| Entry::new(&format!("SubIndex {i:03}"), DataType::UInt32, access));
+        od.insert(index, object);
+        return;
+    }
     let mut subs: Vec<Entry> = entries
         .iter()
         .enumerate()
@@ -48,6 +76,17 @@ pub fn add_mapping(od: &mut ObjectDictionary, index: u16, name: &str, entries: &
 /// Adds an assignment object listing `pdos`; `fixed` makes it read-only.
 pub fn add_assignment(od: &mut ObjectDictionary, index: u16, pdos: &[u16], capacity: usize, fixed: bool) {
     let access = if fixed { Access::RO } else { Access::RW_PREOP };
+    if let Some(described) = od.object(index).filter(|o| o.kind != ObjectKind::Var) {
+        let mut object = described.clone();
+        let values: Vec<i64> = pdos.iter().map(|p| i64::from(*p)).collect();
+        // Unused subindices hold 0.
+        for e in object.entries.range_mut(1..).map(|(_, e)| e) {
+            e.set_int(0);
+        }
+        fill_described(&mut object, &values, |i| Entry::new(&format!("SubIndex {i:03}"), DataType::UInt16, access));
+        od.insert(index, object);
+        return;
+    }
     let mut subs: Vec<Entry> = pdos
         .iter()
         .enumerate()

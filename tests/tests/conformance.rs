@@ -250,7 +250,11 @@ async fn slave_rpcs(ch: Channel, at: u32, d: &CatalogDevice) -> Result<(), Strin
             return Err(format!("Sdo.Upload 0x1018:{sub:02x} = {:02x?}, the file says {want:#x}", up.raw));
         }
     }
-    let objects = within("Sdo.ListObjects", sdo.list_objects(pb::ListObjectsRequest { slave: at })).await?;
+    // With a Dictionary in the file, the file's list (the device's own,
+    // read with SDO Information, is checked in device_dictionary.rs).
+    let source = if d.objects.is_empty() { pb::DictionarySource::Unspecified } else { pb::DictionarySource::Esi };
+    let ask = pb::ListObjectsRequest { slave: at, source: source as i32 };
+    let objects = within("Sdo.ListObjects", sdo.list_objects(ask)).await?;
     let listed: BTreeSet<u16> = objects.entries.iter().map(|e| e.index as u16).collect();
     if d.objects.is_empty() {
         if !listed.contains(&0x1018) {

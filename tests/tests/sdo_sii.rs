@@ -112,7 +112,8 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
         assert_eq!(r.value.unwrap().kind, Some(Kind::Unsigned(0x402)));
 
         // The object listing: identity, PDO assignment, the axes' objects.
-        let list = sdo.list_objects(pb::ListObjectsRequest { slave: 1 }).await.unwrap().into_inner();
+        let probe = pb::ListObjectsRequest { slave: 1, source: pb::DictionarySource::Probe as i32 };
+        let list = sdo.list_objects(probe).await.unwrap().into_inner();
         assert_eq!(list.source, pb::DictionarySource::Probe as i32);
         let names: Vec<&str> = list.entries.iter().map(|e| e.name.as_str()).collect();
         for want in [
@@ -125,7 +126,7 @@ fn sdo_typed_values_aborts_deadlines_and_listing() {
         ] {
             assert!(names.contains(&want), "{want} missing from {names:?}");
         }
-        let e = sdo.list_objects(pb::ListObjectsRequest { slave: 7 }).await.unwrap_err();
+        let e = sdo.list_objects(pb::ListObjectsRequest { slave: 7, source: 0 }).await.unwrap_err();
         assert_eq!(e.code(), Code::InvalidArgument);
     });
 }
@@ -273,7 +274,8 @@ fn object_listing_from_an_esi_file() {
         let mut d = Daemon::with_config(&ecmxf_e2e::config(&link, &extra));
         let ch = d.connect().await;
         let mut sdo = SdoClient::new(ch);
-        let list = sdo.list_objects(pb::ListObjectsRequest { slave: 0 }).await.unwrap().into_inner();
+        let esi = pb::ListObjectsRequest { slave: 0, source: pb::DictionarySource::Esi as i32 };
+        let list = sdo.list_objects(esi).await.unwrap().into_inner();
         assert_eq!(list.source, pb::DictionarySource::Esi as i32);
         let identity = list.entries.iter().find(|e| e.index == 0x1018 && e.subindex == 1).expect("0x1018:01 listed");
         assert_eq!(identity.data_type, pb::DataType::Unsigned32 as i32);

@@ -67,7 +67,8 @@ fn object(index: u32, subindex: u32) -> String {
 /// The type the slave's dictionary (ESI) gives an object, if the daemon
 /// has one for it.
 async fn dictionary_type(api: &Api, slave: u32, index: u32, subindex: u32) -> Option<pb::DataType> {
-    let r = api.sdo().list_objects(api.req(pb::ListObjectsRequest { slave })).await.ok()?.into_inner();
+    let ask = pb::ListObjectsRequest { slave, source: pb::DictionarySource::Unspecified as i32 };
+    let r = api.sdo().list_objects(api.req(ask)).await.ok()?.into_inner();
     r.entries
         .into_iter()
         .find(|e| e.index == index && e.subindex == subindex)
@@ -159,8 +160,12 @@ pub async fn download(api: &Api, d: &Download) -> Result<DownloadReport, CliErro
 #[derive(Debug, Serialize, JsonSchema)]
 pub struct SdosReport {
     pub slave: u32,
-    /// Where the list comes from: ESI (the slave's ESI file) or PROBE (standard objects probed).
+    /// Where the list comes from: DEVICE (the slave's own description, CoE
+    /// SDO Information), ESI (the slave's ESI file) or PROBE (standard
+    /// objects probed).
     pub source: String,
+    /// Why a better source was not used ("" when none was passed over).
+    pub note: String,
     pub objects: Vec<ObjectReport>,
 }
 
@@ -196,20 +201,36 @@ impl Report for SdosReport {
                 o.value_text.clone(),
             ]);
         }
-        format!("slave {} object dictionary ({}):\n{t}", self.slave, self.source)
+        let from = match self.source.as_str() {
+            "DEVICE" => "from the device",
+            "ESI" => "from its ESI",
+            "PROBE" => "probed",
+            other => other,
+        };
+        let note = if self.note.is_empty() { String::new() } else { format!("\n({})", self.note) };
+        format!("slave {} object dictionary ({from}, {} entries):{note}\n{t}", self.slave, self.objects.len())
     }
 }
 
 /// `sdos`.
-pub async fn sdos(api: &Api, slave: u32) -> Result<SdosReport, CliError> {
-    // Probing uploads every standard object: give it time.
-    let req = api.req_for(pb::ListObjectsRequest { slave }, std::time::Duration::from_secs(30));
+pub async fn sdos(api: &Api, slave: u32, only: Option<crate::cli::DictionarySource>) -> Result<SdosReport, CliError> {
+    use crate::cli::DictionarySource as S;
+    let source = match only {
+        None => pb::DictionarySource::Unspecified,
+        Some(S::Device) => pb::DictionarySource::Device,
+        Some(S::Esi) => pb::DictionarySource::Esi,
+        Some(S::Probe) => pb::DictionarySource::Probe,
+    } as i32;
+    // Probing uploads every standard object, and a device describing a
+    // large dictionary the first time takes a while: give it time.
+    let req = api.req_for(pb::ListObjectsRequest { slave, source }, std::time::Duration::from_secs(60));
     let r = api.sdo().list_objects(req).await.map_err(CliError::rpc(format!("object dictionary of slave {slave}")))?;
     let r = r.into_inner();
     let source = crate::values::enum_name(r.source, pb::DictionarySource::as_str_name, "DICTIONARY_SOURCE_");
     Ok(SdosReport {
         slave,
         source: source.into(),
+        note: r.note,
         objects: r
             .entries
             .into_iter()

@@ -81,23 +81,79 @@ impl SdoApi for SdoService {
         &self,
         request: Request<pb::ListObjectsRequest>,
     ) -> Result<Response<pb::ListObjectsResponse>, Status> {
+        use pb::DictionarySource as Source;
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let s = self.0.slave(request.get_ref().slave)?;
+        let r = request.get_ref();
+        let s = self.0.slave(r.slave)?;
+        let only = Source::try_from(r.source)
+            .map_err(|_| super::status::bad_argument("source", format!("{} is no DictionarySource", r.source)))?;
         if usize::from(s) >= self.0.master.layout().slaves.len() {
             return Err(super::status::bad_argument("slave", format!("slave {s} does not exist")));
         }
+        let wants = |source: Source| only == Source::Unspecified || only == source;
+        let mut notes = Vec::new();
+        if wants(Source::Device) {
+            // The read is the daemon's work: a caller whose deadline passes
+            // leaves it running for the next one.
+            let read = bounded(&caller, async { Ok::<_, Status>(self.0.master.device_dictionary(s).await) }).await?;
+            match read {
+                Ok(d) => {
+                    let entries = dictionary_objects(&d.to_od(), Some(&d));
+                    let source = Source::Device as i32;
+                    return Ok(Response::new(pb::ListObjectsResponse { source, entries, note: String::new() }));
+                }
+                Err(e) if only == Source::Device => return Err(dictionary_status(e)),
+                Err(e) => notes.push(e.to_string()),
+            }
+        }
         // An ESI without a `<Dictionary>` (older files, e.g. NI 9144) says
         // nothing of the objects: the slave is probed as without one.
-        if let Some(esi) = self.0.master.esi_device(s).await {
-            let esi = esi.map_err(|e| Status::failed_precondition(e.to_string()))?;
-            if esi.device().dictionary.objects().next().is_some() {
-                let entries = esi_objects(esi.device());
-                let source = pb::DictionarySource::Esi as i32;
-                return Ok(Response::new(pb::ListObjectsResponse { source, entries }));
+        if wants(Source::Esi) {
+            match self.0.master.esi_device(s).await {
+                Some(Ok(esi)) if esi.device().dictionary.objects().next().is_some() => {
+                    let entries = dictionary_objects(&esi.device().dictionary, None);
+                    let (source, note) = (Source::Esi as i32, notes.join("; "));
+                    return Ok(Response::new(pb::ListObjectsResponse { source, entries, note }));
+                }
+                Some(Err(e)) if only == Source::Esi => return Err(Status::failed_precondition(e.to_string())),
+                Some(Err(e)) => notes.push(e.to_string()),
+                Some(Ok(_)) => notes.push(format!("slave {s}'s ESI has no Dictionary")),
+                None => notes.push(format!("no ESI configured for slave {s}")),
+            }
+            if only == Source::Esi {
+                return Err(Status::failed_precondition(notes.join("; ")));
             }
         }
         let entries = bounded(&caller, probe(&self.0.master, s)).await?;
-        Ok(Response::new(pb::ListObjectsResponse { source: pb::DictionarySource::Probe as i32, entries }))
+        let note = notes.join("; ");
+        Ok(Response::new(pb::ListObjectsResponse { source: Source::Probe as i32, entries, note }))
+    }
+}
+
+/// An entry's minimum or maximum: as the device described it, else from
+/// the description's range (little-endian, the entry's size).
+fn limit(
+    described: Option<&crate::master::device_dictionary::DeviceDictionary>,
+    index: u16,
+    sub: u8,
+    e: &ecmxf_devices::od::Entry,
+    given: impl Fn(&crate::master::device_dictionary::DeviceEntry) -> Option<&Vec<u8>>,
+    end: impl Fn((i64, i64)) -> i64,
+) -> Vec<u8> {
+    if let Some(d) = described {
+        return d.entry(index, sub).and_then(given).cloned().unwrap_or_default();
+    }
+    let n = e.dtype.bytes().min(8);
+    e.range.map(|r| end(r).to_le_bytes()[..n].to_vec()).unwrap_or_default()
+}
+
+/// A dictionary that could not be read from the device, as a status.
+fn dictionary_status(e: crate::master::device_dictionary::DictionaryError) -> Status {
+    use crate::master::device_dictionary::DictionaryError as D;
+    match e {
+        D::Engine(e) => to_status(e),
+        D::NotSupported(_) => Status::failed_precondition(e.to_string()),
+        D::Mailbox(_) | D::Aborted { .. } | D::Garbled(_) => Status::unavailable(e.to_string()),
     }
 }
 
@@ -129,6 +185,7 @@ fn entry(
         access: access.into(),
         pdo_mappable: (0x6000..0xA000).contains(&index),
         value,
+        ..pb::ObjectEntry::default()
     }
 }
 
@@ -195,11 +252,14 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
     Ok(out)
 }
 
-/// The object dictionary of the ESI device matched to the slave found
-/// (vendor, product code, revision when the file has it).
-fn esi_objects(device: &ecmxf_devices::esi::EsiDevice) -> Vec<pb::ObjectEntry> {
+/// A dictionary's entries as listed: an ESI device's, or a device's own
+/// (`described`: its minimum, maximum and unit where it gave them).
+fn dictionary_objects(
+    dictionary: &ecmxf_devices::od::ObjectDictionary,
+    described: Option<&crate::master::device_dictionary::DeviceDictionary>,
+) -> Vec<pb::ObjectEntry> {
     let mut out = Vec::new();
-    for (index, object) in device.dictionary.objects() {
+    for (index, object) in dictionary.objects() {
         for (sub, e) in &object.entries {
             let read = e.access.read.preop || e.access.read.safeop || e.access.read.op;
             let write = e.access.write.preop || e.access.write.safeop || e.access.write.op;
@@ -221,6 +281,9 @@ fn esi_objects(device: &ecmxf_devices::esi::EsiDevice) -> Vec<pb::ObjectEntry> {
                 access: access.into(),
                 pdo_mappable: e.mappable != ecmxf_devices::od::Mappable::No,
                 value: e.value.clone(),
+                minimum: limit(described, index, *sub, e, |d| d.minimum.as_ref(), |(lo, _)| lo),
+                maximum: limit(described, index, *sub, e, |d| d.maximum.as_ref(), |(_, hi)| hi),
+                unit: described.and_then(|d| d.entry(index, *sub)).and_then(|d| d.unit).unwrap_or(0),
             });
         }
     }

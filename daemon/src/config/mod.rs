@@ -73,6 +73,12 @@ pub struct Config {
     /// The Prometheus endpoint.
     #[serde(default)]
     pub metrics: MetricsConfig,
+    /// Where the daemon keeps what it learned across restarts (object
+    /// dictionaries read from devices). Unset: systemd's
+    /// `$STATE_DIRECTORY` (the unit's `StateDirectory=`), else nothing is
+    /// kept on disk.
+    #[serde(default)]
+    pub state_dir: Option<PathBuf>,
 }
 
 /// `[log]`.
@@ -673,6 +679,7 @@ impl Config {
             api: ApiConfig::default(),
             log: LogConfig::default(),
             metrics: MetricsConfig::default(),
+            state_dir: None,
         }
     }
 

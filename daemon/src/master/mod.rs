@@ -30,11 +30,13 @@ use outputs::OutputSender;
 pub use outputs::OutputWriter;
 pub use transactions::RawAnswer;
 
+pub mod device_dictionary;
 pub mod esi;
 pub mod frame_claims;
 pub mod image;
 mod leases;
 pub mod mailbox;
+pub mod mailbox_channel;
 mod network;
 pub mod objects;
 pub mod outputs;
@@ -227,6 +229,10 @@ pub struct Master {
     sii_cache: sii::SiiCache,
     /// Mailbox protocols by slave position.
     mailbox: mailbox::MailboxProtocols,
+    /// The host's mailbox channel: geometry and per-slave locks.
+    channels: mailbox_channel::MailboxChannels,
+    /// Dictionaries read from the devices (SDO Information).
+    dictionaries: device_dictionary::DeviceDictionaries,
 }
 
 /// Opens the link the configuration names. For the in-process simulator,
@@ -291,6 +297,8 @@ impl Master {
             esi: esi::EsiLibrary::default(),
             sii_cache: sii::SiiCache::default(),
             mailbox: mailbox::MailboxProtocols::default(),
+            channels: mailbox_channel::MailboxChannels::default(),
+            dictionaries: device_dictionary::DeviceDictionaries::default(),
         }
     }
 

@@ -37,6 +37,7 @@ impl Master {
         timeout: Option<Duration>,
     ) -> Result<Vec<u8>, EngineError> {
         self.check_coe(slave).await?;
+        let _mailbox = self.mailbox_lock(slave).await;
         self.request(SlotRequest::SdoRead { slave, index, subindex, complete }, timeout).await
     }
 
@@ -51,6 +52,7 @@ impl Master {
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
         self.check_coe(slave).await?;
+        let _mailbox = self.mailbox_lock(slave).await;
         self.request(SlotRequest::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
     }
 

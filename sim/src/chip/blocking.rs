@@ -554,8 +554,14 @@ impl Chip {
                 s.esc_write(head.ado, &out);
             } else {
                 let mut buf = vec![0u8; len];
-                if !s.esc_read(head.ado, &mut buf) {
-                    continue;
+                match s.esc_read(head.ado, &mut buf) {
+                    Some(true) => {}
+                    Some(false) => continue,
+                    // The frame did not come back: the datagram failed.
+                    None => {
+                        self.results.raw = None;
+                        return false;
+                    }
                 }
                 if head.command == DatagramCommand::Brd {
                     for (o, b) in out.iter_mut().zip(&buf) {

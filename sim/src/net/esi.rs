@@ -4,7 +4,7 @@ use ecmxf_devices::esi;
 pub use ecmxf_devices::esi::*;
 use ecmxf_wire::payload::pdo::PdoEntry;
 
-use super::od::{Access, DataType, Entry, Mappable, Object, ObjectDictionary, ObjectKind};
+use super::od::{Access, DataType, Entry, Object, ObjectDictionary, ObjectKind};
 use super::pdo_map::{self, RX_ASSIGN, TX_ASSIGN};
 use super::profiles::{Identity, identity_objects};
 use super::sii;
@@ -82,10 +82,8 @@ impl SimulatedDevice for EsiDevice {
 pub(crate) fn add_entry_objects(od: &mut ObjectDictionary, rx: bool, entries: &[(PdoEntry, String, DataType)]) {
     for (e, name, dtype) in entries {
         if e.index == 0 || od.entry(e.index, e.subindex).is_some() {
-            if let Some(en) = od.entry_mut(e.index, e.subindex) {
-                if en.mappable == Mappable::No {
-                    en.mappable = pdo_map::mappable_for(rx);
-                }
+            if od.entry(e.index, e.subindex).is_some_and(|en| !en.mappable.allows(rx)) {
+                od.mapped_anyway.insert((e.index, e.subindex));
             }
             continue;
         }

@@ -117,17 +117,19 @@ impl Mailboxes {
         Some(request)
     }
 
-    /// A read of the send mailbox: false (not counted) while it is empty.
-    pub fn read(&mut self, ado: u16, out: &mut [u8]) -> bool {
+    /// A read of the send mailbox: `Some(false)` (not counted) while it is
+    /// empty, `None` when the datagram was lost on its way back after the
+    /// ESC had freed the mailbox (a lost-answer fault).
+    pub fn read(&mut self, ado: u16, out: &mut [u8]) -> Option<bool> {
         let Some((from, at, n)) = overlap(ado, out.len(), self.area.tx_offset, self.area.tx_size) else {
-            return false;
+            return Some(false);
         };
-        let Some(front) = self.outbox.front() else { return false };
+        let Some(front) = self.outbox.front() else { return Some(false) };
         for (k, b) in out[from..from + n].iter_mut().enumerate() {
             *b = front.get(at + k).copied().unwrap_or(0);
         }
         if at + n != usize::from(self.area.tx_size) {
-            return true;
+            return Some(true);
         }
         let answer = self.outbox.pop_front().unwrap_or_default();
         self.last_read = Some(answer);
@@ -135,9 +137,9 @@ impl Mailboxes {
         if self.faults.lose_answers > 0 {
             self.faults.lose_answers -= 1;
             out.fill(0);
-            return false;
+            return None;
         }
-        true
+        Some(true)
     }
 
     /// Queues an answer: `body` of `kind`, with the slave's next counter.
@@ -218,18 +220,18 @@ mod tests {
     fn an_answer_is_read_once_and_a_repeat_puts_it_back() {
         let mut m = Mailboxes::new(area());
         let mut out = [0u8; 32];
-        assert!(!m.read(0x1080, &mut out), "empty: not counted");
+        assert_eq!(m.read(0x1080, &mut out), Some(false), "empty: not counted");
         m.post(MailboxType::Coe, 0, &[9, 9]);
-        assert!(m.read(0x1080, &mut out[..8]), "the start: counted, not freed");
-        assert!(m.read(0x1080, &mut out));
+        assert_eq!(m.read(0x1080, &mut out[..8]), Some(true), "the start: counted, not freed");
+        assert_eq!(m.read(0x1080, &mut out), Some(true));
         assert_eq!(&out[6..8], &[9, 9]);
-        assert!(!m.read(0x1080, &mut out), "freed");
+        assert_eq!(m.read(0x1080, &mut out), Some(false), "freed");
         assert!(m.repeat_request(true));
-        assert!(m.read(0x1080, &mut out), "the last answer again");
+        assert_eq!(m.read(0x1080, &mut out), Some(true), "the last answer again");
         m.faults.lose_answers = 1;
         m.post(MailboxType::Coe, 0, &[7]);
-        assert!(!m.read(0x1080, &mut out), "read out and lost");
+        assert_eq!(m.read(0x1080, &mut out), None, "read out and lost");
         assert!(!m.repeat_request(false));
-        assert!(m.read(0x1080, &mut out) && out[6] == 7);
+        assert!(m.read(0x1080, &mut out) == Some(true) && out[6] == 7);
     }
 }

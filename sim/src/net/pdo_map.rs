@@ -123,7 +123,7 @@ pub fn validate_write(od: &ObjectDictionary, index: u16, sub: u8, data: &[u8]) -
             let e = PdoEntry::from_u32(value(4));
             if e.index != 0 {
                 let target = od.entry(e.index, e.subindex).ok_or(SdoAbortCode::NOT_MAPPABLE)?;
-                if !target.mappable.allows(rx) {
+                if !target.mappable.allows(rx) && !od.mapped_anyway.contains(&(e.index, e.subindex)) {
                     return Err(SdoAbortCode::NOT_MAPPABLE);
                 }
                 if target.dtype.bits() != u32::from(e.bits) {

@@ -372,3 +372,53 @@ mod tests {
         assert_eq!(other.sdo_upload(0x1018, 1, false), Err(SdoAbortCode::TIMEOUT));
     }
 }
+
+#[cfg(test)]
+mod sdo_information_through_the_esc {
+    use ecmxf_wire::mbx::sdo_info::{InfoFragment, InfoRequest, ListType, OdList};
+    use ecmxf_wire::mbx::{MailboxHeader, MailboxType, Message};
+
+    use super::ti_three_axis;
+    use crate::net::esm::AlState;
+
+    /// A request written into the receive mailbox by datagrams is answered
+    /// in the send mailbox, in fragments when the list is long; an empty
+    /// send mailbox is not counted; a slave without SDO Info refuses the
+    /// service with a mailbox error.
+    #[test]
+    fn an_od_list_comes_back_in_fragments_through_the_mailboxes() {
+        let mut s = ti_three_axis(1, 1);
+        s.esm.state = AlState::PreOp;
+        s.sdo_info = true;
+        // A small send mailbox, so the list comes in fragments.
+        let area = ecmxf_devices::sii::MailboxArea { tx_size: 32, ..s.mailboxes.area };
+        s.mailboxes = crate::net::mailbox::Mailboxes::new(area);
+        let mut body = [0u8; 16];
+        let n = InfoRequest::OdList(ListType::All).encode(&mut body).unwrap();
+        let mut request = vec![0u8; usize::from(area.rx_size)];
+        Message::write(MailboxHeader::new(MailboxType::Coe, 0, 0), &body[..n], &mut request).unwrap();
+        s.esc_write(area.rx_offset, &request);
+        let mut joined = Vec::new();
+        loop {
+            let mut out = vec![0u8; usize::from(area.tx_size)];
+            assert_eq!(s.esc_read(area.tx_offset, &mut out), Some(true), "an answer waits");
+            let m = Message::parse(&out).unwrap();
+            let f = InfoFragment::decode(m.body).unwrap();
+            joined.extend_from_slice(f.payload);
+            if !f.header.incomplete {
+                break;
+            }
+        }
+        let mut out = vec![0u8; usize::from(area.tx_size)];
+        assert_eq!(s.esc_read(area.tx_offset, &mut out), Some(false), "empty now");
+        let listed: Vec<u16> = OdList::decode(&joined).unwrap().indices().collect();
+        let expected: Vec<u16> = s.od.objects().map(|(i, _)| i).collect();
+        assert_eq!(listed, expected);
+        assert!(expected.len() * 2 > usize::from(area.tx_size), "the list needed fragments");
+
+        s.sdo_info = false;
+        s.esc_write(area.rx_offset, &request);
+        assert_eq!(s.esc_read(area.tx_offset, &mut out), Some(true));
+        assert_eq!(Message::parse(&out).unwrap().header.kind, MailboxType::Error);
+    }
+}

@@ -296,10 +296,10 @@ impl Slave {
         self.sync_mailbox_status();
     }
 
-    /// A datagram's read of the ESC; false when it is not counted (an
-    /// empty send mailbox, or the receive mailbox, which the master does
-    /// not read).
-    pub fn esc_read(&mut self, ado: u16, out: &mut [u8]) -> bool {
+    /// A datagram's read of the ESC; `Some(false)` when it is not counted
+    /// (an empty send mailbox, or the receive mailbox, which the master
+    /// does not read), `None` when the datagram was lost (a fault).
+    pub fn esc_read(&mut self, ado: u16, out: &mut [u8]) -> Option<bool> {
         self.sync_mailbox_status();
         if self.mailboxes.touches(ado, out.len()) {
             let counted = self.mailboxes.read(ado, out);
@@ -307,7 +307,7 @@ impl Slave {
             return counted;
         }
         self.read_registers(ado, out);
-        true
+        Some(true)
     }
 
     /// SM1's status: "mailbox full" (bit 3) while an answer waits.
