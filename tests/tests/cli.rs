@@ -144,9 +144,12 @@ fn every_command_works_as_a_table_and_as_json() {
         both(&d, "download", &["download", "-p", "1", "0x605A", "0", "-1", "--type", "int16"]);
         let (_, j) = both(&d, "upload", &["upload", "-p", "1", "0x605A"]);
         assert_eq!(j["value"], -1);
-        let (t, j) = both(&d, "sdos", &["sdos", "-p", "1"]);
+        let (t, j) = both(&d, "sdos", &["sdos", "-p", "1", "--source", "probe"]);
         assert!(t.contains("device_type"), "{t}");
         assert_eq!(j["source"], "PROBE");
+        let (t, j) = both(&d, "sdos", &["sdos", "-p", "1"]);
+        assert!(t.contains("(from the device,"), "{t}");
+        assert_eq!(j["source"], "DEVICE");
 
         // SII: read, decode, dump, write (the same bytes back) with backup.
         let (t, j) = both(&d, "sii read", &["sii", "read", "-p", "2", "--word", "8", "--count", "4"]);
@@ -383,7 +386,7 @@ fn errors_say_what_went_wrong_with_the_documented_exit_code() {
         // exit 5 within it, not at their own budgets.
         for args in [
             &["sii", "read", "-p", "1", "--count", "4096"][..],
-            &["sdos", "-p", "1"],
+            &["sdos", "-p", "1", "--source", "probe"],
             &["foe", "read", "-p", "1", "firmware.bin", "-o", "/dev/null"],
         ] {
             let started = std::time::Instant::now();
