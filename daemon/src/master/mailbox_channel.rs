@@ -23,10 +23,11 @@
 //!   it; 0 is never taken for a repetition. A gateway client's counter is
 //!   put back into the answer it gets.
 //! - **One at a time.** The chip reads the same send mailbox for its own
-//!   SDO_REQ. While a host exchange runs with a slave, the master's own CoE
-//!   requests to that slave (SDO, PDO assignment, FoE) wait on the same
-//!   per-slave lock ([`Master::mailbox_lock`]), so neither reads the
-//!   other's answer.
+//!   SDO_REQ. A host exchange holds its slave's mailbox exclusively
+//!   ([`Master::mailbox_lock`]); the master's own CoE requests to that
+//!   slave share it among themselves ([`Master::coe_lock`]: the blocking
+//!   slot's fair queue orders them) and wait while a host exchange runs,
+//!   so neither reads the other's answer.
 //! - **Lost answers.** A read that freed the mailbox but never came back
 //!   loses the answer: after [`REPEAT_AFTER`] with nothing read, the host
 //!   toggles SM1's repeat request (0x080E bit 1) and the slave puts its
@@ -84,7 +85,7 @@ pub struct MailboxGeometry {
 #[derive(Debug, Default)]
 pub struct MailboxChannels {
     geometry: Mutex<HashMap<u8, (Identity, MailboxGeometry)>>,
-    locks: Mutex<HashMap<u8, Arc<tokio::sync::Mutex<()>>>>,
+    locks: Mutex<HashMap<u8, Arc<tokio::sync::RwLock<()>>>>,
     /// The counter of the last message the host read from each slave.
     counters: Mutex<HashMap<u8, u8>>,
 }
@@ -135,14 +136,21 @@ fn head(command: DatagramCommand, position: u8, ado: u16, length: u16) -> Datagr
 }
 
 impl Master {
-    /// The lock a slave's mailbox is used under: host exchanges hold it for
-    /// their whole exchange, the master's own CoE requests for theirs.
-    pub async fn mailbox_lock(&self, slave: u8) -> tokio::sync::OwnedMutexGuard<()> {
-        let lock = {
-            let mut locks = self.channels.locks.lock().unwrap_or_else(|e| e.into_inner());
-            Arc::clone(locks.entry(slave).or_default())
-        };
-        lock.lock_owned().await
+    fn slave_lock(&self, slave: u8) -> Arc<tokio::sync::RwLock<()>> {
+        let mut locks = self.channels.locks.lock().unwrap_or_else(|e| e.into_inner());
+        Arc::clone(locks.entry(slave).or_default())
+    }
+
+    /// A slave's mailbox for a host exchange, alone: held for the whole
+    /// exchange (all its fragments).
+    pub async fn mailbox_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockWriteGuard<()> {
+        self.slave_lock(slave).write_owned().await
+    }
+
+    /// A slave's mailbox for one of the chip's own CoE requests: shared with
+    /// the others, kept from host exchanges.
+    pub async fn coe_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockReadGuard<()> {
+        self.slave_lock(slave).read_owned().await
     }
 
     /// Where `slave`'s mailboxes are, from its SII (read once per identity).

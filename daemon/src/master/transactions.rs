@@ -37,7 +37,7 @@ impl Master {
         timeout: Option<Duration>,
     ) -> Result<Vec<u8>, EngineError> {
         self.check_coe(slave).await?;
-        let _mailbox = self.mailbox_lock(slave).await;
+        let _mailbox = self.coe_lock(slave).await;
         self.request(SlotRequest::SdoRead { slave, index, subindex, complete }, timeout).await
     }
 
@@ -52,7 +52,7 @@ impl Master {
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
         self.check_coe(slave).await?;
-        let _mailbox = self.mailbox_lock(slave).await;
+        let _mailbox = self.coe_lock(slave).await;
         self.request(SlotRequest::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
     }
 
@@ -177,6 +177,7 @@ impl Master {
         }
         // The chip reads the assignment over CoE.
         self.check_coe(slave).await?;
+        let _mailbox = self.coe_lock(slave).await;
         let d = self.request(SlotRequest::PdoConfigRead { slave, assign_index }, timeout).await?;
         let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
         PdoConfigReply::decode(&fields, &d).map(|r| r.0).map_err(|error| EngineError::BadAnswer {
@@ -225,6 +226,7 @@ impl Master {
         timeout: Option<Duration>,
     ) -> Result<(), EngineError> {
         let request = SlotRequest::FoeWrite { slave, name: name.to_owned(), password, data };
+        let _mailbox = self.coe_lock(slave).await;
         self.request_with_progress(request, timeout, progress).await.map(|_| ())
     }
 
@@ -240,6 +242,7 @@ impl Master {
         timeout: Option<Duration>,
     ) -> Result<Vec<u8>, EngineError> {
         let request = SlotRequest::FoeRead { slave, name: name.to_owned(), password, max_len };
+        let _mailbox = self.coe_lock(slave).await;
         self.request_with_progress(request, timeout, progress).await
     }
 
