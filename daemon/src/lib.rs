@@ -15,6 +15,8 @@
 //! - [`api`]: the gRPC front end (tonic): protobuf to and from the master's
 //!   domain, errors to status codes, authentication; imports the master
 //!   only (daemon/tests/layers.rs checks it).
+//! - [`gateway`]: the ETG.8200 mailbox gateway for engineering tools
+//!   (UDP), a front end like the API, through the master only.
 //! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
 //! - [`config`]: the configuration file.
 //! - [`metrics`]: the Prometheus endpoint.
@@ -29,6 +31,7 @@
 pub mod api;
 pub mod config;
 pub(crate) mod engine;
+pub mod gateway;
 pub mod lifecycle;
 pub mod link;
 pub mod master;

@@ -35,6 +35,8 @@ pub enum DaemonError {
         /// Why.
         source: std::io::Error,
     },
+    /// The mailbox gateway could not listen (`gateway.listen`).
+    Gateway(crate::gateway::GatewayError),
     /// The engine could not start: the link, the simulator's network file.
     Start(StartError),
     /// The API server could not start or failed.
@@ -74,6 +76,7 @@ impl std::fmt::Display for DaemonError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         match self {
             Self::Metrics { addr, source } => write!(f, "metrics.listen {addr}: {source}"),
+            Self::Gateway(e) => write!(f, "{e}"),
             Self::Start(e) => write!(f, "{e}"),
             Self::Api(e) => write!(f, "{e}"),
             Self::ApiEnded => f.write_str("the API server ended"),
@@ -93,6 +96,7 @@ impl std::error::Error for DaemonError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             Self::Metrics { source, .. } => Some(source),
+            Self::Gateway(e) => Some(e),
             Self::Start(e) => Some(e),
             Self::Api(e) => Some(e),
             Self::Signals(e) => Some(e),
@@ -142,6 +146,10 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         Some(addr) => Some(crate::metrics::bind(addr).await.map_err(|source| DaemonError::Metrics { addr, source })?),
         None => None,
     };
+    let gateway = match &config.gateway {
+        Some(g) => Some((g.clone(), crate::gateway::bind(g).await.map_err(DaemonError::Gateway)?)),
+        None => None,
+    };
     let mut running = config.clone();
     let (master, _sim) = Master::from_config(config)?;
     let master = Arc::new(master);
@@ -155,6 +163,9 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         let sources =
             crate::metrics::Sources { master: Arc::clone(&master), sdo_latency: Arc::clone(&ctx.sdo_latency) };
         tokio::spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
+    }
+    if let Some((g, socket)) = gateway {
+        tokio::spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
     }
     let mut server = tokio::spawn(crate::api::server::serve(Arc::clone(&ctx), api, api_stopped));
     let status_every = options.status_every;

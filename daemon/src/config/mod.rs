@@ -73,6 +73,9 @@ pub struct Config {
     /// The Prometheus endpoint.
     #[serde(default)]
     pub metrics: MetricsConfig,
+    /// The ETG.8200 mailbox gateway for engineering tools; absent: off.
+    #[serde(default)]
+    pub gateway: Option<GatewayConfig>,
     /// Where the daemon keeps what it learned across restarts (object
     /// dictionaries read from devices). Unset: systemd's
     /// `$STATE_DIRECTORY` (the unit's `StateDirectory=`), else nothing is
@@ -102,6 +105,80 @@ impl Default for LogConfig {
 pub struct MetricsConfig {
     /// Serve Prometheus metrics at http://ADDRESS/metrics; absent: off.
     pub listen: Option<std::net::SocketAddr>,
+}
+
+/// `[gateway]`: the ETG.8200 mailbox gateway (daemon/src/gateway).
+#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GatewayConfig {
+    /// UDP address to serve, e.g. "0.0.0.0:34980" (0x88A4, the port tools
+    /// use).
+    pub listen: std::net::SocketAddr,
+    /// Clients allowed: addresses ("10.0.0.7") or networks ("10.0.0.0/24",
+    /// "fd00::/8"). Empty: this host only.
+    #[serde(default)]
+    pub allow: Vec<AllowedClients>,
+}
+
+/// One `gateway.allow` entry: an address and how many leading bits of it
+/// a client must share.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct AllowedClients {
+    /// The address.
+    pub address: std::net::IpAddr,
+    /// Leading bits that must match.
+    pub prefix: u8,
+}
+
+impl<'de> Deserialize<'de> for AllowedClients {
+    fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let text = String::deserialize(d)?;
+        let (addr, prefix) = text.split_once('/').map_or((text.as_str(), None), |(a, p)| (a, Some(p)));
+        let address: std::net::IpAddr = addr
+            .trim()
+            .parse()
+            .map_err(|_| serde::de::Error::custom(format!("{text:?} is not an address or address/prefix")))?;
+        let max = if address.is_ipv4() { 32 } else { 128 };
+        let prefix = match prefix {
+            None => max,
+            Some(p) => p
+                .trim()
+                .parse::<u8>()
+                .ok()
+                .filter(|p| *p <= max)
+                .ok_or_else(|| serde::de::Error::custom(format!("{text:?}: the prefix must be 0..={max}")))?,
+        };
+        Ok(Self { address, prefix })
+    }
+}
+
+impl AllowedClients {
+    /// Whether `ip` is in it.
+    pub fn contains(&self, ip: std::net::IpAddr) -> bool {
+        use std::net::IpAddr::{V4, V6};
+        let (a, b, bits): (u128, u128, u32) = match (self.address, ip) {
+            (V4(a), V4(b)) => (u32::from(a).into(), u32::from(b).into(), 32),
+            (V6(a), V6(b)) => (u128::from(a), u128::from(b), 128),
+            (V4(a), V6(b)) => match b.to_ipv4_mapped() {
+                Some(b) => (u32::from(a).into(), u32::from(b).into(), 32),
+                None => return false,
+            },
+            (V6(_), V4(_)) => return false,
+        };
+        let keep = u32::from(self.prefix).min(bits);
+        keep == 0 || (a ^ b) >> (bits - keep) == 0
+    }
+}
+
+impl GatewayConfig {
+    /// Whether a client at `ip` may use the gateway.
+    pub fn allows(&self, ip: std::net::IpAddr) -> bool {
+        if self.allow.is_empty() {
+            return ip.is_loopback()
+                || matches!(ip, std::net::IpAddr::V6(v6) if v6.to_ipv4_mapped().is_some_and(|v4| v4.is_loopback()));
+        }
+        self.allow.iter().any(|a| a.contains(ip))
+    }
 }
 
 /// `[outputs]`.
@@ -680,6 +757,7 @@ impl Config {
             log: LogConfig::default(),
             metrics: MetricsConfig::default(),
             state_dir: None,
+            gateway: None,
         }
     }
 
@@ -938,6 +1016,34 @@ mod tests {
     }
 
     const MINIMAL: &str = "version = 1\n[link]\nbackend = \"sim\"\n";
+
+    #[test]
+    fn the_gateway_allows_the_clients_it_names_and_else_this_host() {
+        let c = parse(&format!("{MINIMAL}[gateway]\nlisten = \"0.0.0.0:34980\"\n")).unwrap();
+        let g = c.gateway.unwrap();
+        assert!(g.allows("127.0.0.1".parse().unwrap()) && g.allows("::1".parse().unwrap()));
+        assert!(!g.allows("10.0.0.7".parse().unwrap()), "only this host without an allow list");
+        let t = format!(
+            "{MINIMAL}[gateway]\nlisten = \"[::]:34980\"\nallow = [\"10.1.0.0/16\", \"192.168.3.4\", \"fd00::/8\"]\n"
+        );
+        let g = parse(&t).unwrap().gateway.unwrap();
+        for (ip, ok) in [
+            ("10.1.200.3", true),
+            ("10.2.0.1", false),
+            ("192.168.3.4", true),
+            ("192.168.3.5", false),
+            ("::ffff:10.1.0.9", true),
+            ("fd12::1", true),
+            ("fe80::1", false),
+            ("127.0.0.1", false),
+        ] {
+            assert_eq!(g.allows(ip.parse().unwrap()), ok, "{ip}");
+        }
+        let e = parse(&format!("{MINIMAL}[gateway]\nlisten = \"0.0.0.0:1\"\nallow = [\"10.0.0.0/40\"]\n"));
+        assert!(e.unwrap_err().to_string().contains("prefix must be 0..=32"));
+        let e = parse(&format!("{MINIMAL}[gateway]\nlisten = \"0.0.0.0:1\"\nallow = [\"plant\"]\n"));
+        assert!(e.unwrap_err().to_string().contains("not an address"));
+    }
 
     #[test]
     fn link_values_of_the_wrong_type_are_named_at_their_line() {

@@ -88,6 +88,26 @@ pub struct MailboxChannels {
     locks: Mutex<HashMap<u8, Arc<tokio::sync::RwLock<()>>>>,
     /// The counter of the last message the host read from each slave.
     counters: Mutex<HashMap<u8, u8>>,
+    /// Station addresses by position, read once per identity.
+    stations: Mutex<HashMap<u8, (Identity, u16)>>,
+    /// What the mailbox gateway did.
+    gateway: GatewayCounters,
+}
+
+/// What the ETG.8200 gateway did (exported as metrics).
+#[derive(Debug, Default)]
+pub struct GatewayCounters {
+    /// Requests taken.
+    pub requests: std::sync::atomic::AtomicU64,
+    /// Answers sent.
+    pub answered: std::sync::atomic::AtomicU64,
+    /// Answers that were mailbox errors (unknown station, slave not in a
+    /// mailbox state, no answer).
+    pub errors: std::sync::atomic::AtomicU64,
+    /// Datagrams that were no mailbox request, dropped.
+    pub malformed: std::sync::atomic::AtomicU64,
+    /// Datagrams from clients `gateway.allow` does not name, dropped.
+    pub refused: std::sync::atomic::AtomicU64,
 }
 
 /// What a host exchange came to.
@@ -151,6 +171,37 @@ impl Master {
     /// the others, kept from host exchanges.
     pub async fn coe_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockReadGuard<()> {
         self.slave_lock(slave).read_owned().await
+    }
+
+    /// The gateway's counters.
+    pub fn gateway_counters(&self) -> &GatewayCounters {
+        &self.channels.gateway
+    }
+
+    /// The configured station address of the slave at `slave` (SLV_INFO,
+    /// read once per identity); `None` when it cannot be read.
+    pub async fn station_address(&self, slave: u8) -> Option<u16> {
+        let identity = self.identity(slave)?;
+        if let Some((id, a)) = self.channels.stations.lock().unwrap_or_else(|e| e.into_inner()).get(&slave) {
+            if *id == identity {
+                return Some(*a);
+            }
+        }
+        let code = ecmxf_wire::payload::slave_info::SlaveInfoCode::ConfiguredAddress;
+        let a = self.slave_number(slave, code).await.ok()? as u16;
+        self.channels.stations.lock().unwrap_or_else(|e| e.into_inner()).insert(slave, (identity, a));
+        Some(a)
+    }
+
+    /// The position of the slave with station address `station`.
+    pub async fn slave_at_station(&self, station: u16) -> Option<u8> {
+        let count = self.layout().slaves.len().min(usize::from(u8::MAX)) as u8;
+        for slave in 0..count {
+            if self.station_address(slave).await == Some(station) {
+                return Some(slave);
+            }
+        }
+        None
     }
 
     /// Where `slave`'s mailboxes are, from its SII (read once per identity).

@@ -207,6 +207,20 @@ pub async fn render(sources: &Sources) -> String {
     for (name, kind, help, value) in single {
         metric(&mut out, name, kind, help, value);
     }
+    let g = master.gateway_counters();
+    for (name, help, counter) in [
+        ("ecmxf_gateway_requests_total", "Mailbox gateway (ETG.8200) requests taken.", &g.requests),
+        ("ecmxf_gateway_answers_total", "Mailbox gateway answers sent.", &g.answered),
+        ("ecmxf_gateway_errors_total", "Mailbox gateway answers that were mailbox errors.", &g.errors),
+        ("ecmxf_gateway_malformed_total", "Mailbox gateway datagrams that were no mailbox request.", &g.malformed),
+        (
+            "ecmxf_gateway_refused_total",
+            "Mailbox gateway datagrams from clients gateway.allow does not name.",
+            &g.refused,
+        ),
+    ] {
+        metric(&mut out, name, "counter", help, counter.load(std::sync::atomic::Ordering::Relaxed));
+    }
     if let Some(l) = master.output_latency() {
         let name = "ecmxf_output_latency_seconds";
         let _ = writeln!(
