@@ -50,6 +50,20 @@ fn sdos_lists_what_the_device_describes_and_says_where_it_comes_from() {
     let kept = std::fs::read_dir(state.join("sdo-info")).expect("the dictionary is kept").count();
     assert_eq!(kept, 1, "one file for the SOES slave's identity");
 
+    // What the device described types its values: a plain Sdo.Upload of a
+    // maker's object (no type asked, none known to the daemon otherwise)
+    // comes back decoded as the device's UDINT.
+    let mut up = None;
+    ecmxf_e2e::run(async {
+        let ch = d.connect().await;
+        let mut sdo = ecmxf_proto::v1::sdo_client::SdoClient::new(ch);
+        let ask = ecmxf_proto::v1::SdoUploadRequest { slave: 0, index: 0x8000, subindex: 1, ..Default::default() };
+        up = Some(sdo.upload(ask).await.unwrap().into_inner());
+    });
+    let up = up.unwrap();
+    assert_eq!(up.data_type, ecmxf_proto::v1::DataType::Unsigned32 as i32, "{up:?}");
+    assert!(up.value.is_some(), "{up:?}");
+
     // No SDO Information: the ESI, and the reason.
     let v = d.ctl(&["sdos", "-p", "1", "--json"]).json();
     assert_eq!(v["source"], "ESI");

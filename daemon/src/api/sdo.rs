@@ -19,10 +19,21 @@ use crate::master::objects::{KNOWN, axis_index, lookup};
 #[derive(Debug, Clone)]
 pub struct SdoService(pub Arc<Context>);
 
-/// The type to use for an object: the caller's, else the known one.
-fn effective_type(asked: pb::DataType, index: u16, subindex: u8, complete: bool) -> pb::DataType {
+/// The type to use for an object: the caller's, else the one the device
+/// described (SDO Information, when read before), else the standard one.
+fn effective_type(
+    m: &Master,
+    slave: u8,
+    asked: pb::DataType,
+    index: u16,
+    subindex: u8,
+    complete: bool,
+) -> pb::DataType {
     if asked != pb::DataType::Unspecified || complete {
         return asked;
+    }
+    if let Some(t) = m.known_device_dictionary(slave).and_then(|d| d.data_type(index, subindex)) {
+        return pb_type(t);
     }
     lookup(index, subindex).map_or(pb::DataType::Unspecified, |(k, _)| pb_type(k.data_type))
 }
@@ -33,7 +44,7 @@ impl SdoApi for SdoService {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.get_ref();
         let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
-        let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
+        let t = effective_type(&self.0.master, s, data_type(r.data_type)?, i, sub, r.complete_access);
         let started = std::time::Instant::now();
         let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await;
         self.0.sdo_latency.observe(started.elapsed());
@@ -64,7 +75,7 @@ impl SdoApi for SdoService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let r = request.get_ref();
         let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
-        let t = effective_type(data_type(r.data_type)?, i, sub, r.complete_access);
+        let t = effective_type(&self.0.master, s, data_type(r.data_type)?, i, sub, r.complete_access);
         let value = r.value.as_ref().ok_or_else(|| super::status::bad_argument("value", "no value given"))?;
         let bytes = encode_value(t, value)?;
         let n = bytes.len() as u32;

@@ -150,7 +150,17 @@ impl Master {
                     }
                 }
                 let pdos = SlavePdos { source: PdoSource::Coe, note: String::new(), rx, tx };
-                return Ok(typed(pdos, esi_device.or(eni_device.as_ref())));
+                let mut pdos = typed(pdos, esi_device.or(eni_device.as_ref()));
+                // Without an ESI, what the device described of itself (SDO
+                // Information, when read) types the entries left untyped.
+                if let Some(d) = self.known_device_dictionary(slave).filter(|_| esi_device.is_none()) {
+                    for e in pdos.rx.iter_mut().chain(pdos.tx.iter_mut()).flat_map(|p| p.entries.iter_mut()) {
+                        if e.data_type.is_none() {
+                            e.data_type = d.data_type(e.index, e.subindex).filter(|t| t.bits() == u32::from(e.bits));
+                        }
+                    }
+                }
+                return Ok(pdos);
             }
             Err(e) if source_lacks(&e) => notes.push(format!("CoE: {e}")),
             Err(e) => return Err(e),
