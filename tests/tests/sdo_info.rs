@@ -86,6 +86,12 @@ fn sdos_lists_what_the_device_describes_and_says_where_it_comes_from() {
     assert!(mailbox.contains("repeats=2"), "both lost answers asked again: {mailbox}");
     let log = d.log();
     assert!(log.contains("emergency") && log.contains("65280"), "the emergency is an event, logged:\n{log}");
+    let e = d.ctl(&["emergencies", "--json"]).json();
+    ecmxf_e2e::assert_schema("emergencies", &e);
+    let from_mailbox: Vec<_> =
+        e["emergencies"].as_array().unwrap().iter().filter(|r| r["source"] == "mailbox").collect();
+    assert_eq!(from_mailbox.len(), 1, "kept among the emergencies: {e}");
+    assert_eq!((from_mailbox[0]["slave"].as_u64(), from_mailbox[0]["error_code"].as_u64()), (Some(0), Some(0xFF00)));
 
     // Kept on disk: a new daemon lists it without asking the slave.
     drop(d);

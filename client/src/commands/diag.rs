@@ -26,6 +26,9 @@ pub struct EmergencyReport {
     pub error_register: u32,
     /// Manufacturer-specific bytes, hex.
     pub data: Hex,
+    /// "chip" (the chip's history) or "mailbox" (read by the daemon's own
+    /// mailbox exchanges with the slave; number 0).
+    pub source: String,
 }
 
 impl From<pb::Emergency> for EmergencyReport {
@@ -36,6 +39,7 @@ impl From<pb::Emergency> for EmergencyReport {
             error_code: e.error_code,
             error_register: e.error_register,
             data: Hex::of(&e.data),
+            source: e.source,
         }
     }
 }
@@ -56,7 +60,7 @@ impl Report for EmergenciesReport {
         for e in &self.emergencies {
             let data = crate::values::parse_hex_bytes(&e.data.0).unwrap_or_default();
             t.row([
-                e.number.to_string(),
+                if e.source == "mailbox" { "mbx".into() } else { e.number.to_string() },
                 e.slave.to_string(),
                 format!("{:#06x}", e.error_code),
                 format!("{:#04x}", e.error_register),

@@ -31,6 +31,7 @@ fn emergency_pb(r: &EmergencyRecord) -> pb::Emergency {
         error_code: r.error_code.into(),
         error_register: r.error_register.into(),
         data: r.data.to_vec(),
+        ..pb::Emergency::default()
     }
 }
 
@@ -170,7 +171,11 @@ impl DiagnosticsApi for DiagnosticsService {
         };
         let t = caller.deadline;
         let records = bounded(&caller, emergencies(&self.0.master, n, t)).await?;
-        Ok(Response::new(pb::GetEmergenciesResponse { emergencies: records.iter().map(emergency_pb).collect() }))
+        let from =
+            |source: &'static str, r: &EmergencyRecord| pb::Emergency { source: source.into(), ..emergency_pb(r) };
+        let mut out: Vec<pb::Emergency> = records.iter().map(|r| from("chip", r)).collect();
+        out.extend(self.0.master.mailbox_emergencies().iter().map(|r| from("mailbox", r)));
+        Ok(Response::new(pb::GetEmergenciesResponse { emergencies: out }))
     }
 
     async fn get_counters(

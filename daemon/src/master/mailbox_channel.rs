@@ -92,7 +92,12 @@ pub struct MailboxChannels {
     stations: Mutex<HashMap<u8, (Identity, u16)>>,
     /// What the mailbox gateway did.
     gateway: GatewayCounters,
+    /// The last emergencies the host's own reads found, newest last.
+    emergencies: Mutex<std::collections::VecDeque<EmergencyRecord>>,
 }
+
+/// Emergencies kept of those the host's reads found.
+const EMERGENCIES_KEPT: usize = 8;
 
 /// What the ETG.8200 gateway did (exported as metrics).
 #[derive(Debug, Default)]
@@ -417,7 +422,20 @@ impl Master {
             error_register: e.error_register,
             data: e.data,
         };
+        {
+            let mut kept = self.channels.emergencies.lock().unwrap_or_else(|e| e.into_inner());
+            if kept.len() == EMERGENCIES_KEPT {
+                kept.pop_front();
+            }
+            kept.push_back(record);
+        }
         let _ = self.engine.events.send(Event { time_ns: self.now_ns(), kind: EventKind::Emergency(record) });
         true
+    }
+
+    /// The last emergencies the host's own mailbox reads found (the chip
+    /// never saw them: they are not in its history), newest first.
+    pub fn mailbox_emergencies(&self) -> Vec<EmergencyRecord> {
+        self.channels.emergencies.lock().unwrap_or_else(|e| e.into_inner()).iter().rev().copied().collect()
     }
 }
