@@ -151,9 +151,23 @@ fn every_fixture_device_with_a_dictionary_describes_it_as_its_file_does() {
     let devices: Vec<CatalogDevice> = catalog.devices.into_iter().filter(|d| !d.objects.is_empty()).collect();
     assert!(devices.len() >= 10, "fixture devices with a Dictionary: {}", devices.len());
     let mut failures = Vec::new();
-    for network in catalog::networks(&devices, 24, 128) {
-        failures.extend(check(&tmp, network));
-    }
+    // The networks side by side, each its own simulator and daemon: the
+    // time goes into waiting on the slot, not the CPU.
+    let networks = catalog::networks(&devices, 24, 128);
+    std::thread::scope(|s| {
+        let running: Vec<_> = networks
+            .iter()
+            .enumerate()
+            .map(|(k, network)| {
+                let dir = tmp.join(k.to_string());
+                std::fs::create_dir_all(&dir).unwrap();
+                s.spawn(move || check(&dir, network))
+            })
+            .collect();
+        for r in running {
+            failures.extend(r.join().expect("a network's check panicked"));
+        }
+    });
     let _ = std::fs::remove_dir_all(&tmp);
     assert!(failures.is_empty(), "{} differences:\n{}", failures.len(), failures.join("\n"));
 }
