@@ -24,8 +24,7 @@ use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice, CatalogEntry};
-use ecmxf_sim::config::SlaveSection;
-use ecmxfd::config::{Config, LinkConfig, SlaveConfig};
+use ecmxfd::config::SlaveConfig;
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 use ecmxfd::master::pdos::{PdoSource, SlavePdos};
@@ -43,12 +42,7 @@ fn networks(devices: &[CatalogDevice]) -> Vec<&[CatalogDevice]> {
 /// Runs these devices as one network; returns an error per device that
 /// disagrees with its file, naming what.
 fn check(dir: &Path, devices: &[CatalogDevice]) -> Vec<String> {
-    let network = dir.join("net.toml");
-    let lines: String = devices.iter().map(SlaveSection::table_for).collect();
-    std::fs::write(&network, format!("version = 1\n{lines}")).unwrap();
-    let mut config = Config::simulator();
-    config.link = LinkConfig::Sim { network: Some(network) };
-    config.cycle.sync0_us = 1000;
+    let mut config = common::simulated(dir, devices);
     config.slaves = devices
         .iter()
         .map(|d| SlaveConfig { esi: d.origin.esi().map(Path::to_path_buf), ..SlaveConfig::default() })

@@ -19,8 +19,6 @@ use std::time::{Duration, Instant};
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice};
 use ecmxf_devices::esi::EsiFile;
 use ecmxf_devices::od::ObjectDictionary;
-use ecmxf_sim::config::SlaveSection;
-use ecmxfd::config::{Config, LinkConfig};
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 use ecmxfd::master::device_dictionary::DictionaryError;
@@ -76,12 +74,7 @@ fn compare(file: &ObjectDictionary, device: &ObjectDictionary) -> Vec<String> {
 }
 
 fn check(dir: &Path, devices: &[CatalogDevice]) -> Vec<String> {
-    let network = dir.join("net.toml");
-    let lines: String = devices.iter().map(SlaveSection::table_for).collect();
-    std::fs::write(&network, format!("version = 1\n{lines}")).unwrap();
-    let mut config = Config::simulator();
-    config.link = LinkConfig::Sim { network: Some(network) };
-    config.cycle.sync0_us = 1000;
+    let mut config = common::simulated(dir, devices);
     config.state_dir = Some(dir.join("state"));
     let master = match Master::from_config(config) {
         Ok((m, _)) => Arc::new(m),

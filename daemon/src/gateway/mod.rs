@@ -140,15 +140,11 @@ pub async fn serve(
         // One task per request: requests to different slaves run side by
         // side, those to one slave in turn (its mailbox lock).
         tokio::spawn(async move {
-            let answer = answer(&master, header, &body).await;
             let counters = master.gateway_counters();
-            if answer
-                .get(2..8)
-                .and_then(|h| MailboxHeader::decode(h).ok())
-                .is_some_and(|h| h.kind == MailboxType::Error)
-            {
+            let answer = answer(&master, header, &body).await.unwrap_or_else(|refused| {
                 counters.errors.fetch_add(1, Relaxed);
-            }
+                refused
+            });
             if socket.send_to(&answer, from).await.is_ok() {
                 counters.answered.fetch_add(1, Relaxed);
             }
@@ -156,23 +152,23 @@ pub async fn serve(
     }
 }
 
-/// The answer datagram to one request.
-async fn answer(master: &Master, request: MailboxHeader, body: &[u8]) -> Vec<u8> {
+/// The answer datagram to one request; a mailbox error in the slave's
+/// stead (or the slave's own) is `Err`.
+async fn answer(master: &Master, request: MailboxHeader, body: &[u8]) -> Result<Vec<u8>, Vec<u8>> {
     if request.address == 0 {
         let reply = master_od::answer(master, body).await;
         let header = MailboxHeader::new(MailboxType::Coe, 0, request.counter);
-        return match reply {
-            Some(reply) => datagram(header, &reply),
-            None => refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED),
-        };
+        return reply
+            .map(|r| datagram(header, &r))
+            .ok_or_else(|| refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED));
     }
     let Some(slave) = master.slave_at_station(request.address).await else {
-        return refusal(&request, MailboxError::INVALID_HEADER);
+        return Err(refusal(&request, MailboxError::INVALID_HEADER));
     };
     let state = master.slave_number(slave, ecmxf_wire::payload::slave_info::SlaveInfoCode::State).await;
     let state = state.map(|s| EcatState::from_u8(s as u8)).unwrap_or(EcatState::None);
     if !matches!(state, EcatState::PreOp | EcatState::SafeOp | EcatState::Op) {
-        return refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED);
+        return Err(refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED));
     }
     let exchange = async {
         let _lock = master.mailbox_lock(slave).await;
@@ -181,16 +177,16 @@ async fn answer(master: &Master, request: MailboxHeader, body: &[u8]) -> Vec<u8>
     match exchange.await {
         Ok(Ok((header, body))) => {
             let header = MailboxHeader { address: request.address, counter: request.counter, length: 0, ..header };
-            datagram(header, &body)
+            Ok(datagram(header, &body))
         }
-        Ok(Err(crate::master::mailbox_channel::MailboxFailure::Refused(e))) => refusal(&request, e),
+        Ok(Err(crate::master::mailbox_channel::MailboxFailure::Refused(e))) => Err(refusal(&request, e)),
         Ok(Err(e)) => {
             tracing::debug!(slave, "gateway: {e}");
-            refusal(&request, MailboxError::NO_MORE_MEMORY)
+            Err(refusal(&request, MailboxError::NO_MORE_MEMORY))
         }
         Err(e) => {
             tracing::debug!(slave, "gateway: {e}");
-            refusal(&request, MailboxError::NO_MORE_MEMORY)
+            Err(refusal(&request, MailboxError::NO_MORE_MEMORY))
         }
     }
 }

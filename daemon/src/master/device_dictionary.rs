@@ -20,8 +20,7 @@ use std::sync::{Arc, Mutex};
 use ecmxf_devices::od::{Access, DataType, Entry, Mappable, Object, ObjectDictionary, ObjectKind, StateSet};
 use ecmxf_wire::mbx::MailboxType;
 use ecmxf_wire::mbx::sdo_info::{
-    EntryDescription, InfoFragment, InfoOpcode, InfoRequest, ListType, ObjectAccess, ObjectDescription, OdList,
-    ValueInfo,
+    EntryDescription, InfoFragment, InfoRequest, ListType, ObjectAccess, ObjectDescription, OdList, ValueInfo,
 };
 use ecmxf_wire::payload::sdo::SdoAbortCode;
 use serde::{Deserialize, Serialize};
@@ -352,11 +351,7 @@ impl Master {
     async fn sdo_info(&self, slave: u8, request: InfoRequest, what: &str) -> Result<Vec<u8>, DictionaryError> {
         let mut body = [0u8; 16];
         let n = request.encode(&mut body).map_err(|e| DictionaryError::Garbled(e.to_string()))?;
-        let want = match request {
-            InfoRequest::OdList(_) => InfoOpcode::OdListResponse,
-            InfoRequest::Object { .. } => InfoOpcode::ObjectResponse,
-            InfoRequest::Entry { .. } => InfoOpcode::EntryResponse,
-        };
+        let want = request.answer_opcode();
         let _lock = self.mailbox_lock(slave).await;
         let mut answer = self.mailbox_exchange(slave, MailboxType::Coe, &body[..n], ANSWER_TIMEOUT).await?;
         let mut joined = Vec::new();

@@ -5,22 +5,17 @@
 //! (one EEPROM request) the first time an SDO goes to it, and kept while
 //! the same device sits at that position.
 
-use std::collections::HashMap;
-use std::sync::Mutex;
-
 use ecmxf_devices::sii::protocol;
 
-use super::{Identity, Master};
+use super::Master;
+use super::per_slave::PerSlave;
 use crate::engine::error::{EngineError, WrongState};
 
 /// SII word of the mailbox protocols.
 const PROTOCOLS_WORD: u16 = 0x1C;
 
 /// The mailbox protocols read so far, by slave position.
-#[derive(Debug, Default)]
-pub struct MailboxProtocols {
-    by_position: Mutex<HashMap<u8, (Identity, u16)>>,
-}
+pub type MailboxProtocols = PerSlave<u16>;
 
 impl Master {
     /// Ok when `slave` speaks CoE, or when its SII cannot say (the SDO then
@@ -28,13 +23,12 @@ impl Master {
     /// when its SII lists the mailbox protocols and CoE is not among them.
     pub async fn check_coe(&self, slave: u8) -> Result<(), EngineError> {
         let Some(identity) = self.identity(slave) else { return Ok(()) };
-        let known = self.mailbox.by_position.lock().unwrap_or_else(|e| e.into_inner()).get(&slave).copied();
-        let protocols = match known {
-            Some((id, p)) if id == identity => p,
-            _ => match self.eeprom_read(slave, PROTOCOLS_WORD, None).await {
+        let protocols = match self.mailbox.get(slave, identity) {
+            Some(p) => p,
+            None => match self.eeprom_read(slave, PROTOCOLS_WORD, None).await {
                 Ok(words) => {
                     let p = u16::from_le_bytes([words[0], words[1]]);
-                    self.mailbox.by_position.lock().unwrap_or_else(|e| e.into_inner()).insert(slave, (identity, p));
+                    self.mailbox.put(slave, identity, p);
                     p
                 }
                 Err(_) => return Ok(()),

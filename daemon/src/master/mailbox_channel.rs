@@ -52,7 +52,8 @@ use ecmxf_wire::mbx::{self, MailboxError, MailboxHeader, MailboxType, Message};
 use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RAW_MAX_DATA};
 
-use super::{Identity, Master};
+use super::Master;
+use super::per_slave::PerSlave;
 use crate::engine::error::EngineError;
 use crate::engine::events::{Event, EventKind};
 
@@ -84,12 +85,12 @@ pub struct MailboxGeometry {
 /// the lock host exchanges and the master's own CoE requests share.
 #[derive(Debug, Default)]
 pub struct MailboxChannels {
-    geometry: Mutex<HashMap<u8, (Identity, MailboxGeometry)>>,
+    geometry: PerSlave<MailboxGeometry>,
     locks: Mutex<HashMap<u8, Arc<tokio::sync::RwLock<()>>>>,
     /// The counter of the last message the host read from each slave.
     counters: Mutex<HashMap<u8, u8>>,
     /// Station addresses by position, read once per identity.
-    stations: Mutex<HashMap<u8, (Identity, u16)>>,
+    stations: PerSlave<u16>,
     /// What the mailbox gateway did.
     gateway: GatewayCounters,
     /// The last emergencies the host's own reads found, newest last.
@@ -187,14 +188,12 @@ impl Master {
     /// read once per identity); `None` when it cannot be read.
     pub async fn station_address(&self, slave: u8) -> Option<u16> {
         let identity = self.identity(slave)?;
-        if let Some((id, a)) = self.channels.stations.lock().unwrap_or_else(|e| e.into_inner()).get(&slave) {
-            if *id == identity {
-                return Some(*a);
-            }
+        if let Some(a) = self.channels.stations.get(slave, identity) {
+            return Some(a);
         }
         let code = ecmxf_wire::payload::slave_info::SlaveInfoCode::ConfiguredAddress;
         let a = self.slave_number(slave, code).await.ok()? as u16;
-        self.channels.stations.lock().unwrap_or_else(|e| e.into_inner()).insert(slave, (identity, a));
+        self.channels.stations.put(slave, identity, a);
         Some(a)
     }
 
@@ -215,15 +214,13 @@ impl Master {
             field: "slave",
             reason: format!("slave {slave} does not exist"),
         })?;
-        if let Some((id, g)) = self.channels.geometry.lock().unwrap_or_else(|e| e.into_inner()).get(&slave) {
-            if *id == identity {
-                return Ok(*g);
-            }
+        if let Some(g) = self.channels.geometry.get(slave, identity) {
+            return Ok(g);
         }
         let w = self.eeprom_read_words(slave, 0x18, 4, None).await?;
         let word = |k: usize| w.get(k).copied().unwrap_or(0);
         let g = MailboxGeometry { rx_offset: word(0), rx_size: word(1), tx_offset: word(2), tx_size: word(3) };
-        self.channels.geometry.lock().unwrap_or_else(|e| e.into_inner()).insert(slave, (identity, g));
+        self.channels.geometry.put(slave, identity, g);
         Ok(g)
     }
 

@@ -41,6 +41,7 @@ mod network;
 pub mod objects;
 pub mod outputs;
 pub mod pdos;
+mod per_slave;
 pub mod sii;
 pub mod states;
 pub mod transactions;

@@ -122,13 +122,8 @@ pub fn answer(od: &ObjectDictionary, request: InfoRequest) -> Result<(InfoOpcode
             description.encode(&mut out).map_err(|_| SdoAbortCode::GENERAL)?
         }
     };
-    let opcode = match request {
-        InfoRequest::OdList(_) => InfoOpcode::OdListResponse,
-        InfoRequest::Object { .. } => InfoOpcode::ObjectResponse,
-        InfoRequest::Entry { .. } => InfoOpcode::EntryResponse,
-    };
     out.truncate(n);
-    Ok((opcode, out))
+    Ok((request.answer_opcode(), out))
 }
 
 #[cfg(test)]

@@ -240,6 +240,15 @@ fn read_header<'a>(r: &mut Reader<'a>) -> Result<InfoHeader, PayloadError> {
 }
 
 impl InfoRequest {
+    /// The opcode its answer comes with (an error aside).
+    pub fn answer_opcode(&self) -> InfoOpcode {
+        match self {
+            Self::OdList(_) => InfoOpcode::OdListResponse,
+            Self::Object { .. } => InfoOpcode::ObjectResponse,
+            Self::Entry { .. } => InfoOpcode::EntryResponse,
+        }
+    }
+
     /// Writes the CoE body; returns its length.
     pub fn encode(&self, out: &mut [u8]) -> Result<usize, EncodeError> {
         let mut w = Writer::new(out);
