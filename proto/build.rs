@@ -17,6 +17,9 @@ const FILES: [&str; 7] = [
     "ecmxf/v1/peripherals.proto",
 ];
 
+/// The Sparkplug B payload schema (Eclipse Sparkplug 3.0, 6.4).
+const SPARKPLUG: &str = "sparkplug/sparkplug_b.proto";
+
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     for f in FILES {
         println!("cargo:rerun-if-changed={f}");
@@ -37,5 +40,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
         .codec_path("crate::codec::RequestCodec")
         .out_dir(&server)
         .compile_fds(fds)?;
+    // The Sparkplug B payload (MQTT edge node, daemon/src/sparkplug):
+    // messages only, its own package, not part of the gRPC API.
+    println!("cargo:rerun-if-changed={SPARKPLUG}");
+    let sparkplug = protox::compile([SPARKPLUG], ["."])?;
+    tonic_prost_build::configure().build_client(false).build_server(false).compile_fds(sparkplug)?;
     Ok(())
 }

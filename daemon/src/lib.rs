@@ -40,5 +40,6 @@ pub mod port;
 pub mod probe;
 pub mod realtime;
 pub mod service;
+pub mod sparkplug;
 
 pub use lifecycle::{DaemonError, Options, run, run_with};

@@ -37,6 +37,8 @@ pub enum DaemonError {
     },
     /// The mailbox gateway could not listen (`gateway.listen`).
     Gateway(crate::gateway::GatewayError),
+    /// The Sparkplug node's TLS files or credentials did not load.
+    Sparkplug(crate::sparkplug::SparkplugError),
     /// The engine could not start: the link, the simulator's network file.
     Start(StartError),
     /// The API server could not start or failed.
@@ -77,6 +79,7 @@ impl std::fmt::Display for DaemonError {
         match self {
             Self::Metrics { addr, source } => write!(f, "metrics.listen {addr}: {source}"),
             Self::Gateway(e) => write!(f, "{e}"),
+            Self::Sparkplug(e) => write!(f, "{e}"),
             Self::Start(e) => write!(f, "{e}"),
             Self::Api(e) => write!(f, "{e}"),
             Self::ApiEnded => f.write_str("the API server ended"),
@@ -97,6 +100,7 @@ impl std::error::Error for DaemonError {
         match self {
             Self::Metrics { source, .. } => Some(source),
             Self::Gateway(e) => Some(e),
+            Self::Sparkplug(e) => Some(e),
             Self::Start(e) => Some(e),
             Self::Api(e) => Some(e),
             Self::Signals(e) => Some(e),
@@ -150,6 +154,11 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         Some(g) => Some((g.clone(), crate::gateway::bind(g).await.map_err(DaemonError::Gateway)?)),
         None => None,
     };
+    let sparkplug = match &config.sparkplug {
+        Some(s) => Some(crate::sparkplug::session::prepare(s).map_err(DaemonError::Sparkplug)?),
+        None => None,
+    };
+    let sparkplug_stats = sparkplug.as_ref().map(|_| crate::sparkplug::SharedStats::default());
     let mut running = config.clone();
     let (master, _sim) = Master::from_config(config)?;
     let master = Arc::new(master);
@@ -160,12 +169,25 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     });
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
     if let Some(l) = metrics_listener {
-        let sources =
-            crate::metrics::Sources { master: Arc::clone(&master), sdo_latency: Arc::clone(&ctx.sdo_latency) };
+        let sources = crate::metrics::Sources {
+            master: Arc::clone(&master),
+            sdo_latency: Arc::clone(&ctx.sdo_latency),
+            sparkplug: sparkplug_stats.clone(),
+        };
         tokio::spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
     }
     if let Some((g, socket)) = gateway {
         tokio::spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
+    }
+    if let (Some(prepared), Some(stats)) = (sparkplug, sparkplug_stats) {
+        tokio::spawn(crate::sparkplug::serve(
+            Arc::clone(&master),
+            Arc::clone(&ctx.leases),
+            prepared,
+            ctx.lease_ttl,
+            stats,
+            api_stopped.clone(),
+        ));
     }
     let mut server = tokio::spawn(crate::api::server::serve(Arc::clone(&ctx), api, api_stopped));
     let status_every = options.status_every;

@@ -195,6 +195,8 @@ impl ReloadPlan {
         restart(old.recovery != new.recovery, "[recovery]");
         restart(old.outputs != new.outputs, "[outputs]");
         restart(old.metrics != new.metrics, "[metrics]");
+        restart(old.gateway != new.gateway, "[gateway]");
+        restart(old.sparkplug != new.sparkplug, "[sparkplug]");
         restart(
             a.socket != b.socket || a.socket_mode != b.socket_mode || a.socket_group != b.socket_group,
             "api.socket*",

@@ -14,6 +14,12 @@ pub mod v1 {
     pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/ecmxf_descriptor.bin"));
 }
 
+/// The Sparkplug B payload (`sparkplug/sparkplug_b.proto`, Eclipse
+/// Sparkplug 3.0 section 6.4): what the daemon's MQTT edge node publishes.
+pub mod sparkplug {
+    include!(concat!(env!("OUT_DIR"), "/org.eclipse.tahu.protobuf.rs"));
+}
+
 #[warn(clippy::all)]
 pub mod codec;
 #[warn(clippy::all)]

@@ -65,6 +65,12 @@ fn binary(name: &str, package: &str) -> PathBuf {
     bin
 }
 
+/// The `ecmxf-sim` binary of this build (built where missing, as
+/// [`daemon_binary`]).
+pub fn sim_binary() -> PathBuf {
+    binary("ecmxf-sim", "ecmxf-sim")
+}
+
 /// What one `ecmxfctl` run did.
 #[derive(Debug)]
 pub struct Ctl {
@@ -149,12 +155,7 @@ impl Simulator {
     /// Serves the demo network on `dir/sim.sock`, with `args` added to
     /// `serve` (e.g. `["--seed", "7"]`).
     pub fn serve(dir: &Path, args: &[&str]) -> Self {
-        let bin = daemon_binary().with_file_name("ecmxf-sim");
-        if !bin.exists() {
-            let cargo = std::env::var("CARGO").unwrap_or_else(|_| "cargo".into());
-            let ok = Command::new(cargo).args(["build", "-p", "ecmxf-sim"]).current_dir(repo()).status();
-            assert!(ok.is_ok_and(|s| s.success()), "building ecmxf-sim failed");
-        }
+        let bin = sim_binary();
         let socket = dir.join("sim.sock");
         let args: Vec<String> = args.iter().map(|a| a.to_string()).collect();
         let child = Self::spawn(&bin, &socket, &args);

@@ -52,7 +52,7 @@ pub struct Context {
     pub sdo_latency: Arc<crate::metrics::Histogram>,
     /// Output leases: the master's table (domain state), shown through
     /// [`leases`].
-    pub leases: crate::master::Leases,
+    pub leases: Arc<crate::master::Leases>,
     /// Default lease time-to-live.
     pub lease_ttl: Duration,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
@@ -69,7 +69,7 @@ impl Context {
             master,
             auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
             sdo_latency: Arc::default(),
-            leases: crate::master::Leases::default(),
+            leases: Arc::default(),
             lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             stopping: tokio::sync::watch::Sender::new(false),

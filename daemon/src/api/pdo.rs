@@ -18,7 +18,8 @@ use super::leases;
 use super::status::{bad_argument, to_status};
 use crate::config::PdoConfig;
 use crate::master::EngineError;
-use crate::master::image::{Entry, Image, write_bits};
+use crate::master::entry_writes::{Staging, WriteError, output_entry};
+use crate::master::image::{Entry, Image};
 use crate::master::pdos::{PdoDescription, PdoSource};
 
 /// The `ProcessData` service.
@@ -83,81 +84,6 @@ fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>,
         .collect()
 }
 
-/// Bytes `from..to` of the output image are no StreamFrames' (its frames
-/// replace them every cycle: a write there would be lost or, while the
-/// stream is dry, break the policy).
-fn not_streamed(ctx: &Context, from: usize, to: usize) -> Result<(), Status> {
-    match ctx.master.frame_claims().overlapping(from, to) {
-        None => Ok(()),
-        Some((start, len)) => Err(Status::failed_precondition(format!(
-            "output bytes {from}..{to} are fed by a StreamFrames (bytes {start}..{}): send them as frames",
-            start + len
-        ))),
-    }
-}
-
-/// Controlword bits the chip's CiA 402 helper drives for an `[[axis]]`
-/// (v049 commands 26..30: bits 0-3, and bit 7 for fault resets): the chip
-/// overwrites them every cycle, so a client's value there would be lost
-/// without a word.
-const HELPER_BITS: u16 = 0x008F;
-
-/// Refuses a write that sets a controlword bit the CiA 402 helper owns
-/// (FAILED_PRECONDITION naming the axis and the bits): bits 4-6 and 8-15
-/// (new set-point, halt, ...) stay the client's.
-fn helper_bits_untouched(
-    ctx: &Context,
-    slaves: &[crate::master::SlaveSummary],
-    staged: &[u8],
-    lo: usize,
-    hi: usize,
-) -> Result<(), Status> {
-    ctx.master.with_axes(|axes| {
-        for (n, a) in axes.iter().enumerate() {
-            let Some(s) = slaves.get(usize::from(a.slave)) else { continue };
-            let at = s.rx_offset + usize::from(a.controlword_offset);
-            if at + 2 > staged.len() || at + 2 <= lo || at >= hi {
-                continue;
-            }
-            let set = u16::from_le_bytes([staged[at], staged[at + 1]]) & HELPER_BITS;
-            if set != 0 {
-                return Err(Status::failed_precondition(format!(
-                    "axis {n} (slave {}, controlword at output byte {at}): bits 0-3 and 7 are driven by the chip's \
-                     CiA 402 helper ([[axis]]), and this write sets {set:#06x} of them; use Cia402.Command to \
-                     change the drive's state, and write only bits 4-6 and 8-15 here",
-                    a.slave
-                )));
-            }
-        }
-        Ok(())
-    })
-}
-
-/// A value for an entry of `bits` bits must be exactly its bytes (a bit
-/// entry: one byte), and an entry narrower than a byte takes no value its
-/// bits cannot hold (a 1-bit entry: 0 or 1). Nothing is cut silently: a
-/// write of 2 bytes to a u8, or 1 MiB to a BOOL, is refused whole.
-fn check_fits(name: &str, bits: u32, bytes: &[u8]) -> Result<(), Status> {
-    let want = bits.div_ceil(8) as usize;
-    if bytes.len() != want {
-        return Err(bad_argument(
-            "writes.value",
-            format!(
-                "{} bytes given for the {bits}-bit entry {name:?}, which takes {want} byte{}",
-                bytes.len(),
-                if want == 1 { "" } else { "s" }
-            ),
-        ));
-    }
-    if bits < 8 && u32::from(bytes[0]) >> bits != 0 {
-        return Err(bad_argument(
-            "writes.value",
-            format!("{} does not fit the {bits}-bit entry {name:?} (0..={})", bytes[0], (1u32 << bits) - 1),
-        ));
-    }
-    Ok(())
-}
-
 /// Applies client writes to the shadow image and sends the touched span as
 /// one write under the lease (so it reaches the slaves in one frame). A bad
 /// write rejects the whole request and changes nothing.
@@ -165,59 +91,39 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
     if writes.is_empty() {
         return Ok(());
     }
-    let layout = ctx.master.layout();
-    let size = image.output_bytes as usize;
-    let mut shadow = ctx.master.output_shadow();
-    shadow.resize(size, 0);
-    let mut staged = shadow.clone();
-    let (mut lo, mut hi) = (usize::MAX, 0usize);
+    let mut staging = Staging::new(&ctx.master, image);
     for w in writes {
         let value = w.value.as_ref().ok_or_else(|| bad_argument("writes.value", "no value given"))?;
         match &w.target {
             Some(pb::output_write::Target::Entry(name)) => {
-                let e: &Entry = image.get(name).ok_or_else(|| {
-                    bad_argument("writes.entry", format!("no entry {name:?} (see GetLayout for the names)"))
-                })?;
-                if !e.output {
-                    return Err(bad_argument("writes.entry", format!("{name:?} is an input")));
-                }
+                let e = output_entry(image, name).map_err(write_status)?;
                 let bytes = encode(super::image::entry_type(e), value)
                     .map_err(|(_, why)| bad_argument("writes.value", format!("entry {name:?}: {why}")))?;
-                check_fits(name, e.bit_length, &bytes)?;
-                let (b0, b1) = ((e.bit_offset / 8) as usize, (e.bit_offset + e.bit_length).div_ceil(8) as usize);
-                not_streamed(ctx, b0, b1)?;
-                write_bits(&mut staged, e.bit_offset, e.bit_length, &bytes);
-                lo = lo.min(b0);
-                hi = hi.max(b1);
+                staging.entry(e, &bytes).map_err(write_status)?;
             }
             Some(pb::output_write::Target::Offset(o)) => {
                 let Some(pb::value::Kind::Raw(bytes)) = &value.kind else {
                     return Err(bad_argument("writes.value", "a write by offset takes raw bytes"));
                 };
-                let o = *o as usize;
-                if o + bytes.len() > size {
-                    return Err(bad_argument(
-                        "writes.offset",
-                        format!("{} bytes at {o} exceed the {size}-byte output image", bytes.len()),
-                    ));
-                }
-                not_streamed(ctx, o, o + bytes.len())?;
-                staged[o..o + bytes.len()].copy_from_slice(bytes);
-                lo = lo.min(o);
-                hi = hi.max(o + bytes.len());
+                staging.raw(*o as usize, bytes).map_err(write_status)?;
             }
             None => return Err(bad_argument("writes.target", "give an entry name or an offset")),
         }
     }
-    if lo >= hi {
-        return Ok(());
+    staging.commit(&ctx.leases, lease_id).map_err(write_status)
+}
+
+/// The status of a refused write: the caller's field INVALID_ARGUMENT, a
+/// span another stream or the CiA 402 helper owns FAILED_PRECONDITION, the
+/// lease's own codes.
+fn write_status(e: WriteError) -> Status {
+    match e {
+        WriteError::Lease(e) => leases::status(e),
+        e => match e.field() {
+            Some(field) => bad_argument(field, e.to_string()),
+            None => Status::failed_precondition(e.to_string()),
+        },
     }
-    helper_bits_untouched(ctx, &layout.slaves, &staged, lo, hi)?;
-    let slave_of =
-        |b: usize| layout.slaves.iter().position(|s| b >= s.rx_offset && b < s.rx_offset + s.rx_bytes).map(|p| p as u8);
-    ctx.leases.write(lease_id, lo, &staged[lo..hi], slave_of).map_err(leases::status)?;
-    *shadow = staged;
-    Ok(())
 }
 
 type SampleStream = super::BoxStream<pb::InputSample>;
@@ -508,29 +414,5 @@ mod age_tests {
         assert!(g.admit(1_000_000, 101_000_000), "exactly the bound");
         assert!(!g.admit(1_000_000, 101_000_001));
         assert!(g.admit(5_000_000, 1_000_000), "a clock read before the frame is not an age");
-    }
-}
-
-#[cfg(test)]
-mod tests {
-    use super::check_fits;
-
-    /// A bit entry takes one byte holding what its bits can: a 1-bit entry
-    /// 0 or 1, a BIT2 entry 0..=3; a byte entry exactly one byte; nothing
-    /// is cut to fit.
-    #[test]
-    fn a_value_must_be_exactly_its_entrys_bytes_and_fit_its_bits() {
-        assert!(check_fits("2.0x7000:01", 1, &[1]).is_ok());
-        assert!(check_fits("2.0x7000:01", 1, &[0]).is_ok());
-        let e = check_fits("2.0x7000:01", 1, &[2]).unwrap_err();
-        assert!(e.message().contains("2 does not fit the 1-bit entry \"2.0x7000:01\" (0..=1)"), "{e:?}");
-        let e = check_fits("2.0x7000:01", 1, &vec![1; 1 << 20]).unwrap_err();
-        assert!(e.message().contains("1048576 bytes given for the 1-bit entry \"2.0x7000:01\", which takes 1 byte"));
-        assert!(check_fits("1.bits", 2, &[3]).is_ok());
-        assert!(check_fits("1.bits", 2, &[4]).is_err());
-        assert!(check_fits("1.u8", 8, &[0xFF]).is_ok());
-        assert!(check_fits("1.u8", 8, &[1, 2]).unwrap_err().message().contains("2 bytes given for the 8-bit"));
-        assert!(check_fits("1.i16", 16, &[1]).unwrap_err().message().contains("which takes 2 bytes"));
-        assert!(check_fits("1.u24", 24, &[1, 2, 3]).is_ok());
     }
 }

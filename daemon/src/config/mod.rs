@@ -11,8 +11,10 @@ use serde::{Deserialize, Serialize};
 pub mod api;
 mod eni;
 mod files;
+pub mod sparkplug;
 
 pub use api::{ApiConfig, Role};
+pub use sparkplug::SparkplugConfig;
 
 /// A configuration mistake: unreadable file, TOML syntax or schema (naming
 /// key and line), or a value not allowed (naming the dotted key). The same
@@ -76,6 +78,9 @@ pub struct Config {
     /// The ETG.8200 mailbox gateway for engineering tools; absent: off.
     #[serde(default)]
     pub gateway: Option<GatewayConfig>,
+    /// The MQTT Sparkplug B edge node; absent: off.
+    #[serde(default)]
+    pub sparkplug: Option<SparkplugConfig>,
     /// Where the daemon keeps what it learned across restarts (object
     /// dictionaries read from devices). Unset: systemd's
     /// `$STATE_DIRECTORY` (the unit's `StateDirectory=`), else nothing is
@@ -758,6 +763,7 @@ impl Config {
             metrics: MetricsConfig::default(),
             state_dir: None,
             gateway: None,
+            sparkplug: None,
         }
     }
 
@@ -945,6 +951,9 @@ impl Config {
             );
         }
         self.api.validate(path)?;
+        if let Some(s) = &self.sparkplug {
+            s.validate(path)?;
+        }
         if let LinkConfig::Spidev { int0_line: None, idle_us, .. } = &self.link {
             if *idle_us < 100 {
                 return bad(
@@ -1016,6 +1025,52 @@ mod tests {
     }
 
     const MINIMAL: &str = "version = 1\n[link]\nbackend = \"sim\"\n";
+
+    #[test]
+    fn sparkplug_takes_one_broker_or_a_list_and_names_the_key_it_refuses() {
+        let c = parse(&format!("{MINIMAL}[sparkplug]\nbroker = \"mqtt://b\"\ngroup_id = \"plant\"\n")).unwrap();
+        let s = c.sparkplug.unwrap();
+        assert_eq!((s.broker.len(), s.data_period_ms, s.commands), (1, 100, api::RoleName::None));
+        let t = format!(
+            "{MINIMAL}[sparkplug]\nbroker = [\"mqtt://a:1884\", \"mqtt://b\"]\ngroup_id = \"g\"\nnode_id = \"n\"\ncommands = \"operator\"\n"
+        );
+        let s = parse(&t).unwrap().sparkplug.unwrap();
+        assert_eq!((s.broker[0].port, s.broker[1].port, s.node_id()), (1884, 1883, "n".to_string()));
+        for (body, key, words) in [
+            ("broker = \"http://b\"\ngroup_id = \"g\"", "line 5", "mqtt:// or mqtts://"),
+            ("broker = \"mqtt://b\"\ngroup_id = \"a/b\"", "sparkplug.group_id", "cannot be a topic level"),
+            (
+                "broker = \"mqtt://b\"\ngroup_id = \"g\"\nnode_id = \"#\"",
+                "sparkplug.node_id",
+                "cannot be a topic level",
+            ),
+            ("broker = \"mqtt://b\"\ngroup_id = \"g\"\ndata_period_ms = 1", "sparkplug.data_period_ms", "10..=3600000"),
+            (
+                "broker = \"mqtt://b\"\ngroup_id = \"g\"\ndata_deadband = -1.0",
+                "sparkplug.data_deadband",
+                "not a deadband",
+            ),
+            (
+                "broker = \"mqtt://b\"\ngroup_id = \"g\"\nca_file = \"/etc/hosts\"",
+                "sparkplug.ca_file",
+                "no broker is mqtts",
+            ),
+            (
+                "broker = \"mqtts://b\"\ngroup_id = \"g\"\nca_file = \"/nonexistent.pem\"",
+                "sparkplug.ca_file",
+                "not a readable file",
+            ),
+            (
+                "broker = \"mqtt://b\"\ngroup_id = \"g\"\ncredentials_file = \"/nonexistent\"",
+                "sparkplug.credentials_file",
+                "/nonexistent",
+            ),
+            ("broker = \"mqtt://b\"\ngroup_id = \"g\"\ncommands = \"root\"", "line 7", "`root`, expected one of `none`"),
+        ] {
+            let e = parse(&format!("{MINIMAL}[sparkplug]\n{body}\n")).unwrap_err().to_string();
+            assert!(e.contains(key) && e.contains(words), "{body}: {e}");
+        }
+    }
 
     #[test]
     fn the_gateway_allows_the_clients_it_names_and_else_this_host() {

@@ -392,6 +392,14 @@ impl ImageCache {
         }
     }
 
+    /// The image for the network in force if one was built (or its build
+    /// failed), without waiting or asking for one: for front ends that
+    /// publish on their own clock (Sparkplug) and try again next time.
+    pub fn current(&self, master: &Master) -> Option<Result<Arc<Image>, EngineError>> {
+        let key = LayoutKey::of(master);
+        self.built.borrow().as_ref().filter(|b| b.key == key).map(|b| b.result.clone())
+    }
+
     /// The daemon's builder, for as long as it runs: builds the image each
     /// time the network runs with a layout it has none for, and again after
     /// a failed build once the engine's phase, state or configuration

@@ -31,6 +31,7 @@ pub use outputs::OutputWriter;
 pub use transactions::RawAnswer;
 
 pub mod device_dictionary;
+pub mod entry_writes;
 pub mod esi;
 pub mod frame_claims;
 pub mod image;
@@ -525,6 +526,12 @@ impl Master {
     /// at once when built, else after the build under way).
     pub async fn image(&self) -> Result<Arc<image::Image>, EngineError> {
         self.image.get(self).await
+    }
+
+    /// The process image of the network in force if it is built (or its
+    /// build failed), at once ([`image::ImageCache::current`]).
+    pub fn current_image(&self) -> Option<Result<Arc<image::Image>, EngineError>> {
+        self.image.current(self)
     }
 
     /// Keeps the process image built after every bring-up, as the

@@ -35,6 +35,8 @@ pub struct Sources {
     pub master: Arc<Master>,
     /// SDO transfer durations through the API.
     pub sdo_latency: Arc<Histogram>,
+    /// The Sparkplug edge node's counters, when `[sparkplug]` is on.
+    pub sparkplug: Option<crate::sparkplug::SharedStats>,
 }
 
 /// The label of each phase (the API's `EnginePhase` names, so dashboards
@@ -220,6 +222,33 @@ pub async fn render(sources: &Sources) -> String {
         ),
     ] {
         metric(&mut out, name, "counter", help, counter.load(std::sync::atomic::Ordering::Relaxed));
+    }
+    if let Some(s) = &sources.sparkplug {
+        use std::sync::atomic::Ordering::Relaxed;
+        metric(
+            &mut out,
+            "ecmxf_sparkplug_connected",
+            "gauge",
+            "1 while the Sparkplug node is connected and born.",
+            s.connected.load(Relaxed),
+        );
+        for (name, help, counter) in [
+            ("ecmxf_sparkplug_published_total", "Sparkplug messages handed to the MQTT client.", &s.published),
+            (
+                "ecmxf_sparkplug_dropped_total",
+                "Sparkplug messages dropped: the MQTT client's queue was full.",
+                &s.dropped,
+            ),
+            ("ecmxf_sparkplug_commands_total", "Sparkplug NCMD/DCMD commands applied.", &s.commands),
+            (
+                "ecmxf_sparkplug_refused_total",
+                "Sparkplug commands refused (disabled, role, metric, value).",
+                &s.refused,
+            ),
+            ("ecmxf_sparkplug_connects_total", "Sparkplug connections made to a broker.", &s.connects),
+        ] {
+            metric(&mut out, name, "counter", help, counter.load(Relaxed));
+        }
     }
     if let Some(l) = master.output_latency() {
         let name = "ecmxf_output_latency_seconds";

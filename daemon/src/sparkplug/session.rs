@@ -1,0 +1,514 @@
+//! The node's MQTT sessions: connect (brokers in order, fail-over), the
+//! will NDEATH with this connection's `bdSeq`, subscribe to commands (and
+//! the primary host's STATE), births once the host is online, then
+//! publish on the configured periods and on engine changes until the
+//! connection is lost; then the next broker after a growing pause, with
+//! the next `bdSeq` and births again. At shutdown NDEATH goes out before
+//! the disconnect.
+//!
+//! The MQTT event loop runs in a task of its own (rumqttc's `poll` is not
+//! cancelled mid-packet), handing received publishes and the end of the
+//! connection over a channel. Messages go into the client's queue without
+//! waiting (`try_publish`): a full queue drops the message and counts it
+//! rather than holding up the node, and nothing of the engine's cyclic
+//! path ever waits on the network.
+
+use std::collections::BTreeMap;
+use std::sync::Arc;
+use std::sync::atomic::Ordering::Relaxed;
+use std::time::{Duration, SystemTime, UNIX_EPOCH};
+
+use ecmxf_proto::sparkplug::Payload;
+use ecmxf_wire::EcatState;
+use prost::Message;
+use rumqttc::{AsyncClient, ConnectReturnCode, Event, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
+use tokio::sync::{broadcast, mpsc, watch};
+use tracing::{info, warn};
+
+use super::commands::{self, Action, Writer};
+use super::node::{Node, Outgoing, Settings, View};
+use super::topic::{self, Kind, NodeTopics};
+use super::{SharedStats, tls};
+use crate::config::{SparkplugConfig, sparkplug::Credentials};
+use crate::master::image::Image;
+use crate::master::{EventKind, Leases, Master, Phase};
+
+/// Pause after a lost connection: doubles up to [`MAX_BACKOFF`].
+const FIRST_BACKOFF: Duration = Duration::from_secs(1);
+/// The longest pause between connection attempts.
+const MAX_BACKOFF: Duration = Duration::from_secs(30);
+/// How long a CONNACK may take.
+const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
+/// How long NDEATH and the disconnect get at shutdown.
+const GOODBYE: Duration = Duration::from_secs(1);
+/// The client's queue: births of 256 devices and a period's data fit.
+const QUEUE: usize = 1024;
+
+/// Why the node could not start.
+#[derive(Debug)]
+pub enum SparkplugError {
+    /// TLS material that does not load.
+    Tls(String),
+    /// Credentials that do not load.
+    Credentials(String),
+}
+
+impl std::fmt::Display for SparkplugError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Tls(e) => write!(f, "{e}"),
+            Self::Credentials(e) => write!(f, "sparkplug.credentials_file: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for SparkplugError {}
+
+/// What the node needs, prepared at start (files read once).
+#[derive(Debug)]
+pub struct Prepared {
+    config: SparkplugConfig,
+    node_id: String,
+    tls: Option<Arc<rustls::ClientConfig>>,
+    credentials: Option<Credentials>,
+}
+
+/// Reads the TLS files and credentials of `config`: an error names the
+/// file, before the daemon starts serving.
+pub fn prepare(config: &SparkplugConfig) -> Result<Prepared, SparkplugError> {
+    let tls = tls::client_config(config).map_err(SparkplugError::Tls)?;
+    let credentials =
+        config.credentials_file.as_deref().map(Credentials::read).transpose().map_err(SparkplugError::Credentials)?;
+    Ok(Prepared { config: config.clone(), node_id: config.node_id(), tls, credentials })
+}
+
+/// How a session ended.
+enum Ended {
+    /// The daemon stops.
+    Stop,
+    /// The connection was lost or refused: why, and whether it had been
+    /// up (a broker that never answered makes the node try the next one).
+    Lost { why: String, was_up: bool },
+}
+
+/// What the MQTT task hands over.
+enum Incoming {
+    Connected(Result<(), String>),
+    Publish { topic: String, payload: bytes::Bytes },
+    Lost(String),
+}
+
+/// Runs the node until `stop` fires.
+pub async fn serve(
+    master: Arc<Master>,
+    leases: Arc<Leases>,
+    prepared: Prepared,
+    lease_ttl: Duration,
+    stats: SharedStats,
+    mut stop: watch::Receiver<()>,
+) {
+    let c = &prepared.config;
+    let topics = NodeTopics { group: c.group_id.clone(), node: prepared.node_id.clone() };
+    let settings = Settings {
+        data_deadband: c.data_deadband,
+        diagnostics_deadband: c.diagnostics_deadband,
+        slaves: c.slaves.clone(),
+        variables: c.variables.clone(),
+    };
+    let mut node = Node::new(settings);
+    let mut writer = Writer::new(lease_ttl);
+    let mut backoff = FIRST_BACKOFF;
+    let mut broker = 0usize;
+    info!(group = %topics.group, node = %topics.node, brokers = c.broker.len(), "sparkplug: edge node starting");
+    loop {
+        let b = &c.broker[broker % c.broker.len()];
+        let bd_seq = node.next_connection();
+        let session = Session { master: &master, leases: &leases, prepared: &prepared, topics: &topics, stats: &stats };
+        match session.run(&mut node, &mut writer, b, bd_seq, &mut stop).await {
+            Ended::Stop => return,
+            Ended::Lost { why, was_up } => {
+                stats.connected.store(0, Relaxed);
+                if was_up {
+                    backoff = FIRST_BACKOFF;
+                } else {
+                    broker += 1;
+                }
+                warn!(broker = %b, "sparkplug: {why}; connecting again in {} s", backoff.as_secs());
+            }
+        }
+        tokio::select! {
+            _ = stop.changed() => return,
+            () = tokio::time::sleep(backoff) => {}
+        }
+        backoff = (backoff * 2).min(MAX_BACKOFF);
+    }
+}
+
+/// One connection's borrowings.
+struct Session<'a> {
+    master: &'a Arc<Master>,
+    leases: &'a Leases,
+    prepared: &'a Prepared,
+    topics: &'a NodeTopics,
+    stats: &'a SharedStats,
+}
+
+/// Owned copies of what the node reads at one instant ([`View`] borrows
+/// them).
+struct Seen {
+    now_ms: u64,
+    snapshot: crate::master::Snapshot,
+    flowing: bool,
+    health: String,
+    layout: crate::master::NetworkLayout,
+    image: Option<Arc<Image>>,
+    inputs: Option<Arc<crate::master::InputFrame>>,
+    outputs: Vec<u8>,
+    cycle_us: u32,
+}
+
+impl Session<'_> {
+    async fn run(
+        &self,
+        node: &mut Node,
+        writer: &mut Writer,
+        b: &crate::config::sparkplug::BrokerUrl,
+        bd_seq: u64,
+        stop: &mut watch::Receiver<()>,
+    ) -> Ended {
+        let c = &self.prepared.config;
+        let (client, mut incoming) = self.connect(node, b);
+        match tokio::time::timeout(CONNECT_TIMEOUT, incoming.recv()).await {
+            Ok(Some(Incoming::Connected(Ok(())))) => {}
+            Ok(Some(Incoming::Connected(Err(why)) | Incoming::Lost(why))) => return Ended::Lost { why, was_up: false },
+            Ok(Some(Incoming::Publish { .. }) | None) => {
+                return Ended::Lost { why: "the connection ended before CONNACK".into(), was_up: false };
+            }
+            Err(_) => {
+                return Ended::Lost {
+                    why: format!("no CONNACK within {} s", CONNECT_TIMEOUT.as_secs()),
+                    was_up: false,
+                };
+            }
+        }
+        self.stats.connects.fetch_add(1, Relaxed);
+        info!(broker = %b, bd_seq, "sparkplug: connected");
+        // Commands before births (spec 7.1.1: NCMD subscription first).
+        for t in self.topics.commands() {
+            let _ = client.try_subscribe(t, QoS::AtLeastOnce);
+        }
+        let mut host_online = c.primary_host_id.is_none();
+        if let Some(host) = &c.primary_host_id {
+            let _ = client.try_subscribe(topic::host_state(host), QoS::AtLeastOnce);
+            info!(host = %host, "sparkplug: waiting for the primary host's STATE online before births");
+        }
+        let mut born = false;
+        let mut al: BTreeMap<u8, (EcatState, u16)> = BTreeMap::new();
+        let mut status = self.master.watch_status();
+        let mut events = self.master.events();
+        // First ticks one period after the births, which carry every value.
+        let period = |ms: u32| Duration::from_millis(ms.into());
+        let first = |ms: u32| tokio::time::Instant::now() + period(ms);
+        let mut data = tokio::time::interval_at(first(c.data_period_ms), period(c.data_period_ms));
+        let mut diagnostics = tokio::time::interval_at(first(c.diagnostics_period_ms), period(c.diagnostics_period_ms));
+        data.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        diagnostics.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        let role = c.commands.role();
+        let mut key = status_key(&status.borrow_and_update());
+        if host_online {
+            self.births(node, &client, &al);
+            born = true;
+        }
+        loop {
+            tokio::select! {
+                _ = stop.changed() => {
+                    self.goodbye(node, &client, &mut incoming).await;
+                    return Ended::Stop;
+                }
+                msg = incoming.recv() => match msg {
+                    Some(Incoming::Publish { topic, payload }) => {
+                        if let Some(host) = &c.primary_host_id && topic == topic::host_state(host) {
+                            match topic::host_online(&payload) {
+                                Some(true) if !born => {
+                                    info!(host = %host, "sparkplug: primary host online");
+                                    host_online = true;
+                                    self.births(node, &client, &al);
+                                    born = true;
+                                }
+                                Some(false) if host_online => {
+                                    // Spec 7.3: the node leaves and comes back when the host does.
+                                    self.goodbye(node, &client, &mut incoming).await;
+                                    return Ended::Lost { why: format!("primary host {host} went offline"), was_up: true };
+                                }
+                                _ => {}
+                            }
+                            continue;
+                        }
+                        if born {
+                            self.command(node, writer, role, &topic, &payload, &client, &al);
+                        }
+                    }
+                    Some(Incoming::Connected(_)) => {}
+                    Some(Incoming::Lost(why)) => return Ended::Lost { why, was_up: true },
+                    None => return Ended::Lost { why: "the MQTT task ended".into(), was_up: true },
+                },
+                _ = data.tick(), if born => {
+                    let seen = self.seen();
+                    let out = node.update(&seen.view(&al, self.stats), true);
+                    self.send(&client, out);
+                }
+                _ = diagnostics.tick(), if born => {
+                    let seen = self.seen();
+                    if let Some(out) = node.node_data(&seen.view(&al, self.stats)) {
+                        self.send(&client, vec![out]);
+                    }
+                }
+                r = status.changed() => {
+                    if r.is_err() {
+                        self.goodbye(node, &client, &mut incoming).await;
+                        return Ended::Stop;
+                    }
+                    // Only what births and deaths hang on: phase, state,
+                    // recoveries, slaves (snapshots come every few ms).
+                    let now = status_key(&status.borrow_and_update());
+                    if now != key {
+                        key = now;
+                        if born {
+                            let seen = self.seen();
+                            let out = node.update(&seen.view(&al, self.stats), false);
+                            self.send(&client, out);
+                        }
+                    }
+                }
+                e = events.recv() => {
+                    let changed = match e {
+                        Ok(e) => track_al(&mut al, &e.kind),
+                        Err(broadcast::error::RecvError::Lagged(_)) => true,
+                        Err(broadcast::error::RecvError::Closed) => {
+                            events = self.master.events();
+                            false
+                        }
+                    };
+                    if changed && born {
+                        let seen = self.seen();
+                        let out = node.update(&seen.view(&al, self.stats), false);
+                        self.send(&client, out);
+                    }
+                }
+            }
+        }
+    }
+
+    /// A client and its event loop task for broker `b`, with the will.
+    fn connect(&self, node: &Node, b: &crate::config::sparkplug::BrokerUrl) -> (AsyncClient, mpsc::Receiver<Incoming>) {
+        let c = &self.prepared.config;
+        let id = format!("ecmxfd-{}-{}", self.topics.group, self.topics.node);
+        let mut options = MqttOptions::new(id, b.host.clone(), b.port);
+        options.set_keep_alive(Duration::from_secs(c.keep_alive_s.into()));
+        // Spec 7.1: clean session, so no command queued for a dead
+        // connection is acted on after a rebirth.
+        options.set_clean_session(true);
+        options.set_max_packet_size(1 << 20, 1 << 20);
+        let death = node.death(now_ms()).encode_to_vec();
+        options.set_last_will(LastWill::new(self.topics.node(Kind::NDeath), death, QoS::AtLeastOnce, false));
+        if let Some(creds) = &self.prepared.credentials {
+            options.set_credentials(creds.username.clone(), creds.password.clone());
+        }
+        if b.tls {
+            if let Some(tls) = &self.prepared.tls {
+                options.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(Arc::clone(tls))));
+            }
+        }
+        let (client, mut eventloop) = AsyncClient::new(options, QUEUE);
+        let (tx, rx) = mpsc::channel(256);
+        tokio::spawn(async move {
+            loop {
+                let msg = match eventloop.poll().await {
+                    Ok(Event::Incoming(Packet::ConnAck(ack))) => Incoming::Connected(match ack.code {
+                        ConnectReturnCode::Success => Ok(()),
+                        code => Err(format!("the broker refused the connection: {code:?}")),
+                    }),
+                    Ok(Event::Incoming(Packet::Publish(p))) => Incoming::Publish { topic: p.topic, payload: p.payload },
+                    Ok(Event::Incoming(Packet::Disconnect)) => Incoming::Lost("the broker disconnected".into()),
+                    Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
+                        let _ = tx.send(Incoming::Lost("disconnected".into())).await;
+                        return;
+                    }
+                    Ok(_) => continue,
+                    Err(e) => Incoming::Lost(format!("connection lost: {e}")),
+                };
+                let end = matches!(msg, Incoming::Lost(_));
+                if tx.send(msg).await.is_err() || end {
+                    return;
+                }
+            }
+        });
+        (client, rx)
+    }
+
+    /// NBIRTH and every live device's DBIRTH.
+    fn births(&self, node: &mut Node, client: &AsyncClient, al: &BTreeMap<u8, (EcatState, u16)>) {
+        let seen = self.seen();
+        let out = node.birth(&seen.view(al, self.stats));
+        let devices = out.len() - 1;
+        self.send(client, out);
+        self.stats.connected.store(1, Relaxed);
+        info!(devices, "sparkplug: births published");
+    }
+
+    /// NDEATH, then the disconnect, both given [`GOODBYE`] to go out.
+    async fn goodbye(&self, node: &Node, client: &AsyncClient, incoming: &mut mpsc::Receiver<Incoming>) {
+        let death = node.death(now_ms()).encode_to_vec();
+        let _ = client.try_publish(self.topics.node(Kind::NDeath), QoS::AtLeastOnce, false, death);
+        let _ = client.try_disconnect();
+        let _ = tokio::time::timeout(GOODBYE, async {
+            while let Some(m) = incoming.recv().await {
+                if matches!(m, Incoming::Lost(_)) {
+                    break;
+                }
+            }
+        })
+        .await;
+        self.stats.connected.store(0, Relaxed);
+    }
+
+    #[allow(clippy::too_many_arguments)]
+    fn command(
+        &self,
+        node: &mut Node,
+        writer: &mut Writer,
+        role: Option<crate::config::Role>,
+        topic: &str,
+        payload: &[u8],
+        client: &AsyncClient,
+        al: &BTreeMap<u8, (EcatState, u16)>,
+    ) {
+        let Some((kind, device)) = self.topics.parse(topic) else { return };
+        let refused = |why: String| {
+            self.stats.refused.fetch_add(1, Relaxed);
+            warn!(topic, "sparkplug: {why}");
+        };
+        let Ok(payload) = Payload::decode(payload) else {
+            return refused(format!("{kind} refused: the payload is not a Sparkplug B payload"));
+        };
+        match (kind, device) {
+            (Kind::NCmd, None) => match commands::node_command(node, role, &payload) {
+                Ok(Action::Rebirth) => {
+                    self.stats.commands.fetch_add(1, Relaxed);
+                    info!("sparkplug: rebirth requested");
+                    self.births(node, client, al);
+                }
+                Ok(Action::None) => {}
+                Err(e) => refused(e.0),
+            },
+            (Kind::DCmd, Some(device)) => {
+                let Some(p) = topic::device_position(device) else {
+                    return refused(format!("DCMD refused: no device {device:?} (devices are slave-<position>)"));
+                };
+                match commands::device_command(node, role, p, &payload, self.master, self.leases, writer) {
+                    Ok(n) => {
+                        self.stats.commands.fetch_add(1, Relaxed);
+                        info!(device, metrics = n, "sparkplug: DCMD written");
+                    }
+                    Err(e) => refused(e.0),
+                }
+            }
+            _ => {}
+        }
+    }
+
+    /// Hands messages to the client's queue; a full queue drops them.
+    fn send(&self, client: &AsyncClient, out: Vec<Outgoing>) {
+        for o in out {
+            let topic = match o.device {
+                None => self.topics.node(o.kind),
+                Some(p) => self.topics.device(o.kind, &topic::device_id(p)),
+            };
+            match client.try_publish(topic, QoS::AtMostOnce, false, o.payload.encode_to_vec()) {
+                Ok(()) => self.stats.published.fetch_add(1, Relaxed),
+                Err(_) => self.stats.dropped.fetch_add(1, Relaxed),
+            };
+        }
+    }
+
+    /// The daemon now, from its published snapshots.
+    fn seen(&self) -> Seen {
+        let m = self.master;
+        let snapshot = m.status();
+        let verdict = m.verdict(&snapshot);
+        let image = match m.current_image() {
+            Some(Ok(image)) => Some(image),
+            // Not laid out (no PDO source): devices still born, without
+            // process data.
+            Some(Err(_)) => Some(Arc::new(Image::default())),
+            None => None,
+        };
+        Seen {
+            now_ms: now_ms(),
+            snapshot,
+            flowing: verdict.flowing(),
+            health: health_word(&verdict.health).into(),
+            layout: m.layout(),
+            image,
+            inputs: m.latest_inputs(),
+            outputs: m.output_shadow().clone(),
+            cycle_us: m.config().cycle.sync0_us,
+        }
+    }
+}
+
+impl Seen {
+    fn view<'a>(&'a self, al: &'a BTreeMap<u8, (EcatState, u16)>, stats: &SharedStats) -> View<'a> {
+        View {
+            now_ms: self.now_ms,
+            snapshot: &self.snapshot,
+            flowing: self.flowing,
+            health: &self.health,
+            layout: &self.layout,
+            image: self.image.as_ref(),
+            inputs: self.inputs.as_ref().map_or(&[][..], |f| &f.data),
+            outputs: &self.outputs,
+            al,
+            cycle_us: self.cycle_us,
+            counts: stats.counts(),
+        }
+    }
+}
+
+/// What births and deaths hang on in a snapshot.
+fn status_key(s: &crate::master::Snapshot) -> (Phase, EcatState, u64, u64, u64) {
+    let (phase, state, generation, recoveries) = s.key();
+    (phase, state, generation, recoveries, s.slaves)
+}
+
+/// Keeps the AL states slaves reported since the network last came up;
+/// whether that changed anything.
+fn track_al(al: &mut BTreeMap<u8, (EcatState, u16)>, kind: &EventKind) -> bool {
+    match kind {
+        EventKind::AlStatus { slave, state, code } => al.insert(*slave, (*state, *code)) != Some((*state, *code)),
+        EventKind::Phase(Phase::Running) | EventKind::Recovered { .. } => {
+            let had = !al.is_empty();
+            al.clear();
+            had
+        }
+        EventKind::ProcessData { .. } | EventKind::EcatState { .. } => true,
+        _ => false,
+    }
+}
+
+/// The health in one or two words (the node metric `Engine/Health`).
+fn health_word(h: &crate::master::Health) -> &'static str {
+    use crate::master::Health;
+    match h {
+        Health::Healthy => "healthy",
+        Health::NotRunning(_) => "not running",
+        Health::WrongState { .. } => "wrong state",
+        Health::Stalled { .. } => "stalled",
+        Health::SlavesMissing { .. } => "slaves missing",
+        Health::Int0Stuck => "int0 stuck",
+    }
+}
+
+fn now_ms() -> u64 {
+    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
+}

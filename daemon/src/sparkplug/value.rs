@@ -1,0 +1,271 @@
+//! Values between the process image and Sparkplug metrics: a CoE type's
+//! Sparkplug datatype (spec 6.4.16), an entry's bits as a metric value,
+//! a DCMD metric as an entry's bytes, and the deadband that decides
+//! whether a value moved enough to publish.
+//!
+//! Signed integers narrower than 64 bits go in `int_value` as two's
+//! complement of their own width (an Int8 -1 is 255), as the Eclipse Tahu
+//! and pysparkplug hosts read them; commands are read the same way and
+//! also sign-extended to 32 bits (as Tahu's Java host writes them).
+
+use ecmxf_devices::od::DataType;
+use ecmxf_proto::sparkplug::DataType as SpType;
+use ecmxf_proto::sparkplug::payload::metric::Value as MetricValue;
+
+/// A metric's value as the node keeps it.
+#[derive(Clone, Debug, PartialEq)]
+pub enum Value {
+    /// Boolean.
+    Bool(bool),
+    /// Int8..Int64.
+    Int(i64),
+    /// UInt8..UInt64.
+    UInt(u64),
+    /// Float.
+    Float(f32),
+    /// Double.
+    Double(f64),
+    /// String.
+    Text(String),
+    /// Bytes.
+    Bytes(Vec<u8>),
+}
+
+impl Value {
+    /// The value as a number, for deadbands (`None`: not a number).
+    fn number(&self) -> Option<f64> {
+        match self {
+            Self::Int(v) => Some(*v as f64),
+            Self::UInt(v) => Some(*v as f64),
+            Self::Float(v) => Some(f64::from(*v)),
+            Self::Double(v) => Some(*v),
+            _ => None,
+        }
+    }
+
+    /// Whether `self` moved from `last` enough to be published: numbers by
+    /// more than `deadband` (0: any change, and a NaN is a change), other
+    /// values when they differ.
+    pub fn moved_from(&self, last: &Value, deadband: f64) -> bool {
+        match (self.number(), last.number()) {
+            // A NaN on either side compares as moved.
+            (Some(a), Some(b)) if deadband > 0.0 => {
+                matches!((a - b).abs().partial_cmp(&deadband), Some(std::cmp::Ordering::Greater) | None)
+            }
+            _ => self != last,
+        }
+    }
+
+    /// The protobuf form, for a metric of `datatype`.
+    pub fn to_metric(&self, datatype: SpType) -> MetricValue {
+        match self {
+            Self::Bool(b) => MetricValue::BooleanValue(*b),
+            Self::Int(v) => match datatype {
+                SpType::Int8 => MetricValue::IntValue(u32::from(*v as i8 as u8)),
+                SpType::Int16 => MetricValue::IntValue(u32::from(*v as i16 as u16)),
+                SpType::Int32 => MetricValue::IntValue(*v as i32 as u32),
+                _ => MetricValue::LongValue(*v as u64),
+            },
+            Self::UInt(v) => match datatype {
+                SpType::UInt64 | SpType::Int64 => MetricValue::LongValue(*v),
+                _ => MetricValue::IntValue(*v as u32),
+            },
+            Self::Float(v) => MetricValue::FloatValue(*v),
+            Self::Double(v) => MetricValue::DoubleValue(*v),
+            Self::Text(s) => MetricValue::StringValue(s.clone()),
+            Self::Bytes(b) => MetricValue::BytesValue(b.clone()),
+        }
+    }
+}
+
+/// The Sparkplug datatype of a CoE type.
+pub fn datatype(t: DataType) -> SpType {
+    match t {
+        DataType::Bool => SpType::Boolean,
+        DataType::Int8 => SpType::Int8,
+        DataType::Int16 => SpType::Int16,
+        DataType::Int32 => SpType::Int32,
+        DataType::Int64 => SpType::Int64,
+        DataType::UInt8 | DataType::Bits(_) => SpType::UInt8,
+        DataType::UInt16 => SpType::UInt16,
+        DataType::UInt32 => SpType::UInt32,
+        DataType::UInt64 => SpType::UInt64,
+        DataType::Real32 => SpType::Float,
+        DataType::Real64 => SpType::Double,
+        DataType::VisibleString(_) => SpType::String,
+        DataType::OctetString(_) => SpType::Bytes,
+    }
+}
+
+/// An entry's value from its bits (`raw`: [`crate::master::image::read_bits`],
+/// little-endian, its bytes rounded up).
+pub fn decode(t: DataType, raw: &[u8]) -> Value {
+    let mut le = [0u8; 8];
+    let n = raw.len().min(8);
+    le[..n].copy_from_slice(&raw[..n]);
+    let u = u64::from_le_bytes(le);
+    match t {
+        DataType::Bool => Value::Bool(u & 1 == 1),
+        DataType::Int8 => Value::Int(i64::from(u as u8 as i8)),
+        DataType::Int16 => Value::Int(i64::from(u as u16 as i16)),
+        DataType::Int32 => Value::Int(i64::from(u as u32 as i32)),
+        DataType::Int64 => Value::Int(u as i64),
+        DataType::UInt8 | DataType::Bits(_) | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => Value::UInt(u),
+        DataType::Real32 => Value::Float(f32::from_bits(u as u32)),
+        DataType::Real64 => Value::Double(f64::from_bits(u)),
+        DataType::VisibleString(_) => {
+            let end = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
+            Value::Text(String::from_utf8_lossy(&raw[..end]).into_owned())
+        }
+        DataType::OctetString(_) => Value::Bytes(raw.to_vec()),
+    }
+}
+
+/// A command's value as the bytes of an entry of type `t` and `bits`
+/// bits (little-endian), or why it cannot be one.
+pub fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>, String> {
+    let bytes = bits.div_ceil(8) as usize;
+    let int = |v: &MetricValue| -> Result<i128, String> {
+        match v {
+            MetricValue::IntValue(u) => Ok(i128::from(*u)),
+            MetricValue::LongValue(u) => Ok(i128::from(*u)),
+            MetricValue::BooleanValue(b) => Ok(i128::from(*b)),
+            MetricValue::FloatValue(f) if f.fract() == 0.0 => Ok(*f as i128),
+            MetricValue::DoubleValue(f) if f.fract() == 0.0 => Ok(*f as i128),
+            other => Err(format!("{} is not an integer", shown(other))),
+        }
+    };
+    let signed = |width: u32| -> Result<Vec<u8>, String> {
+        let raw = int(v)?;
+        let span = 1i128 << width;
+        // Two's complement of the type's width (Tahu, pysparkplug) or of
+        // 32 bits (Tahu's Java int_value).
+        let value = if raw >= span / 2 && raw < span {
+            raw - span
+        } else if width < 32 && (1 << 31..1 << 32).contains(&raw) {
+            raw - (1 << 32)
+        } else if width == 64 && raw >= 1 << 63 {
+            raw - (1 << 64)
+        } else {
+            raw
+        };
+        if value < -(span / 2) || value >= span / 2 {
+            return Err(format!("{raw} does not fit a {width}-bit signed entry"));
+        }
+        Ok((value as i64).to_le_bytes()[..bytes].to_vec())
+    };
+    let unsigned = |width: u32| -> Result<Vec<u8>, String> {
+        let raw = int(v)?;
+        if raw < 0 || raw >= 1i128 << width {
+            return Err(format!("{raw} does not fit a {width}-bit unsigned entry"));
+        }
+        Ok((raw as u64).to_le_bytes()[..bytes].to_vec())
+    };
+    match t {
+        DataType::Bool => match v {
+            MetricValue::BooleanValue(b) => Ok(vec![u8::from(*b)]),
+            _ => unsigned(1),
+        },
+        DataType::Int8 => signed(8),
+        DataType::Int16 => signed(16),
+        DataType::Int32 => signed(32),
+        DataType::Int64 => signed(64),
+        DataType::Bits(n) => unsigned(u32::from(n)),
+        DataType::UInt8 | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => unsigned(bits.min(64)),
+        DataType::Real32 => match v {
+            MetricValue::FloatValue(f) => Ok(f.to_le_bytes().to_vec()),
+            MetricValue::DoubleValue(f) => Ok((*f as f32).to_le_bytes().to_vec()),
+            other => Ok((int(other)? as f32).to_le_bytes().to_vec()),
+        },
+        DataType::Real64 => match v {
+            MetricValue::FloatValue(f) => Ok(f64::from(*f).to_le_bytes().to_vec()),
+            MetricValue::DoubleValue(f) => Ok(f.to_le_bytes().to_vec()),
+            other => Ok((int(other)? as f64).to_le_bytes().to_vec()),
+        },
+        DataType::VisibleString(_) | DataType::OctetString(_) => {
+            let data = match v {
+                MetricValue::StringValue(s) => s.as_bytes().to_vec(),
+                MetricValue::BytesValue(b) => b.clone(),
+                other => return Err(format!("{} is not a string or bytes", shown(other))),
+            };
+            if data.len() > bytes {
+                return Err(format!("{} bytes do not fit the {bytes}-byte entry", data.len()));
+            }
+            let mut out = data;
+            out.resize(bytes, 0);
+            Ok(out)
+        }
+    }
+}
+
+fn shown(v: &MetricValue) -> String {
+    match v {
+        MetricValue::IntValue(u) => u.to_string(),
+        MetricValue::LongValue(u) => u.to_string(),
+        MetricValue::FloatValue(f) => f.to_string(),
+        MetricValue::DoubleValue(f) => f.to_string(),
+        MetricValue::BooleanValue(b) => b.to_string(),
+        MetricValue::StringValue(s) => format!("{s:?}"),
+        MetricValue::BytesValue(b) => format!("{} bytes", b.len()),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integers_round_trip_through_metrics_at_every_width() {
+        let cases: &[(DataType, u32, i64)] = &[
+            (DataType::Int8, 8, -1),
+            (DataType::Int8, 8, -128),
+            (DataType::Int8, 8, 127),
+            (DataType::Int16, 16, -300),
+            (DataType::Int32, 32, i64::from(i32::MIN)),
+            (DataType::Int64, 64, i64::MIN),
+            (DataType::Int64, 64, -5),
+        ];
+        for &(t, bits, v) in cases {
+            let raw = v.to_le_bytes()[..bits.div_ceil(8) as usize].to_vec();
+            let value = decode(t, &raw);
+            assert_eq!(value, Value::Int(v), "{t:?}");
+            let metric = value.to_metric(datatype(t));
+            assert_eq!(encode(t, bits, &metric).unwrap(), raw, "{t:?} {v}");
+        }
+        // An Int8 -1 is 255 in int_value, as Tahu and pysparkplug read it.
+        assert_eq!(Value::Int(-1).to_metric(SpType::Int8), MetricValue::IntValue(255));
+        // Tahu's Java host sign-extends to 32 bits: also -1.
+        assert_eq!(encode(DataType::Int8, 8, &MetricValue::IntValue(u32::MAX)).unwrap(), vec![0xFF]);
+        assert_eq!(encode(DataType::UInt16, 16, &MetricValue::IntValue(65535)).unwrap(), vec![0xFF, 0xFF]);
+        assert!(encode(DataType::UInt16, 16, &MetricValue::IntValue(65536)).unwrap_err().contains("does not fit"));
+        assert!(encode(DataType::Int8, 8, &MetricValue::IntValue(300)).unwrap_err().contains("does not fit"));
+        assert!(
+            encode(DataType::UInt8, 8, &MetricValue::StringValue("x".into())).unwrap_err().contains("not an integer")
+        );
+    }
+
+    #[test]
+    fn bits_booleans_floats_and_strings() {
+        assert_eq!(decode(DataType::Bool, &[1]), Value::Bool(true));
+        assert_eq!(encode(DataType::Bool, 1, &MetricValue::BooleanValue(true)).unwrap(), vec![1]);
+        assert_eq!(encode(DataType::Bool, 1, &MetricValue::IntValue(1)).unwrap(), vec![1]);
+        assert!(encode(DataType::Bool, 1, &MetricValue::IntValue(2)).is_err());
+        assert!(encode(DataType::Bits(2), 2, &MetricValue::IntValue(4)).is_err());
+        assert_eq!(decode(DataType::Real32, &1.5f32.to_le_bytes()), Value::Float(1.5));
+        assert_eq!(encode(DataType::Real32, 32, &MetricValue::DoubleValue(1.5)).unwrap(), 1.5f32.to_le_bytes());
+        assert_eq!(decode(DataType::VisibleString(4), b"ab\0\0"), Value::Text("ab".into()));
+        assert_eq!(encode(DataType::VisibleString(4), 32, &MetricValue::StringValue("ab".into())).unwrap(), b"ab\0\0");
+        assert!(encode(DataType::OctetString(2), 16, &MetricValue::BytesValue(vec![1, 2, 3])).is_err());
+    }
+
+    #[test]
+    fn deadband_decides_what_moved() {
+        assert!(!Value::UInt(5).moved_from(&Value::UInt(5), 0.0));
+        assert!(Value::UInt(6).moved_from(&Value::UInt(5), 0.0));
+        assert!(!Value::Int(7).moved_from(&Value::Int(5), 2.0));
+        assert!(Value::Int(8).moved_from(&Value::Int(5), 2.0));
+        assert!(Value::Double(f64::NAN).moved_from(&Value::Double(1.0), 2.0));
+        assert!(Value::Text("b".into()).moved_from(&Value::Text("a".into()), 5.0));
+        assert!(!Value::Bool(true).moved_from(&Value::Bool(true), 0.0));
+    }
+}
