@@ -227,6 +227,14 @@ fn main() -> ExitCode {
     if let Some(path) = &cli.check_config {
         return match Config::load(path).and_then(|c| {
             let notes = c.check_files(path)?;
+            // The Sparkplug node's certificates and credentials load as at start.
+            if let Some(s) = &c.sparkplug {
+                ecmxfd::sparkplug::session::prepare(s).map_err(|e| ecmxfd::config::ConfigError::Invalid {
+                    file: path.into(),
+                    key: "sparkplug".into(),
+                    message: e.to_string(),
+                })?;
+            }
             check_network(&c, path)?;
             Ok((c, notes))
         }) {

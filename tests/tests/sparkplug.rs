@@ -12,6 +12,7 @@
 
 use std::path::PathBuf;
 use std::process::Command;
+use std::time::{Duration, Instant};
 
 /// mosquitto: `$MOSQUITTO`, on the PATH, or where Debian installs it.
 fn mosquitto() -> Option<PathBuf> {
@@ -65,4 +66,93 @@ fn a_sparkplug_host_sees_births_data_commands_and_deaths_through_mosquitto() {
     println!("{text}");
     assert!(out.status.success(), "test_sparkplug.py failed:\n{text}");
     assert!(text.contains("Ran 8 tests") && text.contains("OK"), "{text}");
+}
+
+/// A plant's broker: TLS with the plant's CA and client certificates
+/// required. The node connects with `ca_file`, `client_cert` and
+/// `client_key` and publishes its births (seen in the broker's log); a node
+/// that trusts another CA never gets in and says why.
+#[test]
+fn the_node_connects_over_tls_with_a_client_certificate() {
+    use rcgen::{BasicConstraints, CertificateParams, CertifiedIssuer, DnType, IsCa, KeyPair, KeyUsagePurpose};
+    // Names of their own: OpenSSL takes a certificate whose subject is its
+    // issuer's (rcgen's default for both) for a self-signed one.
+    let named = |cn: &str, sans: Vec<String>| {
+        let mut params = CertificateParams::new(sans).unwrap();
+        params.distinguished_name.push(DnType::CommonName, cn);
+        params
+    };
+    let Some(broker) = mosquitto() else { return };
+    let _turn = ecmxf_e2e::SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = ecmxf_e2e::temp_dir("spb-tls");
+    let issuer = |cn: &str| {
+        let mut params = named(cn, Vec::new());
+        params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        // OpenSSL (mosquitto) wants a CA that says it signs certificates.
+        params.key_usages = vec![KeyUsagePurpose::KeyCertSign, KeyUsagePurpose::DigitalSignature];
+        CertifiedIssuer::self_signed(params, KeyPair::generate().unwrap()).unwrap()
+    };
+    let (ca, stranger_ca) = (issuer("plant CA"), issuer("another CA"));
+    let server_key = KeyPair::generate().unwrap();
+    let server = named("broker", vec!["localhost".to_string()]).signed_by(&server_key, &ca).unwrap();
+    let client_key = KeyPair::generate().unwrap();
+    let client = named("gateway-7", vec!["gateway-7".to_string()]).signed_by(&client_key, &ca).unwrap();
+    let write = |name: &str, text: String| {
+        let p = dir.join(name);
+        std::fs::write(&p, text).unwrap();
+        p.display().to_string()
+    };
+    let (ca_file, stranger_file) = (write("ca.pem", ca.pem()), write("stranger-ca.pem", stranger_ca.pem()));
+    let (cert, key) = (write("server.pem", server.pem()), write("server.key", server_key.serialize_pem()));
+    let (client_cert, client_key) =
+        (write("client.pem", client.pem()), write("client.key", client_key.serialize_pem()));
+    let port = std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let conf = write(
+        "mosquitto.conf",
+        format!(
+            "listener {port} 127.0.0.1\ncafile {ca_file}\ncertfile {cert}\nkeyfile {key}\nrequire_certificate true\n\
+             use_identity_as_username true\nallow_anonymous true\npersistence false\n"
+        ),
+    );
+    let log = dir.join("mosquitto.log");
+    let out = std::fs::File::create(&log).unwrap();
+    let mut mosquitto = Command::new(broker)
+        .args(["-c", &conf, "-v"])
+        .stdout(out.try_clone().unwrap())
+        .stderr(out)
+        .spawn()
+        .expect("start mosquitto");
+    let node = |name: &str, ca: &str| {
+        ecmxf_e2e::config(
+            "backend = \"sim\"",
+            &format!(
+                "[sparkplug]\nbroker = \"mqtts://localhost:{port}\"\ngroup_id = \"plant\"\nnode_id = \"{name}\"\n\
+                 ca_file = \"{ca}\"\nclient_cert = \"{client_cert}\"\nclient_key = \"{client_key}\"\n"
+            ),
+        )
+    };
+    let births = |name: &str| {
+        std::fs::read_to_string(&log).unwrap_or_default().contains(&format!("'spBv1.0/plant/NBIRTH/{name}'"))
+    };
+    let wait = |what: &dyn Fn() -> bool, limit: Duration| {
+        let t = Instant::now();
+        while !what() && t.elapsed() < limit {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        what()
+    };
+    {
+        let daemon = ecmxf_e2e::Daemon::binary_with_config(&node("trusted", &ca_file));
+        let born = wait(&|| births("trusted"), Duration::from_secs(20));
+        assert!(born, "no NBIRTH over TLS:\n{}\n{}", std::fs::read_to_string(&log).unwrap_or_default(), daemon.log());
+    }
+    {
+        let daemon = ecmxf_e2e::Daemon::binary_with_config(&node("stranger", &stranger_file));
+        let said = wait(&|| daemon.log().contains("sparkplug: connection lost"), Duration::from_secs(10));
+        assert!(said && daemon.log().contains("certificate"), "{}", daemon.log());
+        assert!(!births("stranger"), "a node that does not trust the broker's CA published");
+    }
+    let _ = mosquitto.kill();
+    let _ = mosquitto.wait();
+    let _ = std::fs::remove_dir_all(&dir);
 }

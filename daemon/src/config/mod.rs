@@ -1065,7 +1065,11 @@ mod tests {
                 "sparkplug.credentials_file",
                 "/nonexistent",
             ),
-            ("broker = \"mqtt://b\"\ngroup_id = \"g\"\ncommands = \"root\"", "line 7", "`root`, expected one of `none`"),
+            (
+                "broker = \"mqtt://b\"\ngroup_id = \"g\"\ncommands = \"root\"",
+                "line 7",
+                "`root`, expected one of `none`",
+            ),
         ] {
             let e = parse(&format!("{MINIMAL}[sparkplug]\n{body}\n")).unwrap_err().to_string();
             assert!(e.contains(key) && e.contains(words), "{body}: {e}");

@@ -61,3 +61,26 @@ fn certificates(path: &Path, key: &str) -> Result<Vec<CertificateDer<'static>>, 
     }
     Ok(certs)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn config(extra: &str) -> SparkplugConfig {
+        let text = format!("broker = \"mqtts://b\"\ngroup_id = \"g\"\n{extra}");
+        toml::from_str(&text).unwrap()
+    }
+
+    #[test]
+    fn certificate_files_that_do_not_load_are_named() {
+        let dir = std::env::temp_dir().join(format!("ecmxf-spb-tls-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let junk = dir.join("junk.pem");
+        std::fs::write(&junk, "not a certificate\n").unwrap();
+        let e = client_config(&config(&format!("ca_file = \"{}\"", junk.display()))).unwrap_err();
+        assert!(e.contains("sparkplug.ca_file") && e.contains("junk.pem") && e.contains("no PEM certificate"), "{e}");
+        let plain: SparkplugConfig = toml::from_str("broker = \"mqtt://b\"\ngroup_id = \"g\"").unwrap();
+        assert!(client_config(&plain).unwrap().is_none(), "no TLS without an mqtts:// broker");
+        let _ = std::fs::remove_dir_all(&dir);
+    }
+}

@@ -53,6 +53,7 @@ pub fn serve(network: Option<&Path>) -> Result<Sim, String> {
 
 /// The simulator's own count of packets clocked: what the link carried,
 /// whichever side of the daemon sent it.
+#[allow(dead_code)] // not every bench reads the link
 pub fn packet_counter(socket: &Path) -> Result<impl FnMut() -> Result<u64, String> + use<>, String> {
     let mut ctl = ecmxf_sim::server::SocketClient::connect(socket).map_err(|e| e.to_string())?;
     Ok(move || -> Result<u64, String> {
