@@ -79,6 +79,8 @@ pub struct View<'a> {
     pub al: &'a BTreeMap<u8, (EcatState, u16)>,
     /// DC cycle, us.
     pub cycle_us: u32,
+    /// SPI exchanges per second lately (the link's use).
+    pub exchange_rate: f64,
     /// The node's own counters.
     pub counts: Counts,
 }
@@ -118,6 +120,7 @@ enum NodeSource {
     InputsDroppedByChip,
     RxFifo,
     MaxFifoGapUs,
+    ExchangeRate,
     Published,
     Dropped,
     Refused,
@@ -148,6 +151,7 @@ const NODE_METRICS: &[(&str, SpType, NodeSource)] = &[
     ("Counters/Inputs Dropped By Chip", SpType::UInt64, NodeSource::InputsDroppedByChip),
     ("Link/RxFIFO Frames", SpType::UInt8, NodeSource::RxFifo),
     ("Link/Max FIFO Gap us", SpType::UInt64, NodeSource::MaxFifoGapUs),
+    ("Link/Exchanges per s", SpType::Double, NodeSource::ExchangeRate),
     ("Sparkplug/Published", SpType::UInt64, NodeSource::Published),
     ("Sparkplug/Dropped", SpType::UInt64, NodeSource::Dropped),
     ("Sparkplug/Commands Refused", SpType::UInt64, NodeSource::Refused),
@@ -467,6 +471,7 @@ impl Node {
             NodeSource::InputsDroppedByChip => Value::UInt(s.inputs_dropped_by_chip),
             NodeSource::RxFifo => Value::UInt(s.rx_fifo.into()),
             NodeSource::MaxFifoGapUs => Value::UInt(s.max_fifo_gap_us),
+            NodeSource::ExchangeRate => Value::Double(view.exchange_rate.round()),
             NodeSource::Published => Value::UInt(view.counts.published),
             NodeSource::Dropped => Value::UInt(view.counts.dropped),
             NodeSource::Refused => Value::UInt(view.counts.refused),

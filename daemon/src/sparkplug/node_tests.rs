@@ -78,6 +78,7 @@ impl World {
             outputs: &self.outputs,
             al: &self.al,
             cycle_us: 1000,
+            exchange_rate: 0.0,
             counts: Counts::default(),
         }
     }

@@ -43,6 +43,9 @@ const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 const GOODBYE: Duration = Duration::from_secs(1);
 /// The client's queue: births of 256 devices and a period's data fit.
 const QUEUE: usize = 1024;
+/// Births on request at most this often: a host repeating Rebirth gets
+/// one set of births per interval, not one per request.
+const REBIRTH_SPACING: Duration = Duration::from_secs(1);
 
 /// Why the node could not start.
 #[derive(Debug)]
@@ -165,6 +168,7 @@ struct Seen {
     inputs: Option<Arc<crate::master::InputFrame>>,
     outputs: Vec<u8>,
     cycle_us: u32,
+    exchange_rate: f64,
 }
 
 impl Session<'_> {
@@ -206,6 +210,10 @@ impl Session<'_> {
         let mut al: BTreeMap<u8, (EcatState, u16)> = BTreeMap::new();
         let mut status = self.master.watch_status();
         let mut events = self.master.events();
+        let mut events_open = true;
+        let mut meter = RateMeter::default();
+        let mut last_births = tokio::time::Instant::now();
+        let mut rebirth_due: Option<tokio::time::Instant> = None;
         // First ticks one period after the births, which carry every value.
         let period = |ms: u32| Duration::from_millis(ms.into());
         let first = |ms: u32| tokio::time::Instant::now() + period(ms);
@@ -216,7 +224,7 @@ impl Session<'_> {
         let role = c.commands.role();
         let mut key = status_key(&status.borrow_and_update());
         if host_online {
-            self.births(node, &client, &al);
+            self.births(node, &client, &al, &mut meter);
             born = true;
         }
         loop {
@@ -232,7 +240,8 @@ impl Session<'_> {
                                 Some(true) if !born => {
                                     info!(host = %host, "sparkplug: primary host online");
                                     host_online = true;
-                                    self.births(node, &client, &al);
+                                    self.births(node, &client, &al, &mut meter);
+                                    last_births = tokio::time::Instant::now();
                                     born = true;
                                 }
                                 Some(false) if host_online => {
@@ -244,21 +253,32 @@ impl Session<'_> {
                             }
                             continue;
                         }
-                        if born {
-                            self.command(node, writer, role, &topic, &payload, &client, &al);
+                        if born && self.command(node, writer, role, &topic, &payload) {
+                            let at = last_births + REBIRTH_SPACING;
+                            if tokio::time::Instant::now() >= at {
+                                self.births(node, &client, &al, &mut meter);
+                                last_births = tokio::time::Instant::now();
+                            } else {
+                                rebirth_due = Some(at);
+                            }
                         }
                     }
                     Some(Incoming::Connected(_)) => {}
                     Some(Incoming::Lost(why)) => return Ended::Lost { why, was_up: true },
                     None => return Ended::Lost { why: "the MQTT task ended".into(), was_up: true },
                 },
+                () = tokio::time::sleep_until(rebirth_due.unwrap_or_else(tokio::time::Instant::now)), if rebirth_due.is_some() => {
+                    rebirth_due = None;
+                    self.births(node, &client, &al, &mut meter);
+                    last_births = tokio::time::Instant::now();
+                }
                 _ = data.tick(), if born => {
-                    let seen = self.seen();
+                    let seen = self.seen(&mut meter);
                     let out = node.update(&seen.view(&al, self.stats), true);
                     self.send(&client, out);
                 }
                 _ = diagnostics.tick(), if born => {
-                    let seen = self.seen();
+                    let seen = self.seen(&mut meter);
                     if let Some(out) = node.node_data(&seen.view(&al, self.stats)) {
                         self.send(&client, vec![out]);
                     }
@@ -274,23 +294,23 @@ impl Session<'_> {
                     if now != key {
                         key = now;
                         if born {
-                            let seen = self.seen();
+                            let seen = self.seen(&mut meter);
                             let out = node.update(&seen.view(&al, self.stats), false);
                             self.send(&client, out);
                         }
                     }
                 }
-                e = events.recv() => {
+                e = events.recv(), if events_open => {
                     let changed = match e {
                         Ok(e) => track_al(&mut al, &e.kind),
                         Err(broadcast::error::RecvError::Lagged(_)) => true,
                         Err(broadcast::error::RecvError::Closed) => {
-                            events = self.master.events();
+                            events_open = false;
                             false
                         }
                     };
                     if changed && born {
-                        let seen = self.seen();
+                        let seen = self.seen(&mut meter);
                         let out = node.update(&seen.view(&al, self.stats), false);
                         self.send(&client, out);
                     }
@@ -347,8 +367,14 @@ impl Session<'_> {
     }
 
     /// NBIRTH and every live device's DBIRTH.
-    fn births(&self, node: &mut Node, client: &AsyncClient, al: &BTreeMap<u8, (EcatState, u16)>) {
-        let seen = self.seen();
+    fn births(
+        &self,
+        node: &mut Node,
+        client: &AsyncClient,
+        al: &BTreeMap<u8, (EcatState, u16)>,
+        meter: &mut RateMeter,
+    ) {
+        let seen = self.seen(meter);
         let out = node.birth(&seen.view(al, self.stats));
         let devices = out.len() - 1;
         self.send(client, out);
@@ -372,7 +398,7 @@ impl Session<'_> {
         self.stats.connected.store(0, Relaxed);
     }
 
-    #[allow(clippy::too_many_arguments)]
+    /// Applies an NCMD or DCMD; whether it asks for births.
     fn command(
         &self,
         node: &mut Node,
@@ -380,13 +406,12 @@ impl Session<'_> {
         role: Option<crate::config::Role>,
         topic: &str,
         payload: &[u8],
-        client: &AsyncClient,
-        al: &BTreeMap<u8, (EcatState, u16)>,
-    ) {
-        let Some((kind, device)) = self.topics.parse(topic) else { return };
+    ) -> bool {
+        let Some((kind, device)) = self.topics.parse(topic) else { return false };
         let refused = |why: String| {
             self.stats.refused.fetch_add(1, Relaxed);
             warn!(topic, "sparkplug: {why}");
+            false
         };
         let Ok(payload) = Payload::decode(payload) else {
             return refused(format!("{kind} refused: the payload is not a Sparkplug B payload"));
@@ -396,9 +421,9 @@ impl Session<'_> {
                 Ok(Action::Rebirth) => {
                     self.stats.commands.fetch_add(1, Relaxed);
                     info!("sparkplug: rebirth requested");
-                    self.births(node, client, al);
+                    true
                 }
-                Ok(Action::None) => {}
+                Ok(Action::None) => false,
                 Err(e) => refused(e.0),
             },
             (Kind::DCmd, Some(device)) => {
@@ -409,11 +434,12 @@ impl Session<'_> {
                     Ok(n) => {
                         self.stats.commands.fetch_add(1, Relaxed);
                         info!(device, metrics = n, "sparkplug: DCMD written");
+                        false
                     }
                     Err(e) => refused(e.0),
                 }
             }
-            _ => {}
+            _ => false,
         }
     }
 
@@ -432,9 +458,10 @@ impl Session<'_> {
     }
 
     /// The daemon now, from its published snapshots.
-    fn seen(&self) -> Seen {
+    fn seen(&self, meter: &mut RateMeter) -> Seen {
         let m = self.master;
         let snapshot = m.status();
+        let exchange_rate = meter.sample(snapshot.exchanges, std::time::Instant::now());
         let verdict = m.verdict(&snapshot);
         let image = match m.current_image() {
             Some(Ok(image)) => Some(image),
@@ -453,7 +480,29 @@ impl Session<'_> {
             inputs: m.latest_inputs(),
             outputs: m.output_shadow().clone(),
             cycle_us: m.config().cycle.sync0_us,
+            exchange_rate,
         }
+    }
+}
+
+/// SPI exchanges per second, over at least a second.
+#[derive(Debug, Default)]
+struct RateMeter {
+    last: Option<(u64, std::time::Instant)>,
+    rate: f64,
+}
+
+impl RateMeter {
+    fn sample(&mut self, exchanges: u64, now: std::time::Instant) -> f64 {
+        match self.last {
+            Some((n, t)) if now.duration_since(t) >= Duration::from_secs(1) => {
+                self.rate = exchanges.saturating_sub(n) as f64 / now.duration_since(t).as_secs_f64();
+                self.last = Some((exchanges, now));
+            }
+            Some(_) => {}
+            None => self.last = Some((exchanges, now)),
+        }
+        self.rate
     }
 }
 
@@ -470,6 +519,7 @@ impl Seen {
             outputs: &self.outputs,
             al,
             cycle_us: self.cycle_us,
+            exchange_rate: self.exchange_rate,
             counts: stats.counts(),
         }
     }
