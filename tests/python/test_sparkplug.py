@@ -206,7 +206,7 @@ class Sparkplug(unittest.TestCase):
         wait_until(listening, 10, "mosquitto listening on %d" % cls.port)
 
     @classmethod
-    def start_daemon(cls, commands):
+    def start_daemon(cls, commands, extra=""):
         cls.socket = os.path.join(cls.tmp, "ecmxfd.sock")
         config = os.path.join(cls.tmp, "ecmxfd.toml")
         with open(config, "w") as f:
@@ -216,8 +216,8 @@ class Sparkplug(unittest.TestCase):
                 "[cycle]\nfifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240\n"
                 "[api]\nsocket = \"%s\"\n"
                 "[sparkplug]\nbroker = \"mqtt://127.0.0.1:%d\"\ngroup_id = \"%s\"\nnode_id = \"%s\"\n"
-                "data_period_ms = 100\ndiagnostics_period_ms = 500\ncommands = \"%s\"\n"
-                % (cls.sim_socket, cls.socket, cls.port, GROUP, NODE, commands)
+                "data_period_ms = 100\ndiagnostics_period_ms = 500\ncommands = \"%s\"\n%s"
+                % (cls.sim_socket, cls.socket, cls.port, GROUP, NODE, commands, extra)
             )
         binary = os.environ.get("ECMXFD", os.path.join(TARGET, "ecmxfd"))
         cls.daemon_log = os.path.join(cls.tmp, "ecmxfd-%s.log" % commands)
@@ -434,6 +434,33 @@ class Sparkplug(unittest.TestCase):
             after_births,
         )
         print("commands = none: NCMD Rebirth and DCMD refused, logged and counted")
+
+    def test_9_births_wait_for_the_primary_host(self):
+        h = self.host
+        self.procs["daemon"].terminate()
+        self.procs["daemon"].wait(10)
+        state = "spBv1.0/STATE/scada-%d" % os.getpid()
+        online = lambda up: json.dumps({"online": up, "timestamp": int(time.time() * 1000)})
+        h.client.publish(state, online(False), qos=1, retain=True).wait_for_publish(5)
+        since = h.count()
+        self.start_daemon("observer", 'primary_host_id = "scada-%d"\n' % os.getpid())
+        wait_until(lambda: "waiting for the primary host" in self.log(), 30, "the node waiting for the host")
+        time.sleep(1.0)
+        self.assertEqual(h.count(), since, "no birth while the primary host is offline")
+        h.client.publish(state, online(True), qos=1, retain=True).wait_for_publish(5)
+        i, _ = h.wait_for(lambda k, d, p: k == "NBIRTH", 10, since)
+        h.wait_for(lambda k, d, p: k == "DBIRTH" and d == IO, 30, i)
+        # The host goes offline: the node says NDEATH and waits again.
+        since = h.count()
+        h.client.publish(state, online(False), qos=1, retain=True).wait_for_publish(5)
+        h.wait_for(lambda k, d, p: k == "NDEATH", 10, since)
+        time.sleep(2.5)
+        with h.lock:
+            self.assertNotIn("NBIRTH", [m[1] for m in h.messages[since:]], "births while the host is offline")
+        h.client.publish(state, online(True), qos=1, retain=True).wait_for_publish(5)
+        h.wait_for(lambda k, d, p: k == "NBIRTH", 10, since)
+        h.client.publish(state, b"", qos=1, retain=True).wait_for_publish(5)  # clear the retained STATE
+        print("primary host: births only while its STATE is online; NDEATH when it goes offline, births when back")
 
     def refused_alias(self, birth):
         with self.host.lock:
