@@ -156,3 +156,73 @@ fn the_node_connects_over_tls_with_a_client_certificate() {
     let _ = mosquitto.wait();
     let _ = std::fs::remove_dir_all(&dir);
 }
+
+/// Fail-over and credentials: the first broker of the list does not
+/// answer, the second wants a user name and password (mosquitto's
+/// password file): the node reaches the second with `credentials_file`
+/// and births there; with a wrong password the broker's refusal is logged.
+#[test]
+fn the_node_fails_over_to_the_next_broker_and_logs_in_with_its_credentials() {
+    let Some(broker) = mosquitto() else { return };
+    let passwd = broker.with_file_name("mosquitto_passwd");
+    let passwd = if passwd.is_file() { passwd } else { PathBuf::from("/usr/bin/mosquitto_passwd") };
+    let _turn = ecmxf_e2e::SERIAL.lock().unwrap_or_else(|e| e.into_inner());
+    let dir = ecmxf_e2e::temp_dir("spb-login");
+    let file = |name: &str| dir.join(name).display().to_string();
+    let made = Command::new(&passwd).args(["-b", "-c", &file("passwords"), "gateway", "s3cret"]).status();
+    assert!(made.is_ok_and(|s| s.success()), "{} -b -c failed", passwd.display());
+    let free = || std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port();
+    let (dead, port) = (free(), free());
+    std::fs::write(
+        file("mosquitto.conf"),
+        format!(
+            "listener {port} 127.0.0.1\nallow_anonymous false\npassword_file {}\npersistence false\n",
+            file("passwords")
+        ),
+    )
+    .unwrap();
+    let log = dir.join("mosquitto.log");
+    let out = std::fs::File::create(&log).unwrap();
+    let mut mosquitto = Command::new(broker)
+        .args(["-c", &file("mosquitto.conf"), "-v"])
+        .stdout(out.try_clone().unwrap())
+        .stderr(out)
+        .spawn()
+        .expect("start mosquitto");
+    let node = |name: &str, password: &str| {
+        std::fs::write(file(name), format!("gateway\n{password}\n")).unwrap();
+        ecmxf_e2e::config(
+            "backend = \"sim\"",
+            &format!(
+                "[sparkplug]\nbroker = [\"mqtt://127.0.0.1:{dead}\", \"mqtt://127.0.0.1:{port}\"]\ngroup_id = \"plant\"\n\
+                 node_id = \"{name}\"\ncredentials_file = \"{}\"\n",
+                file(name)
+            ),
+        )
+    };
+    let births = |name: &str| {
+        std::fs::read_to_string(&log).unwrap_or_default().contains(&format!("'spBv1.0/plant/NBIRTH/{name}'"))
+    };
+    let wait = |what: &dyn Fn() -> bool, limit: Duration| {
+        let t = Instant::now();
+        while !what() && t.elapsed() < limit {
+            std::thread::sleep(Duration::from_millis(50));
+        }
+        what()
+    };
+    {
+        let daemon = ecmxf_e2e::Daemon::binary_with_config(&node("right", "s3cret"));
+        let born = wait(&|| births("right"), Duration::from_secs(20));
+        assert!(born, "no NBIRTH on the second broker:\n{}", daemon.log());
+        assert!(daemon.log().contains(&format!("127.0.0.1:{dead}")), "the dead broker tried first:\n{}", daemon.log());
+    }
+    {
+        let daemon = ecmxf_e2e::Daemon::binary_with_config(&node("wrong", "guess"));
+        let said = wait(&|| daemon.log().contains("the broker refused the connection"), Duration::from_secs(20));
+        assert!(said, "{}", daemon.log());
+        assert!(!births("wrong"));
+    }
+    let _ = mosquitto.kill();
+    let _ = mosquitto.wait();
+    let _ = std::fs::remove_dir_all(&dir);
+}

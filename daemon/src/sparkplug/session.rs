@@ -346,7 +346,7 @@ impl Session<'_> {
                 let msg = match eventloop.poll().await {
                     Ok(Event::Incoming(Packet::ConnAck(ack))) => Incoming::Connected(match ack.code {
                         ConnectReturnCode::Success => Ok(()),
-                        code => Err(format!("the broker refused the connection: {code:?}")),
+                        code => Err(refused(code)),
                     }),
                     Ok(Event::Incoming(Packet::Publish(p))) => Incoming::Publish { topic: p.topic, payload: p.payload },
                     Ok(Event::Incoming(Packet::Disconnect)) => Incoming::Lost("the broker disconnected".into()),
@@ -355,6 +355,7 @@ impl Session<'_> {
                         return;
                     }
                     Ok(_) => continue,
+                    Err(rumqttc::ConnectionError::ConnectionRefused(code)) => Incoming::Lost(refused(code)),
                     Err(e) => Incoming::Lost(format!("connection lost: {e}")),
                 };
                 let end = matches!(msg, Incoming::Lost(_));
@@ -523,6 +524,18 @@ impl Seen {
             counts: stats.counts(),
         }
     }
+}
+
+/// A CONNACK refusal in words, with what to check.
+fn refused(code: ConnectReturnCode) -> String {
+    let hint = match code {
+        ConnectReturnCode::BadUserNamePassword | ConnectReturnCode::NotAuthorized => {
+            " (check sparkplug.credentials_file, client_cert and the broker's ACL)"
+        }
+        ConnectReturnCode::BadClientId => " (another client uses this node's client id?)",
+        _ => "",
+    };
+    format!("the broker refused the connection: {code:?}{hint}")
 }
 
 /// What births and deaths hang on in a snapshot.

@@ -125,6 +125,12 @@ pub fn decode(t: DataType, raw: &[u8]) -> Value {
 /// bits (little-endian), or why it cannot be one.
 pub fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>, String> {
     let bytes = bits.div_ceil(8) as usize;
+    // A number's bytes are at most 8: an entry the device describes as a
+    // number but maps wider is refused, not cut (or overrun).
+    let numeric = !matches!(t, DataType::VisibleString(_) | DataType::OctetString(_));
+    if numeric && (bytes > 8 || bytes == 0) {
+        return Err(format!("the entry's {bits} bits do not hold a {t:?}"));
+    }
     let int = |v: &MetricValue| -> Result<i128, String> {
         match v {
             MetricValue::IntValue(u) => Ok(i128::from(*u)),
