@@ -21,7 +21,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
 
 pub mod commands;
+mod connection;
 pub mod node;
+mod seen;
 pub mod session;
 pub mod tls;
 pub mod topic;

@@ -6,9 +6,7 @@
 //! the next `bdSeq` and births again. At shutdown NDEATH goes out before
 //! the disconnect.
 //!
-//! The MQTT event loop runs in a task of its own (rumqttc's `poll` is not
-//! cancelled mid-packet), handing received publishes and the end of the
-//! connection over a channel. Messages go into the client's queue without
+//! The MQTT connection itself is [`connection`]'s. Messages go into the client's queue without
 //! waiting (`try_publish`): a full queue drops the message and counts it
 //! rather than holding up the node, and nothing of the engine's cyclic
 //! path ever waits on the network.
@@ -16,22 +14,23 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
-use std::time::{Duration, SystemTime, UNIX_EPOCH};
+use std::time::Duration;
 
 use ecmxf_proto::sparkplug::Payload;
 use ecmxf_wire::EcatState;
 use prost::Message;
-use rumqttc::{AsyncClient, ConnectReturnCode, Event, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
+use rumqttc::{AsyncClient, QoS};
 use tokio::sync::{broadcast, mpsc, watch};
 use tracing::{info, warn};
 
 use super::commands::{self, Action, Writer};
-use super::node::{Node, Outgoing, Settings, View};
+use super::connection::{self, Incoming};
+use super::node::{Node, Outgoing, Settings};
+use super::seen::{RateMeter, Seen, now_ms, status_key, track_al};
 use super::topic::{self, Kind, NodeTopics};
 use super::{SharedStats, tls};
 use crate::config::{SparkplugConfig, sparkplug::Credentials};
-use crate::master::image::Image;
-use crate::master::{EventKind, Leases, Master, Phase};
+use crate::master::{Leases, Master};
 
 /// Pause after a lost connection: doubles up to [`MAX_BACKOFF`].
 const FIRST_BACKOFF: Duration = Duration::from_secs(1);
@@ -41,8 +40,6 @@ const MAX_BACKOFF: Duration = Duration::from_secs(30);
 const CONNECT_TIMEOUT: Duration = Duration::from_secs(10);
 /// How long NDEATH and the disconnect get at shutdown.
 const GOODBYE: Duration = Duration::from_secs(1);
-/// The client's queue: births of 256 devices and a period's data fit.
-const QUEUE: usize = 1024;
 /// Births on request at most this often: a host repeating Rebirth gets
 /// one set of births per interval, not one per request.
 const REBIRTH_SPACING: Duration = Duration::from_secs(1);
@@ -70,10 +67,10 @@ impl std::error::Error for SparkplugError {}
 /// What the node needs, prepared at start (files read once).
 #[derive(Debug)]
 pub struct Prepared {
-    config: SparkplugConfig,
-    node_id: String,
-    tls: Option<Arc<rustls::ClientConfig>>,
-    credentials: Option<Credentials>,
+    pub(super) config: SparkplugConfig,
+    pub(super) node_id: String,
+    pub(super) tls: Option<Arc<rustls::ClientConfig>>,
+    pub(super) credentials: Option<Credentials>,
 }
 
 /// Reads the TLS files and credentials of `config`: an error names the
@@ -92,13 +89,6 @@ enum Ended {
     /// The connection was lost or refused: why, and whether it had been
     /// up (a broker that never answered makes the node try the next one).
     Lost { why: String, was_up: bool },
-}
-
-/// What the MQTT task hands over.
-enum Incoming {
-    Connected(Result<(), String>),
-    Publish { topic: String, payload: bytes::Bytes },
-    Lost(String),
 }
 
 /// Runs the node until `stop` fires.
@@ -156,21 +146,6 @@ struct Session<'a> {
     stats: &'a SharedStats,
 }
 
-/// Owned copies of what the node reads at one instant ([`View`] borrows
-/// them).
-struct Seen {
-    now_ms: u64,
-    snapshot: crate::master::Snapshot,
-    flowing: bool,
-    health: String,
-    layout: crate::master::NetworkLayout,
-    image: Option<Arc<Image>>,
-    inputs: Option<Arc<crate::master::InputFrame>>,
-    outputs: Vec<u8>,
-    cycle_us: u32,
-    exchange_rate: f64,
-}
-
 impl Session<'_> {
     async fn run(
         &self,
@@ -181,7 +156,9 @@ impl Session<'_> {
         stop: &mut watch::Receiver<()>,
     ) -> Ended {
         let c = &self.prepared.config;
-        let (client, mut incoming) = self.connect(node, b);
+        let client_id = format!("ecmxfd-{}-{}", self.topics.group, self.topics.node);
+        let will = (self.topics.node(Kind::NDeath), node.death(now_ms()).encode_to_vec());
+        let (client, mut incoming) = connection::open(self.prepared, client_id, b, will);
         match tokio::time::timeout(CONNECT_TIMEOUT, incoming.recv()).await {
             Ok(Some(Incoming::Connected(Ok(())))) => {}
             Ok(Some(Incoming::Connected(Err(why)) | Incoming::Lost(why))) => return Ended::Lost { why, was_up: false },
@@ -273,12 +250,12 @@ impl Session<'_> {
                     last_births = tokio::time::Instant::now();
                 }
                 _ = data.tick(), if born => {
-                    let seen = self.seen(&mut meter);
+                    let seen = Seen::now(self.master, &mut meter);
                     let out = node.update(&seen.view(&al, self.stats), true);
                     self.send(&client, out);
                 }
                 _ = diagnostics.tick(), if born => {
-                    let seen = self.seen(&mut meter);
+                    let seen = Seen::now(self.master, &mut meter);
                     if let Some(out) = node.node_data(&seen.view(&al, self.stats)) {
                         self.send(&client, vec![out]);
                     }
@@ -294,7 +271,7 @@ impl Session<'_> {
                     if now != key {
                         key = now;
                         if born {
-                            let seen = self.seen(&mut meter);
+                            let seen = Seen::now(self.master, &mut meter);
                             let out = node.update(&seen.view(&al, self.stats), false);
                             self.send(&client, out);
                         }
@@ -310,61 +287,13 @@ impl Session<'_> {
                         }
                     };
                     if changed && born {
-                        let seen = self.seen(&mut meter);
+                        let seen = Seen::now(self.master, &mut meter);
                         let out = node.update(&seen.view(&al, self.stats), false);
                         self.send(&client, out);
                     }
                 }
             }
         }
-    }
-
-    /// A client and its event loop task for broker `b`, with the will.
-    fn connect(&self, node: &Node, b: &crate::config::sparkplug::BrokerUrl) -> (AsyncClient, mpsc::Receiver<Incoming>) {
-        let c = &self.prepared.config;
-        let id = format!("ecmxfd-{}-{}", self.topics.group, self.topics.node);
-        let mut options = MqttOptions::new(id, b.host.clone(), b.port);
-        options.set_keep_alive(Duration::from_secs(c.keep_alive_s.into()));
-        // Spec 7.1: clean session, so no command queued for a dead
-        // connection is acted on after a rebirth.
-        options.set_clean_session(true);
-        options.set_max_packet_size(1 << 20, 1 << 20);
-        let death = node.death(now_ms()).encode_to_vec();
-        options.set_last_will(LastWill::new(self.topics.node(Kind::NDeath), death, QoS::AtLeastOnce, false));
-        if let Some(creds) = &self.prepared.credentials {
-            options.set_credentials(creds.username.clone(), creds.password.clone());
-        }
-        if b.tls {
-            if let Some(tls) = &self.prepared.tls {
-                options.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(Arc::clone(tls))));
-            }
-        }
-        let (client, mut eventloop) = AsyncClient::new(options, QUEUE);
-        let (tx, rx) = mpsc::channel(256);
-        tokio::spawn(async move {
-            loop {
-                let msg = match eventloop.poll().await {
-                    Ok(Event::Incoming(Packet::ConnAck(ack))) => Incoming::Connected(match ack.code {
-                        ConnectReturnCode::Success => Ok(()),
-                        code => Err(refused(code)),
-                    }),
-                    Ok(Event::Incoming(Packet::Publish(p))) => Incoming::Publish { topic: p.topic, payload: p.payload },
-                    Ok(Event::Incoming(Packet::Disconnect)) => Incoming::Lost("the broker disconnected".into()),
-                    Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
-                        let _ = tx.send(Incoming::Lost("disconnected".into())).await;
-                        return;
-                    }
-                    Ok(_) => continue,
-                    Err(rumqttc::ConnectionError::ConnectionRefused(code)) => Incoming::Lost(refused(code)),
-                    Err(e) => Incoming::Lost(format!("connection lost: {e}")),
-                };
-                let end = matches!(msg, Incoming::Lost(_));
-                if tx.send(msg).await.is_err() || end {
-                    return;
-                }
-            }
-        });
-        (client, rx)
     }
 
     /// NBIRTH and every live device's DBIRTH.
@@ -375,7 +304,7 @@ impl Session<'_> {
         al: &BTreeMap<u8, (EcatState, u16)>,
         meter: &mut RateMeter,
     ) {
-        let seen = self.seen(meter);
+        let seen = Seen::now(self.master, meter);
         let out = node.birth(&seen.view(al, self.stats));
         let devices = out.len() - 1;
         self.send(client, out);
@@ -457,121 +386,4 @@ impl Session<'_> {
             };
         }
     }
-
-    /// The daemon now, from its published snapshots.
-    fn seen(&self, meter: &mut RateMeter) -> Seen {
-        let m = self.master;
-        let snapshot = m.status();
-        let exchange_rate = meter.sample(snapshot.exchanges, std::time::Instant::now());
-        let verdict = m.verdict(&snapshot);
-        let image = match m.current_image() {
-            Some(Ok(image)) => Some(image),
-            // Not laid out (no PDO source): devices still born, without
-            // process data.
-            Some(Err(_)) => Some(Arc::new(Image::default())),
-            None => None,
-        };
-        Seen {
-            now_ms: now_ms(),
-            snapshot,
-            flowing: verdict.flowing(),
-            health: health_word(&verdict.health).into(),
-            layout: m.layout(),
-            image,
-            inputs: m.latest_inputs(),
-            outputs: m.output_shadow().clone(),
-            cycle_us: m.config().cycle.sync0_us,
-            exchange_rate,
-        }
-    }
-}
-
-/// SPI exchanges per second, over at least a second.
-#[derive(Debug, Default)]
-struct RateMeter {
-    last: Option<(u64, std::time::Instant)>,
-    rate: f64,
-}
-
-impl RateMeter {
-    fn sample(&mut self, exchanges: u64, now: std::time::Instant) -> f64 {
-        match self.last {
-            Some((n, t)) if now.duration_since(t) >= Duration::from_secs(1) => {
-                self.rate = exchanges.saturating_sub(n) as f64 / now.duration_since(t).as_secs_f64();
-                self.last = Some((exchanges, now));
-            }
-            Some(_) => {}
-            None => self.last = Some((exchanges, now)),
-        }
-        self.rate
-    }
-}
-
-impl Seen {
-    fn view<'a>(&'a self, al: &'a BTreeMap<u8, (EcatState, u16)>, stats: &SharedStats) -> View<'a> {
-        View {
-            now_ms: self.now_ms,
-            snapshot: &self.snapshot,
-            flowing: self.flowing,
-            health: &self.health,
-            layout: &self.layout,
-            image: self.image.as_ref(),
-            inputs: self.inputs.as_ref().map_or(&[][..], |f| &f.data),
-            outputs: &self.outputs,
-            al,
-            cycle_us: self.cycle_us,
-            exchange_rate: self.exchange_rate,
-            counts: stats.counts(),
-        }
-    }
-}
-
-/// A CONNACK refusal in words, with what to check.
-fn refused(code: ConnectReturnCode) -> String {
-    let hint = match code {
-        ConnectReturnCode::BadUserNamePassword | ConnectReturnCode::NotAuthorized => {
-            " (check sparkplug.credentials_file, client_cert and the broker's ACL)"
-        }
-        ConnectReturnCode::BadClientId => " (another client uses this node's client id?)",
-        _ => "",
-    };
-    format!("the broker refused the connection: {code:?}{hint}")
-}
-
-/// What births and deaths hang on in a snapshot.
-fn status_key(s: &crate::master::Snapshot) -> (Phase, EcatState, u64, u64, u64) {
-    let (phase, state, generation, recoveries) = s.key();
-    (phase, state, generation, recoveries, s.slaves)
-}
-
-/// Keeps the AL states slaves reported since the network last came up;
-/// whether that changed anything.
-fn track_al(al: &mut BTreeMap<u8, (EcatState, u16)>, kind: &EventKind) -> bool {
-    match kind {
-        EventKind::AlStatus { slave, state, code } => al.insert(*slave, (*state, *code)) != Some((*state, *code)),
-        EventKind::Phase(Phase::Running) | EventKind::Recovered { .. } => {
-            let had = !al.is_empty();
-            al.clear();
-            had
-        }
-        EventKind::ProcessData { .. } | EventKind::EcatState { .. } => true,
-        _ => false,
-    }
-}
-
-/// The health in one or two words (the node metric `Engine/Health`).
-fn health_word(h: &crate::master::Health) -> &'static str {
-    use crate::master::Health;
-    match h {
-        Health::Healthy => "healthy",
-        Health::NotRunning(_) => "not running",
-        Health::WrongState { .. } => "wrong state",
-        Health::Stalled { .. } => "stalled",
-        Health::SlavesMissing { .. } => "slaves missing",
-        Health::Int0Stuck => "int0 stuck",
-    }
-}
-
-fn now_ms() -> u64 {
-    SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
 }

@@ -1,0 +1,95 @@
+//! One MQTT connection (rumqttc): the client, and its event loop in a
+//! task of its own that hands over what the node needs (CONNACK, received
+//! publishes, the end of the connection) on a channel, so `poll` is never
+//! cancelled mid-packet by the node's other work.
+
+use std::sync::Arc;
+use std::time::Duration;
+
+use rumqttc::{AsyncClient, ConnectReturnCode, Event, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
+use tokio::sync::mpsc;
+
+use super::session::Prepared;
+use crate::config::sparkplug::BrokerUrl;
+
+/// The client's queue: births of 256 devices and a period's data fit.
+const QUEUE: usize = 1024;
+
+/// What the MQTT task hands over.
+#[derive(Debug)]
+pub enum Incoming {
+    /// The CONNACK: accepted, or the refusal in words.
+    Connected(Result<(), String>),
+    /// A message on a subscribed topic.
+    Publish {
+        /// Its topic.
+        topic: String,
+        /// Its payload.
+        payload: bytes::Bytes,
+    },
+    /// The connection ended: why.
+    Lost(String),
+}
+
+/// A client for broker `b` and its event loop task, with `will` (topic,
+/// payload) as the MQTT will.
+pub fn open(
+    prepared: &Prepared,
+    client_id: String,
+    b: &BrokerUrl,
+    will: (String, Vec<u8>),
+) -> (AsyncClient, mpsc::Receiver<Incoming>) {
+    let mut options = MqttOptions::new(client_id, b.host.clone(), b.port);
+    options.set_keep_alive(Duration::from_secs(prepared.config.keep_alive_s.into()));
+    // Spec 7.1: clean session, so no command queued for a dead
+    // connection is acted on after a rebirth.
+    options.set_clean_session(true);
+    options.set_max_packet_size(1 << 20, 1 << 20);
+    options.set_last_will(LastWill::new(will.0, will.1, QoS::AtLeastOnce, false));
+    if let Some(creds) = &prepared.credentials {
+        options.set_credentials(creds.username.clone(), creds.password.clone());
+    }
+    if b.tls {
+        if let Some(tls) = &prepared.tls {
+            options.set_transport(Transport::tls_with_config(TlsConfiguration::Rustls(Arc::clone(tls))));
+        }
+    }
+    let (client, mut eventloop) = AsyncClient::new(options, QUEUE);
+    let (tx, rx) = mpsc::channel(256);
+    tokio::spawn(async move {
+        loop {
+            let msg = match eventloop.poll().await {
+                Ok(Event::Incoming(Packet::ConnAck(ack))) => Incoming::Connected(match ack.code {
+                    ConnectReturnCode::Success => Ok(()),
+                    code => Err(refused(code)),
+                }),
+                Ok(Event::Incoming(Packet::Publish(p))) => Incoming::Publish { topic: p.topic, payload: p.payload },
+                Ok(Event::Incoming(Packet::Disconnect)) => Incoming::Lost("the broker disconnected".into()),
+                Ok(Event::Outgoing(rumqttc::Outgoing::Disconnect)) => {
+                    let _ = tx.send(Incoming::Lost("disconnected".into())).await;
+                    return;
+                }
+                Ok(_) => continue,
+                Err(rumqttc::ConnectionError::ConnectionRefused(code)) => Incoming::Lost(refused(code)),
+                Err(e) => Incoming::Lost(format!("connection lost: {e}")),
+            };
+            let end = matches!(msg, Incoming::Lost(_));
+            if tx.send(msg).await.is_err() || end {
+                return;
+            }
+        }
+    });
+    (client, rx)
+}
+
+/// A CONNACK refusal in words, with what to check.
+fn refused(code: ConnectReturnCode) -> String {
+    let hint = match code {
+        ConnectReturnCode::BadUserNamePassword | ConnectReturnCode::NotAuthorized => {
+            " (check sparkplug.credentials_file, client_cert and the broker's ACL)"
+        }
+        ConnectReturnCode::BadClientId => " (another client uses this node's client id?)",
+        _ => "",
+    };
+    format!("the broker refused the connection: {code:?}{hint}")
+}
