@@ -155,7 +155,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         None => None,
     };
     let sparkplug = match &config.sparkplug {
-        Some(s) => Some(crate::sparkplug::session::prepare(s).map_err(DaemonError::Sparkplug)?),
+        Some(s) => Some(crate::sparkplug::prepare(s).map_err(DaemonError::Sparkplug)?),
         None => None,
     };
     let sparkplug_stats = sparkplug.as_ref().map(|_| crate::sparkplug::SharedStats::default());

@@ -229,7 +229,7 @@ fn main() -> ExitCode {
             let notes = c.check_files(path)?;
             // The Sparkplug node's certificates and credentials load as at start.
             if let Some(s) = &c.sparkplug {
-                ecmxfd::sparkplug::session::prepare(s).map_err(|e| ecmxfd::config::ConfigError::Invalid {
+                ecmxfd::sparkplug::prepare(s).map_err(|e| ecmxfd::config::ConfigError::Invalid {
                     file: path.into(),
                     key: "sparkplug".into(),
                     message: e.to_string(),

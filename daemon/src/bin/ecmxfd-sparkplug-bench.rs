@@ -155,7 +155,7 @@ fn main() -> Result<(), String> {
         let cpu_off = cpu_over(window);
         let stats = ecmxfd::sparkplug::SharedStats::default();
         let (stop, stopped) = tokio::sync::watch::channel(());
-        let prepared = ecmxfd::sparkplug::session::prepare(&sparkplug).map_err(|e| e.to_string())?;
+        let prepared = ecmxfd::sparkplug::prepare(&sparkplug).map_err(|e| e.to_string())?;
         let node = rt.spawn(ecmxfd::sparkplug::serve(
             Arc::clone(&master),
             Arc::clone(&leases),

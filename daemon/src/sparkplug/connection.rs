@@ -1,7 +1,8 @@
 //! One MQTT connection (rumqttc): the client, and its event loop in a
 //! task of its own that hands over what the node needs (CONNACK, received
 //! publishes, the end of the connection) on a channel, so `poll` is never
-//! cancelled mid-packet by the node's other work.
+//! cancelled mid-packet by the node's other work. What every connection
+//! needs (TLS, credentials) is read once at start ([`prepare`]).
 
 use std::sync::Arc;
 use std::time::Duration;
@@ -9,8 +10,47 @@ use std::time::Duration;
 use rumqttc::{AsyncClient, ConnectReturnCode, Event, LastWill, MqttOptions, Packet, QoS, TlsConfiguration, Transport};
 use tokio::sync::mpsc;
 
-use super::session::Prepared;
-use crate::config::sparkplug::BrokerUrl;
+use super::tls;
+use crate::config::SparkplugConfig;
+use crate::config::sparkplug::{BrokerUrl, Credentials};
+
+/// Why the node could not start.
+#[derive(Debug)]
+pub enum SparkplugError {
+    /// TLS material that does not load.
+    Tls(String),
+    /// Credentials that do not load.
+    Credentials(String),
+}
+
+impl std::fmt::Display for SparkplugError {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Tls(e) => write!(f, "{e}"),
+            Self::Credentials(e) => write!(f, "sparkplug.credentials_file: {e}"),
+        }
+    }
+}
+
+impl std::error::Error for SparkplugError {}
+
+/// What the node needs, prepared at start (files read once).
+#[derive(Debug)]
+pub struct Prepared {
+    pub(super) config: SparkplugConfig,
+    pub(super) node_id: String,
+    pub(super) tls: Option<Arc<rustls::ClientConfig>>,
+    pub(super) credentials: Option<Credentials>,
+}
+
+/// Reads the TLS files and credentials of `config`: an error names the
+/// file, before the daemon starts serving.
+pub fn prepare(config: &SparkplugConfig) -> Result<Prepared, SparkplugError> {
+    let tls = tls::client_config(config).map_err(SparkplugError::Tls)?;
+    let credentials =
+        config.credentials_file.as_deref().map(Credentials::read).transpose().map_err(SparkplugError::Credentials)?;
+    Ok(Prepared { config: config.clone(), node_id: config.node_id(), tls, credentials })
+}
 
 /// The client's queue: births of 256 devices and a period's data fit.
 const QUEUE: usize = 1024;

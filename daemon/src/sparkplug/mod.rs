@@ -29,7 +29,8 @@ pub mod tls;
 pub mod topic;
 pub mod value;
 
-pub use session::{SparkplugError, serve};
+pub use connection::{Prepared, SparkplugError, prepare};
+pub use session::serve;
 
 /// The node's counters, for the metrics endpoint and its own NDATA.
 #[derive(Debug, Default)]

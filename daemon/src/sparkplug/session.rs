@@ -23,13 +23,12 @@ use rumqttc::{AsyncClient, QoS};
 use tokio::sync::{broadcast, mpsc, watch};
 use tracing::{info, warn};
 
+use super::SharedStats;
 use super::commands::{self, Action, Writer};
-use super::connection::{self, Incoming};
+use super::connection::{self, Incoming, Prepared};
 use super::node::{Node, Outgoing, Settings};
 use super::seen::{RateMeter, Seen, now_ms, status_key, track_al};
 use super::topic::{self, Kind, NodeTopics};
-use super::{SharedStats, tls};
-use crate::config::{SparkplugConfig, sparkplug::Credentials};
 use crate::master::{Leases, Master};
 
 /// Pause after a lost connection: doubles up to [`MAX_BACKOFF`].
@@ -43,44 +42,6 @@ const GOODBYE: Duration = Duration::from_secs(1);
 /// Births on request at most this often: a host repeating Rebirth gets
 /// one set of births per interval, not one per request.
 const REBIRTH_SPACING: Duration = Duration::from_secs(1);
-
-/// Why the node could not start.
-#[derive(Debug)]
-pub enum SparkplugError {
-    /// TLS material that does not load.
-    Tls(String),
-    /// Credentials that do not load.
-    Credentials(String),
-}
-
-impl std::fmt::Display for SparkplugError {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        match self {
-            Self::Tls(e) => write!(f, "{e}"),
-            Self::Credentials(e) => write!(f, "sparkplug.credentials_file: {e}"),
-        }
-    }
-}
-
-impl std::error::Error for SparkplugError {}
-
-/// What the node needs, prepared at start (files read once).
-#[derive(Debug)]
-pub struct Prepared {
-    pub(super) config: SparkplugConfig,
-    pub(super) node_id: String,
-    pub(super) tls: Option<Arc<rustls::ClientConfig>>,
-    pub(super) credentials: Option<Credentials>,
-}
-
-/// Reads the TLS files and credentials of `config`: an error names the
-/// file, before the daemon starts serving.
-pub fn prepare(config: &SparkplugConfig) -> Result<Prepared, SparkplugError> {
-    let tls = tls::client_config(config).map_err(SparkplugError::Tls)?;
-    let credentials =
-        config.credentials_file.as_deref().map(Credentials::read).transpose().map_err(SparkplugError::Credentials)?;
-    Ok(Prepared { config: config.clone(), node_id: config.node_id(), tls, credentials })
-}
 
 /// How a session ended.
 enum Ended {
