@@ -141,6 +141,7 @@ fn main() -> Result<(), String> {
         diagnostics_deadband: 0.0,
         slaves: Vec::new(),
         variables: Vec::new(),
+        metric_names: Default::default(),
         commands: ecmxfd::config::api::RoleName::None,
     };
     let alarms0 = master.status().fifo_alarms;

@@ -64,12 +64,28 @@ pub struct SparkplugConfig {
     /// variable name (the ENI's); empty: all.
     #[serde(default)]
     pub variables: Vec<String>,
+    /// How process data metrics are named: "entry" (`Inputs/0x6000:01`, as
+    /// `ecmxfctl data`) or "label" (the device's name for the entry,
+    /// `Inputs/Acceleration X`, where unique in the slave).
+    #[serde(default)]
+    pub metric_names: MetricNames,
     /// What the Sparkplug hosts may command, as a gRPC role: "none" (every
     /// NCMD and DCMD refused and logged), "observer" (Node
     /// Control/Rebirth), "operator" (also DCMD writes of output variables,
     /// under an output lease like a gRPC client's).
     #[serde(default = "defaults::commands")]
     pub commands: RoleName,
+}
+
+/// `sparkplug.metric_names`.
+#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum MetricNames {
+    /// Entry names without the slave's number.
+    #[default]
+    Entry,
+    /// The device's names for the entries, where unique.
+    Label,
 }
 
 mod defaults {

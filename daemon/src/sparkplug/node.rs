@@ -23,6 +23,7 @@ use ecmxf_wire::EcatState;
 
 use super::topic::Kind;
 use super::value::{self, Value};
+use crate::config::sparkplug::MetricNames;
 use crate::master::image::{Image, read_bits};
 use crate::master::{NetworkLayout, Phase, Snapshot};
 
@@ -37,6 +38,8 @@ pub struct Settings {
     pub slaves: Vec<u8>,
     /// Variables published by entry or variable name (empty: all).
     pub variables: Vec<String>,
+    /// How process data metrics are named (`sparkplug.metric_names`).
+    pub names: MetricNames,
 }
 
 /// Counters of the node itself, published as node metrics.
@@ -72,6 +75,9 @@ pub struct View<'a> {
     pub image: Option<&'a Arc<Image>>,
     /// The newest input frame.
     pub inputs: &'a [u8],
+    /// When it was received, ms since the Unix epoch (the timestamp of
+    /// input values; `now_ms` when none).
+    pub inputs_ms: u64,
     /// The output image as clients last wrote it.
     pub outputs: &'a [u8],
     /// AL status reported per slave since the network last came up:
@@ -301,7 +307,7 @@ impl Node {
                 .map(|(m, v)| Metric {
                     name: Some(m.name.clone()),
                     alias: Some(m.alias),
-                    timestamp: Some(view.now_ms),
+                    timestamp: Some(taken_at(&m.source, view)),
                     datatype: Some(m.datatype as u32),
                     value: Some(v.to_metric(m.datatype)),
                     ..Metric::default()
@@ -320,7 +326,7 @@ impl Node {
                     if v.moved_from(last, deadband) {
                         changed.push(Metric {
                             alias: Some(m.alias),
-                            timestamp: Some(view.now_ms),
+                            timestamp: Some(taken_at(&m.source, view)),
                             datatype: Some(m.datatype as u32),
                             value: Some(v.to_metric(m.datatype)),
                             ..Metric::default()
@@ -428,8 +434,12 @@ impl Node {
         add(self, "State".into(), SpType::String, DeviceSource::State);
         add(self, "AL Status Code".into(), SpType::UInt16, DeviceSource::AlCode);
         if let Some(image) = view.image {
+            let mine = |e: &&crate::master::image::Entry| e.slave == p && e.index != 0;
+            let labelled = |output: bool, label: &str| {
+                image.entries.iter().filter(mine).filter(|e| e.output == output && e.label == label).count() == 1
+            };
             for (i, e) in image.entries.iter().enumerate() {
-                if e.slave != p || e.index == 0 {
+                if !mine(&e) {
                     continue;
                 }
                 let v = &self.settings.variables;
@@ -437,12 +447,11 @@ impl Node {
                     continue;
                 }
                 let folder = if e.output { OUTPUTS } else { INPUTS };
-                add(
-                    self,
-                    format!("{folder}{}", metric_name(&e.name)),
-                    value::datatype(e.data_type),
-                    DeviceSource::Entry(i),
-                );
+                let name = match self.settings.names {
+                    MetricNames::Label if !e.label.is_empty() && labelled(e.output, &e.label) => e.label.as_str(),
+                    _ => metric_name(&e.name),
+                };
+                add(self, format!("{folder}{name}"), value::datatype(e.data_type), DeviceSource::Entry(i));
             }
         }
         metrics
@@ -512,6 +521,15 @@ fn alive(view: &View, p: u8) -> bool {
         && usize::from(p) < view.layout.slaves.len()
         && view.al.get(&p).is_none_or(|(state, _)| *state == EcatState::Op)
         && view.image.is_some()
+}
+
+/// When a device metric's value was taken: an input's when its frame
+/// arrived, the rest now.
+fn taken_at(source: &DeviceSource, view: &View) -> u64 {
+    match (source, view.image) {
+        (DeviceSource::Entry(i), Some(image)) if image.entries.get(*i).is_some_and(|e| !e.output) => view.inputs_ms,
+        _ => view.now_ms,
+    }
 }
 
 fn device_value(source: &DeviceSource, view: &View, p: u8) -> Value {

@@ -11,6 +11,7 @@ use ecmxf_proto::sparkplug::payload::metric::Value as MetricValue;
 use ecmxf_wire::EcatState;
 
 use super::*;
+use crate::config::sparkplug::MetricNames;
 use crate::master::SlaveSummary;
 use crate::master::image::Entry;
 
@@ -75,6 +76,7 @@ impl World {
             layout: &self.layout,
             image: Some(&self.image),
             inputs: &self.inputs,
+            inputs_ms: now_ms.saturating_sub(3),
             outputs: &self.outputs,
             al: &self.al,
             cycle_us: 1000,
@@ -249,4 +251,38 @@ fn node_data_carries_only_diagnostics_that_changed() {
     assert_eq!(out.kind, Kind::NData);
     assert_eq!(out.payload.metrics.len(), 2);
     assert!(out.payload.metrics.iter().all(|m| m.name.is_none() && m.alias.is_some()));
+}
+
+#[test]
+fn label_names_where_unique_and_entry_names_elsewhere() {
+    let mut w = World::new();
+    let mut image = (*w.image).clone();
+    image.entries[2].label = "Acceleration X".into();
+    image.entries[0].label = "Setpoint".into();
+    image.entries[1].label = "Same".into();
+    image.entries[3].label = "Same".into(); // an input: unique among slave 2's inputs
+    w.image = Arc::new(image);
+    let mut node = Node::new(Settings { names: MetricNames::Label, ..Settings::default() });
+    node.next_connection();
+    let out = node.birth(&w.view(100));
+    assert_eq!(names(&out[1])[7..], ["Outputs/Setpoint", "Inputs/Acceleration X"]);
+    assert_eq!(names(&out[3])[7..], ["Outputs/Same", "Inputs/Same"]);
+    // Input values carry their frame's time, the rest the publish time.
+    let at = |o: &Outgoing, n: &str| o.payload.metrics.iter().find(|m| m.name.as_deref() == Some(n)).unwrap().timestamp;
+    assert_eq!(at(&out[1], "Inputs/Acceleration X"), Some(97));
+    assert_eq!(at(&out[1], "Outputs/Setpoint"), Some(100));
+}
+
+#[test]
+fn a_label_two_entries_share_falls_back_to_entry_names() {
+    let mut w = World::new();
+    let mut image = (*w.image).clone();
+    image.entries.push(entry("0.other", 0, false, 16, DataType::UInt8));
+    image.entries[2].label = "Twice".into();
+    image.entries[4].label = "Twice".into();
+    w.image = Arc::new(image);
+    let mut node = Node::new(Settings { names: MetricNames::Label, ..Settings::default() });
+    node.next_connection();
+    let out = node.birth(&w.view(0));
+    assert_eq!(names(&out[1])[8..], ["Inputs/actual", "Inputs/other"]);
 }

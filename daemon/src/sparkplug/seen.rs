@@ -25,6 +25,7 @@ pub struct Seen {
     layout: crate::master::NetworkLayout,
     image: Option<Arc<Image>>,
     inputs: Option<Arc<crate::master::InputFrame>>,
+    inputs_ms: u64,
     outputs: Vec<u8>,
     cycle_us: u32,
     exchange_rate: f64,
@@ -66,14 +67,20 @@ impl Seen {
             Some(Err(_)) => Some(Arc::new(Image::default())),
             None => None,
         };
+        let now = now_ms();
+        let inputs = m.latest_inputs();
+        // The frame's age on the engine's clock, taken off the wall clock.
+        let inputs_ms =
+            inputs.as_ref().map_or(now, |f| now.saturating_sub(m.now_ns().saturating_sub(f.time_ns) / 1_000_000));
         Self {
-            now_ms: now_ms(),
+            now_ms: now,
+            inputs_ms,
             snapshot,
             flowing: verdict.flowing(),
             health: health_word(&verdict.health).into(),
             layout: m.layout(),
             image,
-            inputs: m.latest_inputs(),
+            inputs,
             outputs: m.output_shadow().clone(),
             cycle_us: m.config().cycle.sync0_us,
             exchange_rate,
@@ -90,6 +97,7 @@ impl Seen {
             layout: &self.layout,
             image: self.image.as_ref(),
             inputs: self.inputs.as_ref().map_or(&[][..], |f| &f.data),
+            inputs_ms: self.inputs_ms,
             outputs: &self.outputs,
             al,
             cycle_us: self.cycle_us,

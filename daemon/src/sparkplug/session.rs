@@ -68,6 +68,7 @@ pub async fn serve(
         diagnostics_deadband: c.diagnostics_deadband,
         slaves: c.slaves.clone(),
         variables: c.variables.clone(),
+        names: c.metric_names,
     };
     let mut node = Node::new(settings);
     let mut writer = Writer::new(lease_ttl);
