@@ -158,7 +158,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         Some(s) => Some(crate::sparkplug::prepare(s).map_err(DaemonError::Sparkplug)?),
         None => None,
     };
-    let sparkplug_stats = sparkplug.as_ref().map(|_| crate::sparkplug::SharedStats::default());
+    let sparkplug_stats = crate::sparkplug::SharedStats::default();
     let mut running = config.clone();
     let (master, _sim) = Master::from_config(config)?;
     let master = Arc::new(master);
@@ -172,22 +172,17 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         let sources = crate::metrics::Sources {
             master: Arc::clone(&master),
             sdo_latency: Arc::clone(&ctx.sdo_latency),
-            sparkplug: sparkplug_stats.clone(),
+            sparkplug: Some(Arc::clone(&sparkplug_stats)),
         };
         tokio::spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
     }
     if let Some((g, socket)) = gateway {
         tokio::spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
     }
-    if let (Some(prepared), Some(stats)) = (sparkplug, sparkplug_stats) {
-        tokio::spawn(crate::sparkplug::serve(
-            Arc::clone(&master),
-            Arc::clone(&ctx.leases),
-            prepared,
-            ctx.lease_ttl,
-            stats,
-            api_stopped.clone(),
-        ));
+    let mut sparkplug_node =
+        crate::sparkplug::Runner::new(Arc::clone(&master), Arc::clone(&ctx.leases), ctx.lease_ttl, sparkplug_stats);
+    if let Some(prepared) = sparkplug {
+        sparkplug_node.start(prepared);
     }
     let mut server = tokio::spawn(crate::api::server::serve(Arc::clone(&ctx), api, api_stopped));
     let status_every = options.status_every;
@@ -227,7 +222,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
             () = &mut shutdown => break,
             Some(new) = async { reloads.as_mut()?.recv().await }, if reloads.is_some() => {
                 notifier.send("RELOADING=1");
-                reload(&mut running, new, &ctx, logging.as_ref());
+                reload(&mut running, new, &ctx, logging.as_ref(), &mut sparkplug_node).await;
                 notifier.send(&format!("READY=1\nSTATUS={}", service_status(&master)));
             }
             _ = watchdog.tick(), if watchdog_every.is_some() => {
@@ -262,6 +257,8 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     });
     ctx.stop_streams();
     let _ = stop_api.send(());
+    // NDEATH while the bus goes down (at most a second or so).
+    sparkplug_node.stop().await;
     layout_builder.abort();
     if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
         server.abort();
@@ -358,8 +355,23 @@ fn service_status(m: &Master) -> String {
 /// A configuration read again (SIGHUP): applies what can change while the
 /// bus runs (log filter, API roles and tokens) and names what needs a
 /// restart.
-fn reload(running: &mut Config, new: Config, ctx: &Context, logging: Option<&Logging>) {
+async fn reload(
+    running: &mut Config,
+    new: Config,
+    ctx: &Context,
+    logging: Option<&Logging>,
+    sparkplug: &mut crate::sparkplug::Runner,
+) {
     let plan = ReloadPlan::between(running, &new);
+    if plan.sparkplug {
+        match sparkplug.replace(new.sparkplug.as_ref()).await {
+            Ok(()) => {
+                running.sparkplug = new.sparkplug.clone();
+                info!("SIGHUP: [sparkplug] applied (the node restarted; the bus ran on)");
+            }
+            Err(e) => warn!("SIGHUP: [sparkplug] not applied, the node runs as before: {e}"),
+        }
+    }
     if plan.log_level {
         match logging.map(|l| l.set_level(&new.log.level)) {
             Some(Ok(true)) => info!(level = %new.log.level, "SIGHUP: log.level applied"),
@@ -384,7 +396,7 @@ fn reload(running: &mut Config, new: Config, ctx: &Context, logging: Option<&Log
             "SIGHUP: not applied while the bus runs; restart the service to apply"
         );
     }
-    if !plan.log_level && !plan.roles && plan.needs_restart.is_empty() {
+    if !plan.log_level && !plan.roles && !plan.sparkplug && plan.needs_restart.is_empty() {
         info!("SIGHUP: configuration unchanged");
     }
 }

@@ -166,6 +166,8 @@ pub struct ReloadPlan {
     pub log_level: bool,
     /// `[api]` roles, tokens, client certificates or default role changed.
     pub roles: bool,
+    /// `[sparkplug]` changed: the node is restarted, the bus runs on.
+    pub sparkplug: bool,
     /// Keys that changed but take a restart (or a re-initialisation that
     /// interrupts the bus), for the log.
     pub needs_restart: Vec<&'static str>,
@@ -174,7 +176,8 @@ pub struct ReloadPlan {
 impl ReloadPlan {
     /// Compares the running configuration with the reloaded one.
     pub fn between(old: &Config, new: &Config) -> Self {
-        let mut p = Self { log_level: old.log != new.log, ..Self::default() };
+        let mut p =
+            Self { log_level: old.log != new.log, sparkplug: old.sparkplug != new.sparkplug, ..Self::default() };
         let (a, b) = (&old.api, &new.api);
         p.roles = a.users != b.users
             || a.groups != b.groups
@@ -196,7 +199,6 @@ impl ReloadPlan {
         restart(old.outputs != new.outputs, "[outputs]");
         restart(old.metrics != new.metrics, "[metrics]");
         restart(old.gateway != new.gateway, "[gateway]");
-        restart(old.sparkplug != new.sparkplug, "[sparkplug]");
         restart(
             a.socket != b.socket || a.socket_mode != b.socket_mode || a.socket_group != b.socket_group,
             "api.socket*",
@@ -252,6 +254,14 @@ mod tests {
         let p = ReloadPlan::between(&old, &new);
         assert!(p.log_level && p.roles);
         assert_eq!(p.needs_restart, vec!["[cycle]", "api.lease_ttl_ms"]);
+        // A Sparkplug node is restarted on its own (the bus runs on); a
+        // mailbox gateway's address needs the daemon restarted.
+        let mut new = old.clone();
+        new.sparkplug = Some(toml::from_str("broker = \"mqtt://b\"\ngroup_id = \"g\"").unwrap());
+        new.gateway = Some(toml::from_str("listen = \"127.0.0.1:34980\"").unwrap());
+        let p = ReloadPlan::between(&old, &new);
+        assert!(p.sparkplug);
+        assert_eq!(p.needs_restart, vec!["[gateway]"]);
     }
 
     #[test]

@@ -207,6 +207,16 @@ class Sparkplug(unittest.TestCase):
 
     @classmethod
     def start_daemon(cls, commands, extra=""):
+        config = cls.write_config(commands, extra)
+        binary = os.environ.get("ECMXFD", os.path.join(TARGET, "ecmxfd"))
+        cls.daemon_log = os.path.join(cls.tmp, "ecmxfd-%s.log" % commands)
+        with open(cls.daemon_log, "w") as log:
+            cls.procs["daemon"] = subprocess.Popen(
+                [binary, "--config", config, "--status-every", "0"], stdout=log, stderr=log
+            )
+
+    @classmethod
+    def write_config(cls, commands, extra=""):
         cls.socket = os.path.join(cls.tmp, "ecmxfd.sock")
         config = os.path.join(cls.tmp, "ecmxfd.toml")
         with open(config, "w") as f:
@@ -219,12 +229,7 @@ class Sparkplug(unittest.TestCase):
                 "data_period_ms = 100\ndiagnostics_period_ms = 500\ncommands = \"%s\"\n%s"
                 % (cls.sim_socket, cls.socket, cls.port, GROUP, NODE, commands, extra)
             )
-        binary = os.environ.get("ECMXFD", os.path.join(TARGET, "ecmxfd"))
-        cls.daemon_log = os.path.join(cls.tmp, "ecmxfd-%s.log" % commands)
-        with open(cls.daemon_log, "w") as log:
-            cls.procs["daemon"] = subprocess.Popen(
-                [binary, "--config", config, "--status-every", "0"], stdout=log, stderr=log
-            )
+        return config
 
     @classmethod
     def tearDownClass(cls):
@@ -255,7 +260,7 @@ class Sparkplug(unittest.TestCase):
 
     # The steps, in order.
 
-    def test_1_births_in_order_aliases_unique_and_seq_without_gaps(self):
+    def test_01_births_in_order_aliases_unique_and_seq_without_gaps(self):
         h = self.host
         i, (_, _, _, nbirth) = h.wait_for(lambda k, d, p: k == "NBIRTH", 30)
         self.__class__.first_birth = i
@@ -297,7 +302,7 @@ class Sparkplug(unittest.TestCase):
             self.assertEqual(b, (a + 1) % 256, seqs)
         print("births: NBIRTH + %d DBIRTH, %d aliases, %d messages in order" % (len(births), len(aliases), len(msgs)))
 
-    def test_2_ddata_values_equal_ecmxfctl_data(self):
+    def test_02_ddata_values_equal_ecmxfctl_data(self):
         # Values that hold still across two reads of `ecmxfctl data` must be
         # what the host has after the data in between.
         before = {e["name"]: e for e in self.ctl("data")["entries"]}
@@ -320,7 +325,7 @@ class Sparkplug(unittest.TestCase):
         self.assertGreater(compared, 20, "too few steady values to compare")
         print("ddata: %d values equal to ecmxfctl data" % compared)
 
-    def test_3_dcmd_output_write_loops_back(self):
+    def test_03_dcmd_output_write_loops_back(self):
         h = self.host
         since = h.count()
         h.command(IO, "Outputs/0x7000:01", 5, int_value=1)  # UInt8
@@ -335,7 +340,7 @@ class Sparkplug(unittest.TestCase):
         wait_until(lambda: self.host.state(self.first_birth)[IO].get("Inputs/0x6000:01") == 0, 5, "loopback back to 0")
         print("dcmd: Outputs/0x7000:01 = 1 came back as Inputs/0x6000:01 (and ecmxfctl data agrees)")
 
-    def test_4_rebirth_on_ncmd(self):
+    def test_04_rebirth_on_ncmd(self):
         h = self.host
         since = h.count()
         h.command(None, "Node Control/Rebirth", 11, boolean_value=True)
@@ -359,7 +364,7 @@ class Sparkplug(unittest.TestCase):
         self.__class__.first_birth = j
         print("rebirth: NBIRTH seq 0 and 3 DBIRTH after NCMD; 5 more requests at once: one more set of births")
 
-    def test_5_ddeath_on_unplug_and_dbirth_on_replug(self):
+    def test_05_ddeath_on_unplug_and_dbirth_on_replug(self):
         h = self.host
         since = h.count()
         t0 = time.monotonic()
@@ -377,7 +382,7 @@ class Sparkplug(unittest.TestCase):
         h.command(IO, "Outputs/0x7000:01", 5, int_value=0)
         wait_until(lambda: self.host.state(j)[IO].get("Inputs/0x6000:01") == 0, 10, "loopback back to 0")
 
-    def test_6_broker_restart_reconnects_rebirths_and_the_engine_runs_on(self):
+    def test_06_broker_restart_reconnects_rebirths_and_the_engine_runs_on(self):
         h = self.host
         before = self.ctl("master")["counters"]
         since = h.count()
@@ -400,7 +405,7 @@ class Sparkplug(unittest.TestCase):
             self.assertEqual(after.get(key, 0), before.get(key, 0), "%s: %s -> %s" % (key, before, after))
         print("broker restart: NBIRTH bdSeq %d and births again; fifo_alarms and recoveries unchanged" % bd_seq)
 
-    def test_7_ndeath_with_the_births_bdseq_when_killed(self):
+    def test_07_ndeath_with_the_births_bdseq_when_killed(self):
         h = self.host
         since = h.count()
         self.procs["daemon"].send_signal(signal.SIGKILL)
@@ -410,7 +415,7 @@ class Sparkplug(unittest.TestCase):
         self.assertFalse(p.HasField("seq"), "NDEATH carries no seq")
         print("kill -9: the broker sent NDEATH bdSeq %d" % self.bd_seq)
 
-    def test_8_commands_refused_when_disabled(self):
+    def test_08_commands_refused_when_disabled(self):
         h = self.host
         since = h.count()
         self.start_daemon("none")
@@ -435,7 +440,7 @@ class Sparkplug(unittest.TestCase):
         )
         print("commands = none: NCMD Rebirth and DCMD refused, logged and counted")
 
-    def test_9_births_wait_for_the_primary_host(self):
+    def test_09_births_wait_for_the_primary_host(self):
         h = self.host
         self.procs["daemon"].terminate()
         self.procs["daemon"].wait(10)
@@ -461,6 +466,29 @@ class Sparkplug(unittest.TestCase):
         h.wait_for(lambda k, d, p: k == "NBIRTH", 10, since)
         h.client.publish(state, b"", qos=1, retain=True).wait_for_publish(5)  # clear the retained STATE
         print("primary host: births only while its STATE is online; NDEATH when it goes offline, births when back")
+
+    def test_10_sighup_restarts_the_node_not_the_bus(self):
+        h = self.host
+        with h.lock:
+            births = [m for m in h.messages if m[1] == "NBIRTH"]
+        bd_seq = metric(births[-1][3], "bdSeq").long_value
+        before = self.ctl("master")
+        since = h.count()
+        # The same daemon, its [sparkplug] changed (no primary host, commands
+        # observer): SIGHUP.
+        self.write_config("observer")
+        self.procs["daemon"].send_signal(signal.SIGHUP)
+        i, (_, _, _, death) = h.wait_for(lambda k, d, p: k == "NDEATH", 10, since)
+        self.assertEqual(metric(death, "bdSeq").long_value, bd_seq, "the old session's death")
+        j, (_, _, _, birth) = h.wait_for(lambda k, d, p: k == "NBIRTH", 10, i)
+        self.assertEqual(metric(birth, "bdSeq").long_value, (bd_seq + 1) % 256, "bdSeq goes on")
+        h.wait_for(lambda k, d, p: k == "DBIRTH" and d == IO, 10, j)
+        wait_until(lambda: "[sparkplug] applied" in self.log(), 5, "the reload in the log")
+        after = self.ctl("master")
+        self.assertEqual(after["phase"], "RUNNING")
+        self.assertEqual(after["counters"]["recoveries"], before["counters"]["recoveries"], "the bus ran on")
+        self.assertGreater(after["counters"]["input_frames"], before["counters"]["input_frames"])
+        print("SIGHUP: NDEATH bdSeq %d, NBIRTH bdSeq %d, the bus ran on" % (bd_seq, (bd_seq + 1) % 256))
 
     def refused_alias(self, birth):
         with self.host.lock:

@@ -65,7 +65,7 @@ fn a_sparkplug_host_sees_births_data_commands_and_deaths_through_mosquitto() {
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     println!("{text}");
     assert!(out.status.success(), "test_sparkplug.py failed:\n{text}");
-    assert!(text.contains("Ran 9 tests") && text.contains("OK"), "{text}");
+    assert!(text.contains("Ran 10 tests") && text.contains("OK"), "{text}");
 }
 
 /// A plant's broker: TLS with the plant's CA and client certificates

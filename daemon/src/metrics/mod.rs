@@ -223,7 +223,7 @@ pub async fn render(sources: &Sources) -> String {
     ] {
         metric(&mut out, name, "counter", help, counter.load(std::sync::atomic::Ordering::Relaxed));
     }
-    if let Some(s) = &sources.sparkplug {
+    if let Some(s) = sources.sparkplug.as_ref().filter(|s| s.enabled.load(std::sync::atomic::Ordering::Relaxed)) {
         use std::sync::atomic::Ordering::Relaxed;
         metric(
             &mut out,

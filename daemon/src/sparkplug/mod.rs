@@ -18,11 +18,12 @@
 //! rustls on ring, as tonic's here; no C library to cross-compile).
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
 
 pub mod commands;
 mod connection;
 pub mod node;
+pub mod runner;
 mod seen;
 pub mod session;
 pub mod tls;
@@ -30,11 +31,17 @@ pub mod topic;
 pub mod value;
 
 pub use connection::{Prepared, SparkplugError, prepare};
+pub use runner::Runner;
 pub use session::serve;
 
 /// The node's counters, for the metrics endpoint and its own NDATA.
 #[derive(Debug, Default)]
 pub struct Stats {
+    /// A node is configured (the metrics endpoint shows these counters).
+    pub enabled: AtomicBool,
+    /// The last connection's `bdSeq` + 1 (0: none yet): a node started
+    /// again on SIGHUP goes on from it.
+    pub next_bd_seq: AtomicU64,
     /// 1 while connected to a broker (and births are out), else 0.
     pub connected: AtomicU64,
     /// Messages handed to the MQTT client.

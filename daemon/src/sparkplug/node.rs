@@ -230,6 +230,12 @@ impl Node {
         }
     }
 
+    /// Goes on counting `bdSeq` from a node that ran before in this
+    /// process (`next`: its last + 1, 0 for none).
+    pub fn resume(&mut self, next: u64) {
+        self.bd_seq = next.checked_sub(1).map(|b| b % 256);
+    }
+
     /// A new MQTT connection: the next `bdSeq` (0 first, then +1 modulo
     /// 256, spec 7.1.2), for the will and the NBIRTH that follows.
     pub fn next_connection(&mut self) -> u64 {

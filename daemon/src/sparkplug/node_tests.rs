@@ -286,3 +286,16 @@ fn a_label_two_entries_share_falls_back_to_entry_names() {
     let out = node.birth(&w.view(0));
     assert_eq!(names(&out[1])[8..], ["Inputs/actual", "Inputs/other"]);
 }
+
+#[test]
+fn a_node_started_again_goes_on_counting_bdseq() {
+    let mut node = Node::new(Settings::default());
+    node.resume(0);
+    assert_eq!(node.next_connection(), 0, "first node of the process");
+    let mut again = Node::new(Settings::default());
+    again.resume(4);
+    assert_eq!(again.next_connection(), 4);
+    let mut wrap = Node::new(Settings::default());
+    wrap.resume(256);
+    assert_eq!(wrap.next_connection(), 0);
+}

@@ -71,6 +71,7 @@ pub async fn serve(
         names: c.metric_names,
     };
     let mut node = Node::new(settings);
+    node.resume(stats.next_bd_seq.load(Relaxed));
     let mut writer = Writer::new(lease_ttl);
     let mut backoff = FIRST_BACKOFF;
     let mut broker = 0usize;
@@ -78,6 +79,7 @@ pub async fn serve(
     loop {
         let b = &c.broker[broker % c.broker.len()];
         let bd_seq = node.next_connection();
+        stats.next_bd_seq.store(bd_seq + 1, Relaxed);
         let session = Session { master: &master, leases: &leases, prepared: &prepared, topics: &topics, stats: &stats };
         match session.run(&mut node, &mut writer, b, bd_seq, &mut stop).await {
             Ended::Stop => return,
