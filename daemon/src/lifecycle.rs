@@ -158,7 +158,6 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         Some(s) => Some(crate::sparkplug::prepare(s).map_err(DaemonError::Sparkplug)?),
         None => None,
     };
-    let sparkplug_stats = crate::sparkplug::SharedStats::default();
     let mut running = config.clone();
     let (master, _sim) = Master::from_config(config)?;
     let master = Arc::new(master);
@@ -169,18 +168,14 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     });
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
     if let Some(l) = metrics_listener {
-        let sources = crate::metrics::Sources {
-            master: Arc::clone(&master),
-            sdo_latency: Arc::clone(&ctx.sdo_latency),
-            sparkplug: Some(Arc::clone(&sparkplug_stats)),
-        };
+        let sources =
+            crate::metrics::Sources { master: Arc::clone(&master), sdo_latency: Arc::clone(&ctx.sdo_latency) };
         tokio::spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
     }
     if let Some((g, socket)) = gateway {
         tokio::spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
     }
-    let mut sparkplug_node =
-        crate::sparkplug::Runner::new(Arc::clone(&master), Arc::clone(&ctx.leases), ctx.lease_ttl, sparkplug_stats);
+    let mut sparkplug_node = crate::sparkplug::Runner::new(Arc::clone(&master), Arc::clone(&ctx.leases), ctx.lease_ttl);
     if let Some(prepared) = sparkplug {
         sparkplug_node.start(prepared);
     }

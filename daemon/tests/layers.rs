@@ -61,6 +61,10 @@ fn no_import_circle_between_the_daemons_modules() {
     // The layers the brief names, checked as edges that must not exist.
     for (low, high) in
         [("engine", "master"), ("master", "api"), ("engine", "api"), ("metrics", "api"), ("config", "api")]
+            .into_iter()
+            // Front ends beside each other, none under the master.
+            .chain([("sparkplug", "api"), ("api", "sparkplug"), ("gateway", "api"), ("api", "gateway")])
+            .chain([("master", "sparkplug"), ("master", "gateway"), ("engine", "sparkplug")])
     {
         assert!(!graph[low].contains(high), "{low} uses {high}: layers point one way");
     }
@@ -76,12 +80,15 @@ fn the_api_imports_the_master_not_the_engine() {
     let mut files = Vec::new();
     rust_files(&src.join("api"), &mut files);
     assert!(files.len() >= 10, "the api files were not found");
+    // The other front ends too: the MQTT node and the mailbox gateway.
+    rust_files(&src.join("sparkplug"), &mut files);
+    rust_files(&src.join("gateway"), &mut files);
     let offenders: Vec<String> = files
         .iter()
         .filter(|f| uses(&std::fs::read_to_string(f).unwrap()).contains("engine"))
         .map(|f| f.strip_prefix(&src).unwrap().display().to_string())
         .collect();
-    assert!(offenders.is_empty(), "api files that import crate::engine (use crate::master): {offenders:?}");
+    assert!(offenders.is_empty(), "front-end files that import crate::engine (use crate::master): {offenders:?}");
 }
 
 /// The file-level modules of one folder (`engine/`, the wire crate) and

@@ -488,6 +488,12 @@ class Sparkplug(unittest.TestCase):
         self.assertEqual(after["phase"], "RUNNING")
         self.assertEqual(after["counters"]["recoveries"], before["counters"]["recoveries"], "the bus ran on")
         self.assertGreater(after["counters"]["input_frames"], before["counters"]["input_frames"])
+        # ecmxfctl master shows the node (GetStatus.sparkplug).
+        wait_until(lambda: self.ctl("master").get("sparkplug", {}).get("connected"), 5, "ecmxfctl master: connected")
+        sp = self.ctl("master")["sparkplug"]
+        self.assertEqual(sp["bd_seq"], (bd_seq + 1) % 256)
+        self.assertEqual(sp["broker"], "mqtt://127.0.0.1:%d" % self.port)
+        self.assertGreater(sp["published"], 0)
         print("SIGHUP: NDEATH bdSeq %d, NBIRTH bdSeq %d, the bus ran on" % (bd_seq, (bd_seq + 1) % 256))
 
     def refused_alias(self, birth):

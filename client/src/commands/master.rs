@@ -63,6 +63,45 @@ pub struct MasterReport {
     pub output_latency_p50_us: u64,
     pub output_latency_p99_us: u64,
     pub counters: CountersReport,
+    /// The MQTT Sparkplug B edge node; absent while none is configured.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub sparkplug: Option<SparkplugReport>,
+}
+
+/// The Sparkplug B edge node (see `SparkplugStatus` in proto/ecmxf/v1/master.proto).
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct SparkplugReport {
+    /// Connected to a broker, births published.
+    pub connected: bool,
+    /// The broker of the current or last connection ("" before the first).
+    pub broker: String,
+    /// The current or last connection's bdSeq.
+    pub bd_seq: u64,
+    /// Messages handed to the MQTT client.
+    pub published: u64,
+    /// Messages dropped: the client's queue was full.
+    pub dropped: u64,
+    /// NCMD/DCMD commands applied.
+    pub commands: u64,
+    /// Commands refused.
+    pub refused: u64,
+    /// Connections made.
+    pub connects: u64,
+}
+
+impl From<pb::SparkplugStatus> for SparkplugReport {
+    fn from(s: pb::SparkplugStatus) -> Self {
+        Self {
+            connected: s.connected,
+            broker: s.broker,
+            bd_seq: s.bd_seq,
+            published: s.published,
+            dropped: s.dropped,
+            commands: s.commands,
+            refused: s.refused,
+            connects: s.connects,
+        }
+    }
 }
 
 /// Engine and chip counters (see `Counters` in proto/ecmxf/v1/master.proto).
@@ -184,6 +223,20 @@ impl Report for MasterReport {
         if !self.last_error.is_empty() {
             f.add("Last error", &self.last_error);
         }
+        if let Some(s) = &self.sparkplug {
+            let link = match (s.connected, s.broker.as_str()) {
+                (true, b) => format!("connected to {b} (bdSeq {})", s.bd_seq),
+                (false, "") => "not connected yet".to_string(),
+                (false, b) => format!("NOT CONNECTED (last broker {b})"),
+            };
+            f.add("Sparkplug", link).add(
+                "Sparkplug messages",
+                format!(
+                    "{} published, {} dropped; commands {} applied, {} refused; {} connects",
+                    s.published, s.dropped, s.commands, s.refused, s.connects
+                ),
+            );
+        }
         self.counters.add_to(&mut f);
         f.to_string()
     }
@@ -224,5 +277,6 @@ pub async fn fetch(api: &Api) -> Result<MasterReport, CliError> {
         output_latency_p50_us: s.output_latency_p50_us,
         output_latency_p99_us: s.output_latency_p99_us,
         counters: s.counters.into(),
+        sparkplug: s.sparkplug.map(Into::into),
     })
 }

@@ -53,6 +53,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
         output_latency_budget_us: m.output_latency_budget_us().unwrap_or(0),
         output_latency_p50_us: latency.map_or(0, |l| l.p50_us.into()),
         output_latency_p99_us: latency.map_or(0, |l| l.p99_us.into()),
+        sparkplug: sparkplug_pb(m),
     }
 }
 
@@ -128,6 +129,22 @@ impl MasterApi for MasterService {
         bounded(&caller, self.0.master.warm_reset(t)).await?;
         Ok(Response::new(pb::WarmResetResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
+}
+
+/// The Sparkplug node's status, while one is configured.
+fn sparkplug_pb(m: &Master) -> Option<pb::SparkplugStatus> {
+    use std::sync::atomic::Ordering::Relaxed;
+    let s = m.sparkplug_state();
+    s.enabled.load(Relaxed).then(|| pb::SparkplugStatus {
+        connected: s.connected.load(Relaxed) == 1,
+        broker: s.broker(),
+        bd_seq: s.next_bd_seq.load(Relaxed).saturating_sub(1),
+        published: s.published.load(Relaxed),
+        dropped: s.dropped.load(Relaxed),
+        commands: s.commands.load(Relaxed),
+        refused: s.refused.load(Relaxed),
+        connects: s.connects.load(Relaxed),
+    })
 }
 
 /// The `Slaves` service.

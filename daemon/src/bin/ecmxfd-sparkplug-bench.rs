@@ -145,7 +145,7 @@ fn main() -> Result<(), String> {
         commands: ecmxfd::config::api::RoleName::None,
     };
     let alarms0 = master.status().fifo_alarms;
-    let (mut off, mut on, mut rates, mut dropped) = (Vec::new(), Vec::new(), Vec::new(), 0);
+    let (mut off, mut on, mut rates) = (Vec::new(), Vec::new(), Vec::new());
     let window = Duration::from_secs(secs);
     let cpu_over = |w: Duration| {
         let (c0, t0) = (cpu_seconds(), Instant::now());
@@ -154,7 +154,7 @@ fn main() -> Result<(), String> {
     };
     for round in 0..rounds {
         let cpu_off = cpu_over(window);
-        let stats = ecmxfd::sparkplug::SharedStats::default();
+        let stats = Arc::clone(master.sparkplug_state());
         let (stop, stopped) = tokio::sync::watch::channel(());
         let prepared = ecmxfd::sparkplug::prepare(&sparkplug).map_err(|e| e.to_string())?;
         let node = rt.spawn(ecmxfd::sparkplug::serve(
@@ -174,7 +174,6 @@ fn main() -> Result<(), String> {
         let (p0, t0) = (stats.published.load(Relaxed), Instant::now());
         let cpu_on = cpu_over(window);
         let rate = (stats.published.load(Relaxed) - p0) as f64 / t0.elapsed().as_secs_f64();
-        dropped += stats.dropped.load(Relaxed);
         let _ = stop.send(());
         let _ = rt.block_on(node);
         println!(
@@ -187,6 +186,7 @@ fn main() -> Result<(), String> {
         rates.push(rate);
     }
     let s = master.status();
+    let dropped = master.sparkplug_state().dropped.load(Relaxed);
     println!(
         "sparkplug, {SLAVES} IO slaves at 1 ms, every variable changing at 10 Hz, deadband 0: CPU {:.1}% -> {:.1}% of a core (+{:.1} points, medians of {rounds} rounds of {secs} s), {:.0} messages/s to the broker ({} dropped), fifo alarms {}, recoveries {}",
         median(off.clone()) * 100.0,

@@ -44,6 +44,7 @@ pub mod outputs;
 pub mod pdos;
 mod per_slave;
 pub mod sii;
+pub mod sparkplug_state;
 pub mod states;
 pub mod transactions;
 
@@ -235,6 +236,8 @@ pub struct Master {
     channels: mailbox_channel::MailboxChannels,
     /// Dictionaries read from the devices (SDO Information).
     dictionaries: device_dictionary::DeviceDictionaries,
+    /// The Sparkplug node's connection and counters.
+    sparkplug: Arc<sparkplug_state::SparkplugState>,
 }
 
 /// Opens the link the configuration names. For the in-process simulator,
@@ -301,7 +304,14 @@ impl Master {
             mailbox: mailbox::MailboxProtocols::default(),
             channels: mailbox_channel::MailboxChannels::default(),
             dictionaries: device_dictionary::DeviceDictionaries::default(),
+            sparkplug: Arc::default(),
         }
+    }
+
+    /// The Sparkplug node's connection and counters (zero while none is
+    /// configured).
+    pub fn sparkplug_state(&self) -> &Arc<sparkplug_state::SparkplugState> {
+        &self.sparkplug
     }
 
     /// Opens the configured link and starts.

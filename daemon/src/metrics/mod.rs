@@ -35,8 +35,6 @@ pub struct Sources {
     pub master: Arc<Master>,
     /// SDO transfer durations through the API.
     pub sdo_latency: Arc<Histogram>,
-    /// The Sparkplug edge node's counters, when `[sparkplug]` is on.
-    pub sparkplug: Option<crate::sparkplug::SharedStats>,
 }
 
 /// The label of each phase (the API's `EnginePhase` names, so dashboards
@@ -223,7 +221,8 @@ pub async fn render(sources: &Sources) -> String {
     ] {
         metric(&mut out, name, "counter", help, counter.load(std::sync::atomic::Ordering::Relaxed));
     }
-    if let Some(s) = sources.sparkplug.as_ref().filter(|s| s.enabled.load(std::sync::atomic::Ordering::Relaxed)) {
+    let s = master.sparkplug_state();
+    if s.enabled.load(std::sync::atomic::Ordering::Relaxed) {
         use std::sync::atomic::Ordering::Relaxed;
         metric(
             &mut out,

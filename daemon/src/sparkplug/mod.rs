@@ -18,7 +18,7 @@
 //! rustls on ring, as tonic's here; no C library to cross-compile).
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, AtomicU64, Ordering::Relaxed};
+use std::sync::atomic::Ordering::Relaxed;
 
 pub mod commands;
 mod connection;
@@ -34,39 +34,16 @@ pub use connection::{Prepared, SparkplugError, prepare};
 pub use runner::Runner;
 pub use session::serve;
 
-/// The node's counters, for the metrics endpoint and its own NDATA.
-#[derive(Debug, Default)]
-pub struct Stats {
-    /// A node is configured (the metrics endpoint shows these counters).
-    pub enabled: AtomicBool,
-    /// The last connection's `bdSeq` + 1 (0: none yet): a node started
-    /// again on SIGHUP goes on from it.
-    pub next_bd_seq: AtomicU64,
-    /// 1 while connected to a broker (and births are out), else 0.
-    pub connected: AtomicU64,
-    /// Messages handed to the MQTT client.
-    pub published: AtomicU64,
-    /// Messages dropped: the client's queue was full.
-    pub dropped: AtomicU64,
-    /// Commands applied.
-    pub commands: AtomicU64,
-    /// Commands refused (disabled, role, unknown metric, bad value).
-    pub refused: AtomicU64,
-    /// Connections made.
-    pub connects: AtomicU64,
-}
+/// The node's state as the master keeps it (connection, counters), for
+/// the API, the metrics endpoint and the node's own NDATA.
+pub type SharedStats = Arc<crate::master::sparkplug_state::SparkplugState>;
 
-impl Stats {
-    /// The counters the node publishes.
-    pub fn counts(&self) -> node::Counts {
-        node::Counts {
-            published: self.published.load(Relaxed),
-            dropped: self.dropped.load(Relaxed),
-            refused: self.refused.load(Relaxed),
-            connects: self.connects.load(Relaxed),
-        }
+/// The counters the node publishes.
+pub fn counts(s: &crate::master::sparkplug_state::SparkplugState) -> node::Counts {
+    node::Counts {
+        published: s.published.load(Relaxed),
+        dropped: s.dropped.load(Relaxed),
+        refused: s.refused.load(Relaxed),
+        connects: s.connects.load(Relaxed),
     }
 }
-
-/// Shared handle to the counters.
-pub type SharedStats = Arc<Stats>;

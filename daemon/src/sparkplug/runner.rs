@@ -33,8 +33,9 @@ pub struct Runner {
 }
 
 impl Runner {
-    /// No node yet; `stats` is what the metrics endpoint reads.
-    pub fn new(master: Arc<Master>, leases: Arc<Leases>, lease_ttl: Duration, stats: SharedStats) -> Self {
+    /// No node yet.
+    pub fn new(master: Arc<Master>, leases: Arc<Leases>, lease_ttl: Duration) -> Self {
+        let stats = Arc::clone(master.sparkplug_state());
         Self { master, leases, lease_ttl, stats, running: None }
     }
 

@@ -102,7 +102,7 @@ impl Seen {
             al,
             cycle_us: self.cycle_us,
             exchange_rate: self.exchange_rate,
-            counts: stats.counts(),
+            counts: super::counts(stats),
         }
     }
 }

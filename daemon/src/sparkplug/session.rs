@@ -137,6 +137,7 @@ impl Session<'_> {
             }
         }
         self.stats.connects.fetch_add(1, Relaxed);
+        self.stats.set_broker(b.to_string());
         info!(broker = %b, bd_seq, "sparkplug: connected");
         // Commands before births (spec 7.1.1: NCMD subscription first).
         for t in self.topics.commands() {
