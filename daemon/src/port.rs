@@ -166,6 +166,8 @@ pub struct Port<L> {
     /// The exchange that brought `status`.
     status_exchange: u64,
     stats: PortStats,
+    /// How long an exchange takes, ns, averaged (1/8 weight for the newest).
+    exchange_ns: u64,
 }
 
 impl<L: Link> Port<L> {
@@ -188,6 +190,7 @@ impl<L: Link> Port<L> {
             status: ResponseHeader::default(),
             status_exchange: 0,
             stats: PortStats::default(),
+            exchange_ns: 0,
         }
     }
 
@@ -260,6 +263,14 @@ impl<L: Link> Port<L> {
         }
     }
 
+    /// How long one exchange takes on this link (the wait for INT0 and
+    /// the transfer), averaged over the recent ones: what the engine
+    /// plans around when it fits cyclic exchanges into a blocking
+    /// command's run.
+    pub fn exchange_time(&self) -> Duration {
+        Duration::from_nanos(self.exchange_ns)
+    }
+
     /// Counters.
     pub fn stats(&self) -> PortStats {
         self.stats
@@ -305,6 +316,7 @@ impl<L: Link> Port<L> {
 
     /// Waits for INT0, clocks `self.tx`, decodes into `self.rx`.
     fn clock(&mut self, decode_as: CheckType) -> Result<Received, PortError> {
+        let began = Instant::now();
         if !self.wait_ready()? {
             return Err(PortError::NotReady(self.ready_timeout));
         }
@@ -315,6 +327,11 @@ impl<L: Link> Port<L> {
         (self.tx, self.rx) = (tx, rx);
         r?;
         self.stats.exchanges += 1;
+        let took = began.elapsed().as_nanos().min(u128::from(u32::MAX)) as u64;
+        self.exchange_ns = match self.exchange_ns {
+            0 => took,
+            avg => avg - avg / 8 + took / 8,
+        };
         Ok(match decode_response(&self.rx, decode_as) {
             Ok(p) => {
                 self.status = p.header;

@@ -192,6 +192,20 @@ impl Cyclic {
         self.rx_size > 0 && self.estimate(now) < self.levels.floor + 2
     }
 
+    /// Whether three packets' worth of input frames wait in the TxFIFO
+    /// (the ones the last call left plus one a cycle since), or half the
+    /// TxFIFO when that is less: an exchange for them no longer waits for
+    /// the blocking slot's turn. The count the chip reported lags by up to
+    /// two exchanges (PROTOCOL-NOTES), so this reads high by a packet or
+    /// so; two packets made every other SDO read wait for a FIFO exchange
+    /// it did not need. Half the depth the chip drops at (`tx_depth`) at
+    /// most, so deferring one never loses a frame.
+    pub fn inputs_pressing(&self, now: Instant, tx_room: usize) -> bool {
+        let waiting = u64::from(self.backlog) + self.cycles_since(self.last_push.0, now);
+        let limit = (3 * tx_room.max(1) as u64).min(u64::from(self.tx_depth / 2).max(1));
+        self.tx_size > 0 && waiting >= limit
+    }
+
     /// The estimated RxFIFO level now.
     pub fn estimate(&self, now: Instant) -> i64 {
         let (at, pushed) = self.last_push;

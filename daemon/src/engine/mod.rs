@@ -27,6 +27,7 @@ pub mod held;
 pub mod inputs;
 pub mod layout;
 pub mod link_budget;
+mod link_turn;
 pub mod network_action;
 pub mod output_writes;
 mod running;

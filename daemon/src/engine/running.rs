@@ -23,6 +23,7 @@ use super::cyclic::Cyclic;
 use super::emergencies;
 use super::events::EventKind;
 use super::inputs::InputPublisher;
+use super::link_turn::{Fifo, PULL_FORWARD, Slot, fifo_goes_first};
 use super::network_action::NetworkAction;
 use super::slot::{Active, Progress, SlotRequest};
 use super::supervisor::{RecoverCause, RunShape, SlaveFault, Supervisor, flow_limit};
@@ -83,13 +84,12 @@ struct Clocks {
     slot_waited: bool,
     /// FIFO exchanges in a row that went first while a transaction waited.
     slot_skipped: u32,
+    /// When the last transaction ended: a client that asks one after
+    /// another (a script, a loop of SDO reads) sends the next within tens
+    /// of us, and a FIFO exchange that is only due, not pressing, lets it
+    /// go first for one exchange time (see `fifo_first`).
+    slot_freed: Option<Instant>,
 }
-
-/// FIFO exchanges that may go first in a row, with the level low, while a
-/// transaction waits: a budget the host cannot hold keeps the level low,
-/// and the blocking slot must still move (the shortfall shows as
-/// underruns, counted and reported).
-const SLOT_SKIPS: u32 = 4;
 
 impl<L: Link> Engine<L> {
     /// Reads every slave's state and AL status code (a fault is being
@@ -157,7 +157,7 @@ impl<L: Link> Engine<L> {
         let mut cyclic = cyclic;
         let now = Instant::now();
         self.start_run(cyclic.as_deref(), slaves, now);
-        let mut clocks = Clocks { emergency_poll: now, slot_waited: false, slot_skipped: 0 };
+        let mut clocks = Clocks { emergency_poll: now, slot_waited: false, slot_skipped: 0, slot_freed: None };
         let exit = loop {
             if let Err(exit) = self.turn(&mut cyclic, &mut clocks) {
                 break exit;
@@ -302,7 +302,10 @@ impl<L: Link> Engine<L> {
         // question, none to fetch it (unless no FIFO exchange came for
         // `emergencies::POLL_LONGEST`).
         let rides = cyclic.is_none_or(|c| self.fifo_due(c, now)) || since >= emergencies::POLL_LONGEST;
-        if self.active.is_none() && self.queue.is_empty() && since >= emergencies::POLL && rides {
+        // Not while a client's next transaction is likely on its way (see
+        // `Clocks::slot_freed`): it would wait for the question.
+        let lingering = self.lingering(clocks, now);
+        if self.active.is_none() && self.queue.is_empty() && since >= emergencies::POLL && rides && !lingering {
             self.poll_emergencies(&mut clocks.emergency_poll, now)?;
         }
         Ok(())
@@ -349,6 +352,10 @@ impl<L: Link> Engine<L> {
     fn idle(&mut self, cyclic: &mut Option<&mut Cyclic>, clocks: &Clocks) -> Result<(), Exit> {
         let now = Instant::now();
         let wake = match cyclic.as_deref() {
+            Some(c) if self.lingering(clocks, now) => {
+                let linger_end = clocks.slot_freed.map_or(now, |t| t + self.port.exchange_time());
+                c.next_exchange(now, self.rx_room(c), self.tx_room(c)).max(linger_end)
+            }
             Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room(c)),
             None => now + IDLE,
         };
@@ -413,21 +420,36 @@ impl<L: Link> Engine<L> {
         self.active.is_some() || !self.queue.is_empty()
     }
 
-    /// Whether this turn is the FIFO's. When it is due: yes if no
-    /// transaction waits, or the slot had its step since the last
-    /// exchange; if only the clock says so (the level is not low), the
-    /// waiting transaction goes first; if the level is low, the FIFO goes
-    /// first at most [`SLOT_SKIPS`] times in a row. With a small latency
-    /// budget exchanges are due every few cycles; without these rules the
-    /// blocking slot would never get a turn.
+    /// Whether this turn is the FIFO's (the rules: `link_turn`).
     fn fifo_first(&self, c: &Cyclic, clocks: &Clocks, now: Instant) -> bool {
-        if !self.fifo_due(c, now) {
-            return false;
-        }
-        if !self.slot_waits() || clocks.slot_waited {
-            return true;
-        }
-        c.outputs_low(now) && clocks.slot_skipped < SLOT_SKIPS
+        let exchange = self.port.exchange_time();
+        let slot = match (&self.active, self.slot_on_chip()) {
+            (Some(a), Some(true)) => {
+                Slot::Runs { pulled: a.polled() || c.last_exchange().is_some_and(|t| t >= a.began_at()) }
+            }
+            (Some(_), Some(false)) => Slot::WantsLink,
+            (Some(_), None) => Slot::Other { had_turn: clocks.slot_waited },
+            (None, _) if !self.queue.is_empty() => Slot::Queued,
+            (None, _) => Slot::Empty { just_freed: self.lingering(clocks, now) },
+        };
+        let fifo = Fifo {
+            due: self.fifo_due(c, now),
+            due_soon: self.fifo_due(c, now + exchange * PULL_FORWARD),
+            pressing: c.outputs_low(now) || c.inputs_pressing(now, self.tx_room(c)),
+        };
+        fifo_goes_first(fifo, slot, clocks.slot_skipped)
+    }
+
+    /// Whether a transaction ended less than an exchange ago (see
+    /// `Clocks::slot_freed`).
+    fn lingering(&self, clocks: &Clocks, now: Instant) -> bool {
+        clocks.slot_freed.is_some_and(|t| now < t + self.port.exchange_time())
+    }
+
+    /// What the newest header says of the slot's blocking command (see
+    /// `Active::on_chip`).
+    fn slot_on_chip(&self) -> Option<bool> {
+        self.active.as_ref()?.on_chip(&self.port)
     }
 
     fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
@@ -541,7 +563,8 @@ impl<L: Link> Engine<L> {
             return Ok(false);
         };
         let exchanges = self.port.stats().exchanges;
-        if active.waiting()
+        if active.on_chip(&self.port) == Some(true)
+            && !active.start_unread()
             && active.next_poll() <= now
             && now.saturating_duration_since(clocks.emergency_poll) >= emergencies::POLL
         {
@@ -556,6 +579,7 @@ impl<L: Link> Engine<L> {
         self.active = rest;
         if progress == Progress::Done {
             self.telemetry.transactions.fetch_add(1, Relaxed);
+            clocks.slot_freed = Some(Instant::now());
         }
         let sent = self.port.stats().exchanges != exchanges;
         Ok(sent && progress != Progress::Waiting)

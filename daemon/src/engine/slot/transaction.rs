@@ -112,6 +112,15 @@ pub struct Active {
     since: Instant,
     /// When the last poll went out, and the exchange count right after it.
     polled: Option<(Instant, u64)>,
+    /// The first exchange whose header the chip built after it took this
+    /// step's blocking command: from then on the busy bit speaks of it.
+    told_from: u64,
+    /// The indices of this step's last two GET polls, newest first: an
+    /// answer to either that says "not busy" is the result.
+    polls: [Option<u8>; 2],
+    /// The last poll was sent at once to fetch the answer of the one
+    /// before it (see `waited`); the next waits for its time.
+    fetching: bool,
     /// A read went out once (index, code, the exchange count right after
     /// it) and its answer has not been looked at yet.
     sent_read: Option<(u8, CommandCode, u64)>,
@@ -183,6 +192,9 @@ impl Active {
             buffer: job.buffer,
             since: now,
             polled: None,
+            told_from: u64::MAX,
+            polls: [None; 2],
+            fetching: false,
             sent_read: None,
             unsure_after: None,
         })
@@ -363,7 +375,8 @@ impl Active {
     ) -> Result<(Option<Self>, Progress), PortError> {
         let index = port.send_once(req)?;
         self.step = Step::Wait;
-        (self.since, self.polled) = (now, None);
+        // The exchange after this one brings the header built after the chip took it.
+        self.began(now, port.stats().exchanges + 1);
         self.sent_read = Some((index, R::CODE, port.stats().exchanges));
         Ok((Some(self), Progress::Sent))
     }
@@ -415,13 +428,72 @@ impl Active {
             return Ok(self.refused_by_chip(port));
         }
         self.step = next;
-        (self.since, self.polled) = (now, None);
+        // A guarded call's own answer was built after the chip took it.
+        self.began(now, port.stats().exchanges);
         Ok((Some(self), Progress::Sent))
+    }
+
+    /// Whether a read went out once and the exchange that brings its
+    /// answer has not been looked at: the next exchange must not be one
+    /// whose own answer replaces it before the transaction looks.
+    pub fn start_unread(&self) -> bool {
+        self.sent_read.is_some()
+    }
+
+    /// When this step's blocking command went out.
+    pub fn began_at(&self) -> Instant {
+        self.since
+    }
+
+    /// Whether this step's command has been polled: past its start, where
+    /// the rest of its run is no longer known to hold a FIFO exchange.
+    pub fn polled(&self) -> bool {
+        self.polls[0].is_some() || self.polled.is_some()
     }
 
     /// Whether its blocking command went out and it waits for the chip.
     pub fn waiting(&self) -> bool {
         self.step != Step::Start
+    }
+
+    /// A step's blocking command went out at `now`; headers from exchange
+    /// `told_from` on were built after the chip took it.
+    fn began(&mut self, now: Instant, told_from: u64) {
+        (self.since, self.polled, self.told_from) = (now, None, told_from);
+        (self.polls, self.fetching) = ([None; 2], false);
+    }
+
+    /// What this transaction wants of the link now: `Some(true)` its
+    /// blocking command runs on the chip (or no header since it went out
+    /// can say yet), so the link is free for cyclic exchanges;
+    /// `Some(false)` it wants the next exchange: the command ended, or a
+    /// GET poll's result is there or on its way; `None` no command of it
+    /// is out (or whether it runs is being decided). The engine fits
+    /// cyclic exchanges into a command's run and fetches a result before
+    /// them (`running.rs`, `fifo_first`).
+    pub fn on_chip<L: Link>(&self, port: &Port<L>) -> Option<bool> {
+        if !self.waiting() || self.unsure_after.is_some() {
+            return None;
+        }
+        if let Some((_, _, at)) = self.sent_read {
+            // Whatever exchange comes next brings the start's answer; once
+            // one has, the transaction must look before another replaces it.
+            return Some(port.stats().exchanges == at);
+        }
+        if self.fetched(port).is_some() || self.fetch_unanswered(port) {
+            return Some(false);
+        }
+        Some(port.status_exchange() < self.told_from || port.status().blocking_busy())
+    }
+
+    /// A GET poll went out on its own time and its answer, the result if
+    /// the operation has ended, is still to come: the exchange that brings
+    /// it goes at once (and polls again) instead of a quarter of the
+    /// operation's age later. One such fetch per timed poll, so a long
+    /// operation is not polled back to back.
+    fn fetch_unanswered<L: Link>(&self, port: &Port<L>) -> bool {
+        let unanswered = self.polled.is_some_and(|(_, after)| port.stats().exchanges <= after);
+        self.fetch().is_some() && unanswered && !self.fetching
     }
 
     /// When the next poll is due: back to back while the operation is
@@ -448,12 +520,16 @@ impl Active {
     /// Sends one poll: the result's GET where there is one, else
     /// INFO_UPDATE; either answer refreshes the busy bit.
     fn poll<L: Link>(&mut self, port: &mut Port<L>, now: Instant) -> Result<(), PortError> {
-        match self.fetch() {
+        self.fetching = self.fetch_unanswered(port);
+        let index = match self.fetch() {
             Some(Fetch::Sdo) => port.send_once(&SdoGet)?,
             Some(Fetch::Eeprom) => port.send_once(&EepromGet)?,
             None => port.send_once(&InfoUpdate)?,
         };
-        self.polled = Some((now, port.stats().exchanges));
+        self.polls = [Some(index), self.polls[0]];
+        if !self.fetching {
+            self.polled = Some((now, port.stats().exchanges));
+        }
         Ok(())
     }
 
@@ -462,10 +538,9 @@ impl Active {
     /// ended (its own header says not busy): header and data.
     fn fetched<'p, L: Link>(&self, port: &'p Port<L>) -> Option<Answer<'p>> {
         let code = self.fetch()?.code();
-        let (_, after) = self.polled?;
         let a = port.previous()?;
-        let fresh = port.stats().exchanges > after;
-        (fresh && a.header.code == code && !a.header.is_nop() && !a.header.blocking_busy()).then_some(a)
+        let ours = self.polls.contains(&Some(a.header.index));
+        (ours && a.header.code == code && !a.header.is_nop() && !a.header.blocking_busy()).then_some(a)
     }
 
     /// The request in words, for errors.
@@ -514,7 +589,7 @@ impl Active {
                 port.pending_control |= ControlFlags::CLEAR_BLOCKING_ERROR;
                 return Ok((None, Progress::Done));
             }
-            if now >= self.next_poll() {
+            if self.fetch_unanswered(port) || now >= self.next_poll() {
                 self.poll(port, now)?;
                 return Ok((Some(self), Progress::Sent));
             }
@@ -546,6 +621,13 @@ impl Active {
                 let code = answer.map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
             }
+            (SlotRequest::SdoRead { .. }, false) if self.fetched(port).is_none() && self.fetch_unanswered(port) => {
+                // A GET poll's answer is on its way: the exchange that
+                // brings it (a poll again) ends the read, one exchange
+                // where a guarded GET would take two.
+                self.poll(port, now)?;
+                return Ok((Some(self), Progress::Sent));
+            }
             (SlotRequest::SdoRead { .. }, false) => {
                 let a = match self.fetched(port) {
                     Some(a) => a,
@@ -574,7 +656,7 @@ impl Active {
                     timeout_us: 100_000,
                 })?;
                 self.step = Step::Verify;
-                (self.since, self.polled) = (now, None);
+                self.began(now, port.stats().exchanges);
                 return Ok((Some(self), Progress::Sent));
             }
             (SlotRequest::EepromRead { slave, word }, false)
