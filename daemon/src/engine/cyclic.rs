@@ -192,18 +192,26 @@ impl Cyclic {
         self.rx_size > 0 && self.estimate(now) < self.levels.floor + 2
     }
 
-    /// Whether three packets' worth of input frames wait in the TxFIFO
-    /// (the ones the last call left plus one a cycle since), or half the
-    /// TxFIFO when that is less: an exchange for them no longer waits for
-    /// the blocking slot's turn. The count the chip reported lags by up to
-    /// two exchanges (PROTOCOL-NOTES), so this reads high by a packet or
-    /// so; two packets made every other SDO read wait for a FIFO exchange
-    /// it did not need. Half the depth the chip drops at (`tx_depth`) at
-    /// most, so deferring one never loses a frame.
+    /// Whether input frames wait in the TxFIFO beyond what an exchange may
+    /// leave for the blocking slot's turn (the ones the last call left
+    /// plus one a cycle since): three packets' worth, or a quarter of the
+    /// TxFIFO when that is less, so a host stall still has three quarters
+    /// of it before the chip drops the oldest. The count the chip reported
+    /// lags by up to two exchanges (PROTOCOL-NOTES), so this reads high by
+    /// a packet or so; two packets made every other SDO read wait for a
+    /// FIFO exchange it did not need.
     pub fn inputs_pressing(&self, now: Instant, tx_room: usize) -> bool {
         let waiting = u64::from(self.backlog) + self.cycles_since(self.last_push.0, now);
-        let limit = (3 * tx_room.max(1) as u64).min(u64::from(self.tx_depth / 2).max(1));
+        let limit = (3 * tx_room.max(1) as u64).min(u64::from(self.tx_depth / 4).max(1));
         self.tx_size > 0 && waiting >= limit
+    }
+
+    /// Whether the RxFIFO has fallen two packets (`rx_room` frames each)
+    /// below the level aimed at: one packet later than an exchange is due,
+    /// the most an exchange may wait for the blocking slot's turn, so the
+    /// margin against a host stall stays what the plan keeps.
+    pub fn outputs_behind(&self, now: Instant, rx_room: usize) -> bool {
+        self.rx_size > 0 && self.estimate(now) < self.target() - 2 * rx_room.max(1) as i64
     }
 
     /// The estimated RxFIFO level now.
@@ -344,6 +352,26 @@ mod tests {
         // Far below target: now.
         cy.answered(t0, 0, 2, 0, 0);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0);
+    }
+
+    #[test]
+    fn an_exchange_may_wait_for_the_slot_about_a_packet_past_its_time() {
+        let (mut cy, _) = cyclic();
+        let t0 = Instant::now();
+        let cycles = |n: u64| t0 + Duration::from_micros(125 * n);
+        // Target 14, packet room 4: due at 10, behind below 6.
+        cy.answered(t0, 0, 14, 0, 0);
+        assert!(!cy.outputs_behind(cycles(8), 4));
+        assert!(cy.outputs_behind(cycles(9), 4));
+        // Inputs, 4 to a packet, TxFIFO 32: pressing at a quarter of it (8),
+        // counting the 2 the last call left.
+        cy.answered(t0, 0, 14, 6, 4);
+        assert!(!cy.inputs_pressing(cycles(5), 4));
+        assert!(cy.inputs_pressing(cycles(6), 4));
+        // Three packets when that is less than a quarter of the TxFIFO.
+        cy.tx_depth = 64;
+        assert!(!cy.inputs_pressing(cycles(9), 4));
+        assert!(cy.inputs_pressing(cycles(10), 4));
     }
 
     #[test]

@@ -264,7 +264,7 @@ pub const SPELL_QUIET: Duration = Duration::from_secs(1);
 
 /// The daemon's log of events: each one as it comes, except an alarm that
 /// repeats (the RxFIFO running dry): the first of a spell at once, then
-/// one line when the spell ends (no alarm for [`SPELL_QUIET`]) saying how
+/// one line when the spell ends (no alarm for `SPELL_QUIET`) saying how
 /// many there were and for how long (issue 26: a stall of a few seconds
 /// wrote thousands of WARN lines). API subscribers still get every event.
 #[derive(Debug, Default)]

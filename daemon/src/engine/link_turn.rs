@@ -24,8 +24,11 @@
 //! - otherwise, when the FIFO is due: it goes if no transaction waits, or
 //!   the slot had its step since the last FIFO exchange.
 //!
-//! "Pressing" is the outputs near their floor or two packets' worth of
-//! inputs waiting; the FIFO then goes first, at most [`SLOT_SKIPS`] times
+//! "Pressing" is the outputs two packets below the level aimed at, or
+//! three packets' worth of inputs waiting (a quarter of the TxFIFO at
+//! most): an exchange waits at most about a packet past its due time for
+//! the slot, so the margin against a host stall stays the plan's. The FIFO
+//! then goes first, at most [`SLOT_SKIPS`] times
 //! in a row so the slot still moves on a link the plan fills (the
 //! shortfall shows as underruns, counted and reported).
 
@@ -75,7 +78,8 @@ pub struct Fifo {
     pub due: bool,
     /// An exchange is due within [`PULL_FORWARD`] exchange times.
     pub due_soon: bool,
-    /// Outputs near their floor, or two packets of inputs waiting.
+    /// Outputs two packets below their aim, or three packets of inputs
+    /// waiting (see the module doc).
     pub pressing: bool,
 }
 

@@ -55,7 +55,7 @@ impl Runner {
     }
 
     /// Stops the node, if one runs: NDEATH and the disconnect, within
-    /// [`STOP_WITHIN`].
+    /// `STOP_WITHIN`.
     pub async fn stop(&mut self) {
         if let Some((stop, mut task)) = self.running.take() {
             let _ = stop.send(());

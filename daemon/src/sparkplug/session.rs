@@ -6,7 +6,7 @@
 //! the next `bdSeq` and births again. At shutdown NDEATH goes out before
 //! the disconnect.
 //!
-//! The MQTT connection itself is [`connection`]'s. Messages go into the client's queue without
+//! The MQTT connection itself is `connection`'s. Messages go into the client's queue without
 //! waiting (`try_publish`): a full queue drops the message and counts it
 //! rather than holding up the node, and nothing of the engine's cyclic
 //! path ever waits on the network.

@@ -7,9 +7,9 @@
 //! Writes (SDO download, EEPROM write, state change, raw datagrams) start
 //! with a guarded call: they must run exactly once. Reads (SDO upload,
 //! EEPROM read, PDO assignment, state refresh) may run twice without harm,
-//! so they go out once, and whichever exchange comes next (the first poll,
-//! at once when nothing else is due) brings the read's answer (refused or
-//! started): one exchange instead of the guard's two. When that answer is
+//! so they go out once, and whichever exchange comes next (a FIFO exchange
+//! fitted into the operation's run, or the first poll) brings the read's
+//! answer (refused or started): one exchange instead of the guard's two. When that answer is
 //! lost to a bit error, the next header the chip builds decides: busy, the
 //! read runs; not busy, it is sent again (it never ran, or it already
 //! ended: either way a second run is the answer). Never a result of the
@@ -25,11 +25,17 @@
 //! a packet comes out with the next one), so a GET whose own answer says
 //! "not busy" ran after the operation ended and its data is the result; a
 //! GET answered "busy" is ignored, one lost to a bit error is sent again.
-//! The operation is therefore seen to end within one exchange of the chip
-//! finishing it, without a second exchange to fetch the result. Others poll
-//! with INFO_UPDATE, sent once. Polls go back to back while the operation
-//! is young and every quarter of its age later (at most [`MAX_POLL`]), so
-//! a slow slave's operation does not fill the link with polls.
+//! A GET poll sent on its time is followed at once by another, whose
+//! exchange brings the first one's answer (the result, if the operation
+//! has ended) and polls again; an answer to either of the last two that
+//! says "not busy" is the result. So the end is seen within one exchange of
+//! the chip finishing, and no guarded GET (two exchanges) is needed.
+//! Others poll with INFO_UPDATE, sent once. Polls go back to back while
+//! the operation is young and every quarter of its age later (at most
+//! [`MAX_POLL`]), so a slow slave's operation does not fill the link with
+//! polls. What the transaction wants of the link between its steps
+//! ([`Active::on_chip`]) lets the engine fit a FIFO exchange into the
+//! operation's run and fetch the result before the next one (`link_turn`).
 //!
 //! Cancel-safety: a caller that stops waiting is answered with a timeout at
 //! once, but the operation it started still runs to its end (or is
@@ -236,7 +242,7 @@ impl Active {
             return Ok((None, Progress::Done));
         }
         let data_size = port.data_size();
-        // Reads: once, and the first poll at once (see the module doc).
+        // Reads: once; the next exchange brings the answer (see the module doc).
         match self.request {
             SlotRequest::SdoRead { slave, index, subindex, complete } => {
                 let access = SdoAccess::Read { max_len: (data_size - SDO_REQ_HEADER_LEN) as u16 };
