@@ -563,14 +563,17 @@ impl<L: Link> Engine<L> {
             return Ok(false);
         };
         let exchanges = self.port.stats().exchanges;
-        if active.on_chip(&self.port) == Some(true)
-            && !active.start_unread()
-            && active.next_poll() <= now
-            && now.saturating_duration_since(clocks.emergency_poll) >= emergencies::POLL
+        let since = now.saturating_duration_since(clocks.emergency_poll);
+        let poll_due = active.on_chip(&self.port) == Some(true) && active.next_poll() <= now;
+        if active.may_lend_an_exchange(&self.port)
+            && ((poll_due && since >= emergencies::POLL) || since >= emergencies::POLL_LONGEST)
         {
             // A poll is due and so is the emergency question: it is the
-            // poll (its answer refreshes the busy bit like any other), so
-            // emergencies are seen under a steady load of transactions.
+            // poll (its answer refreshes the busy bit like any other). A
+            // question overdue takes any step's exchange (its own brings
+            // whatever answer the transaction waits for, which it reads
+            // by index), so emergencies are seen under a steady load of
+            // transactions however short their polls (EEPROM reads).
             self.active = Some(active);
             self.poll_emergencies(&mut clocks.emergency_poll, now)?;
             return Ok(true);

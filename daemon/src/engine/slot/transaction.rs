@@ -439,11 +439,14 @@ impl Active {
         Ok((Some(self), Progress::Sent))
     }
 
-    /// Whether a read went out once and the exchange that brings its
-    /// answer has not been looked at: the next exchange must not be one
-    /// whose own answer replaces it before the transaction looks.
-    pub fn start_unread(&self) -> bool {
-        self.sent_read.is_some()
+    /// Whether the engine may spend the next exchange on something else
+    /// (the emergency question) without this transaction losing an answer:
+    /// not when an exchange already brought a read's start answer that
+    /// the transaction has not looked at yet (the next one would replace
+    /// it). Answers to GET polls are read by their index, whichever
+    /// exchange brings them.
+    pub fn may_lend_an_exchange<L: Link>(&self, port: &Port<L>) -> bool {
+        self.sent_read.is_none_or(|(_, _, at)| port.stats().exchanges == at)
     }
 
     /// When this step's blocking command went out.
