@@ -24,13 +24,13 @@
 //! - otherwise, when the FIFO is due: it goes if no transaction waits, or
 //!   the slot had its step since the last FIFO exchange.
 //!
-//! "Pressing" is the outputs two packets below the level aimed at, or
-//! three packets' worth of inputs waiting (a quarter of the TxFIFO at
-//! most): an exchange waits at most about a packet past its due time for
-//! the slot, so the margin against a host stall stays the plan's. The FIFO
-//! then goes first, at most [`SLOT_SKIPS`] times
-//! in a row so the slot still moves on a link the plan fills (the
-//! shortfall shows as underruns, counted and reported).
+//! "Pressing" is the outputs near their floor or two packets below the
+//! level aimed at, or three packets' worth of inputs waiting (a quarter
+//! of the TxFIFO at most): an exchange waits at most about a packet past
+//! its due time for the slot, so the margin against a host stall stays
+//! the plan's. The FIFO then goes first, at most [`SLOT_SKIPS`] times in
+//! a row so the slot still moves on a link the plan fills (the shortfall
+//! shows as underruns, counted and reported).
 
 /// FIFO exchanges that may go first in a row while a transaction waits.
 pub const SLOT_SKIPS: u32 = 4;

@@ -435,7 +435,11 @@ impl<L: Link> Engine<L> {
         let fifo = Fifo {
             due: self.fifo_due(c, now),
             due_soon: self.fifo_due(c, now + exchange * PULL_FORWARD),
-            pressing: c.outputs_behind(now, self.rx_room(c)) || c.inputs_pressing(now, self.tx_room(c)),
+            // Behind its aim or near its floor, whichever comes first (a
+            // shallow FIFO's floor is less than two packets below its aim).
+            pressing: c.outputs_low(now)
+                || c.outputs_behind(now, self.rx_room(c))
+                || c.inputs_pressing(now, self.tx_room(c)),
         };
         fifo_goes_first(fifo, slot, clocks.slot_skipped)
     }
