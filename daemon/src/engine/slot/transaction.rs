@@ -457,7 +457,7 @@ impl Active {
     /// Whether this step's command has been polled: past its start, where
     /// the rest of its run is no longer known to hold a FIFO exchange.
     pub fn polled(&self) -> bool {
-        self.polls[0].is_some() || self.polled.is_some()
+        self.polls[0].is_some()
     }
 
     /// Whether its blocking command went out and it waits for the chip.
@@ -619,6 +619,13 @@ impl Active {
             }
             return self.foe_continue(port, now);
         }
+        if !failed && self.fetched(port).is_none() && self.fetch_unanswered(port) {
+            // A GET poll's answer is on its way: the exchange that brings
+            // it (a poll again) ends the read, one exchange where a
+            // guarded GET would take two.
+            self.poll(port, now)?;
+            return Ok((Some(self), Progress::Sent));
+        }
         // Borrowed, not cloned: a request may hold data (an SDO write's).
         let result = match (&self.request, failed) {
             (
@@ -629,13 +636,6 @@ impl Active {
                 let answer = port.call(&SdoAbortCodeGet)?.answer_to(&SdoAbortCodeGet);
                 let code = answer.map_or(SdoAbortCode::GENERAL, |r| r.0);
                 Err(EngineError::SdoAbort { slave: *slave, index: *index, subindex: *subindex, code })
-            }
-            (SlotRequest::SdoRead { .. }, false) if self.fetched(port).is_none() && self.fetch_unanswered(port) => {
-                // A GET poll's answer is on its way: the exchange that
-                // brings it (a poll again) ends the read, one exchange
-                // where a guarded GET would take two.
-                self.poll(port, now)?;
-                return Ok((Some(self), Progress::Sent));
             }
             (SlotRequest::SdoRead { .. }, false) => {
                 let a = match self.fetched(port) {
