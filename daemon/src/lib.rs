@@ -1,45 +1,56 @@
-//! `ecmxfd`: the daemon that owns the ECM-XF chip.
+//! `ecmxfd`: the daemon that owns the ECM-XF chip. docs/architecture.md
+//! is the map for a newcomer: the layers, the threads, and two requests
+//! traced through the files.
 //!
 //! # Map
+//! Layers point one way: link -> port -> engine -> master -> front ends ->
+//! lifecycle (config and realtime beside them all; daemon/tests/layers.rs
+//! checks it).
 //! - [`link`]: the chip behind a small trait (spidev + GPIO, simulator,
 //!   simulator socket).
 //! - [`port`]: packet exchange with the chip's rules: one-behind answers,
-//!   fresh indices, retries that never execute a command twice.
+//!   fresh indices, retries that never execute a command twice
+//!   (docs/protocol.md).
 //! - `engine` (private): the thread that owns the chip: bring-up, cyclic FIFO
 //!   exchange, the blocking-slot transactions, supervision and recovery.
-//! - [`master`]: the async handle to the engine ([`master::Master`]), and
-//!   the one door front ends use: it re-exports what they need of the
-//!   engine (errors, phases, events, layout, frame streams); it owns the
-//!   domain: leases, the process image, output writers
-//!   ([`master::outputs`]), device descriptions.
-//! - [`api`]: the gRPC front end (tonic): protobuf to and from the master's
-//!   domain, errors to status codes, authentication; imports the master
-//!   only (daemon/tests/layers.rs checks it).
-//! - [`gateway`]: the ETG.8200 mailbox gateway for engineering tools
-//!   (UDP), a front end like the API, through the master only.
+//! - [`master`]: the domain and the one door every front end uses: the
+//!   engine's requests as typed methods, leases, the process image and
+//!   entry writes, typed values, CiA 402 axes, peripherals, device
+//!   descriptions.
+//! - Front ends (private), each through the master alone: `api` (gRPC),
+//!   [`sparkplug`] (MQTT Sparkplug B), `gateway` (ETG.8200 mailbox
+//!   gateway), `metrics` (Prometheus).
+//! - [`config`]: the configuration file; [`check_config`] is
+//!   `--check-config`.
 //! - [`realtime`]: SCHED_FIFO, affinity, mlockall for the engine thread.
-//! - [`config`]: the configuration file.
-//! - [`metrics`]: the Prometheus endpoint.
-//! - [`service`]: life under systemd: sd_notify, watchdog, logging, reload.
 //! - [`probe`]: `ecmxfd probe`, first contact with a new board, step by
 //!   step with the likely cause and fix of each failure.
-//! - [`lifecycle`]: the daemon as a whole: [`run`]`(config, shutdown)`
-//!   starts all of the above and stops it safely; the binary is thin.
+//! - The daemon as a whole: [`run`]`(config, shutdown)` starts all of the
+//!   above and stops it safely, joining every task it started;
+//!   [`run_until_signalled`] adds SIGTERM, SIGINT and SIGHUP; the binary
+//!   only parses arguments.
 #![forbid(unsafe_code)]
 #![warn(missing_docs)]
+#![warn(unreachable_pub)]
 
-pub mod api;
+mod api;
+mod check_config;
 pub mod config;
 pub(crate) mod engine;
-pub mod gateway;
-pub mod lifecycle;
+mod gateway;
+mod lifecycle;
 pub mod link;
 pub mod master;
-pub mod metrics;
+mod metrics;
 pub mod port;
 pub mod probe;
 pub mod realtime;
-pub mod service;
+mod service;
+mod signals;
 pub mod sparkplug;
 
-pub use lifecycle::{DaemonError, Options, run, run_with};
+pub use api::status::debug_looking_messages;
+pub use check_config::{EXIT_CONFIG, check_config};
+pub use lifecycle::{DaemonError, EXIT_REFUSED, Options, run, run_with};
+pub use service::{Logging, Notifier, init_logging};
+pub use signals::run_until_signalled;

@@ -167,15 +167,18 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         async move { Arc::clone(&ctx.master).keep_image_built().await }
     });
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
+    // Front ends beside the API, each ending when the API stops; joined at
+    // shutdown.
+    let mut front_ends = tokio::task::JoinSet::new();
     if let Some(l) = metrics_listener {
         let sources =
             crate::metrics::Sources { master: Arc::clone(&master), sdo_latency: Arc::clone(&ctx.sdo_latency) };
-        tokio::spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
+        front_ends.spawn(crate::metrics::serve(sources, l, api_stopped.clone()));
     }
     if let Some((g, socket)) = gateway {
-        tokio::spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
+        front_ends.spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
     }
-    let mut sparkplug_node = crate::sparkplug::Runner::new(Arc::clone(&master), Arc::clone(&ctx.leases), ctx.lease_ttl);
+    let mut sparkplug_node = crate::sparkplug::Runner::new(Arc::clone(&master));
     if let Some(prepared) = sparkplug {
         sparkplug_node.start(prepared);
     }
@@ -257,7 +260,14 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     layout_builder.abort();
     if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
         server.abort();
+        let _ = server.await;
     }
+    // Every task the daemon started ends before it returns: the front ends
+    // saw the API stop; whatever is still busy after the grace is cut.
+    if tokio::time::timeout(STREAM_GRACE, async { while front_ends.join_next().await.is_some() {} }).await.is_err() {
+        front_ends.shutdown().await;
+    }
+    let _ = layout_builder.await;
     bus.await.map_err(|e| DaemonError::Task("stopping the engine", e))?;
     info!(took_ms = started.elapsed().as_millis() as u64, "stopped");
     Ok(())

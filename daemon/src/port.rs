@@ -1,5 +1,5 @@
 //! Packet exchange with the chip's rules (v049 SPI 命令傳送與回應接收說明;
-//! PROTOCOL-NOTES "Pipelining and deduplication").
+//! docs/protocol.md §6 and §7).
 //!
 //! The answer to a packet arrives with the next one, and a packet with the
 //! same index and code as the one before it does not execute again but
@@ -487,8 +487,8 @@ impl<L: Link> Port<L> {
 
     /// Finds the packet size and check type of a chip in an unknown state:
     /// clocks single bytes until it has seen an end word followed by a start
-    /// word twice, takes their distance as the packet length (PROTOCOL-NOTES
-    /// "Resizing"; the vendor driver does the same), completes the packet in
+    /// word twice, takes their distance as the packet length (docs/protocol.md
+    /// §3; the vendor driver does the same), completes the packet in
     /// progress with zeros (the chip refuses it as a bad packet), then reads
     /// the check type from the status byte of the next answer.
     pub fn synchronize(&mut self) -> Result<(), PortError> {

@@ -6,7 +6,7 @@
 //! whether the wiring, the kernel set-up or the network is at fault.
 //!
 //! The steps, in the order a link comes up (v049 "ECM-XF 初始化EtherCAT網路
-//! 及從站配置說明", figure 7, and PROTOCOL-NOTES "Resizing"):
+//! 及從站配置說明", figure 7, and docs/protocol.md §3):
 //! 1. the SPI device and the GPIO lines open;
 //! 2. INT0 says ready, goes busy when a packet is complete and comes back;
 //! 3. the packet boundary is found in the chip's byte stream;
@@ -244,6 +244,31 @@ fn device_failure(config: &Config, e: &StartError) -> Verdict {
         (StartError::Link(_), _) => ("the link could not be opened".to_string(), NAMED.to_string()),
     };
     fail(what, cause, fix)
+}
+
+/// `ecmxfd probe`, the command: refuses while a daemon answers on the
+/// configuration's socket (unless `force`), then walks the steps of
+/// `source` (the file, or `--sim`) on stdout. Exit status: 0 when every
+/// step passed, 1 when one failed, 2 when it could not run.
+pub fn command(config: &Config, source: &str, force: bool) -> u8 {
+    use std::io::Write as _;
+    if !force && let Some(why) = daemon_in_the_way(config) {
+        eprintln!("ecmxfd probe: {why}");
+        return 2;
+    }
+    let mut out = std::io::stdout();
+    // A reader that went away (`| head`) ends the output, not the process.
+    let _ = writeln!(out, "ecmxfd probe ({source})");
+    match run(config, &mut out) {
+        Ok(true) => 0,
+        Ok(false) => 1,
+        // The reader went away: nothing left to tell.
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => 2,
+        Err(e) => {
+            eprintln!("ecmxfd probe: {e}");
+            2
+        }
+    }
 }
 
 /// Refuses to probe a chip a running daemon is using: the probe's packets
@@ -592,7 +617,7 @@ impl<'c, L: Link> Probe<'c, L> {
         }
     }
 
-    /// Step 7: every slave's state and AL status code (command 21, items 6
+    /// Step 7: every slave's state and AL status code (command 15, items 6
     /// and 7), and the network state in the status header.
     pub fn states(&mut self) -> Verdict {
         let network = match self.port.call(&InfoUpdate) {

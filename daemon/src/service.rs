@@ -78,14 +78,14 @@ impl Notifier {
 /// counter must have moved since the last ping. A stalled loop (stuck SPI
 /// transfer, dead chip, deadlock) stops the pings and systemd restarts us.
 #[derive(Debug, Default)]
-pub struct Liveness {
+pub(crate) struct Liveness {
     last_exchanges: Option<u64>,
 }
 
 impl Liveness {
     /// True when `exchanges` advanced since the previous call (the first
     /// call only records).
-    pub fn advanced(&mut self, exchanges: u64) -> bool {
+    pub(crate) fn advanced(&mut self, exchanges: u64) -> bool {
         let moved = self.last_exchanges.is_none_or(|l| exchanges > l);
         self.last_exchanges = Some(exchanges);
         moved
@@ -96,7 +96,7 @@ impl Liveness {
     /// did not turn into a recovery within a ping interval means it is
     /// wedged, and systemd should restart it. Bringing up or recovering,
     /// the engine is doing its job (its waits are bounded), so it is pinged.
-    pub fn verdict(&mut self, s: &Snapshot, health: Health) -> Result<(), String> {
+    pub(crate) fn verdict(&mut self, s: &Snapshot, health: Health) -> Result<(), String> {
         let advanced = self.advanced(s.exchanges);
         match s.phase {
             Phase::Stopped => Err("the engine stopped".into()),
@@ -161,7 +161,7 @@ impl Logging {
 /// What a reload changed, split into what is applied while the bus runs
 /// and what needs a restart.
 #[derive(Debug, Default, PartialEq, Eq)]
-pub struct ReloadPlan {
+pub(crate) struct ReloadPlan {
     /// `log.level` changed.
     pub log_level: bool,
     /// `[api]` roles, tokens, client certificates or default role changed.
@@ -175,7 +175,7 @@ pub struct ReloadPlan {
 
 impl ReloadPlan {
     /// Compares the running configuration with the reloaded one.
-    pub fn between(old: &Config, new: &Config) -> Self {
+    pub(crate) fn between(old: &Config, new: &Config) -> Self {
         let mut p =
             Self { log_level: old.log != new.log, sparkplug: old.sparkplug != new.sparkplug, ..Self::default() };
         let (a, b) = (&old.api, &new.api);

@@ -218,7 +218,8 @@ fn every_fixture_device_alone_reaches_op_with_the_pdos_its_file_describes() {
 /// object's index; seen in two-channel drives' ESI files): the simulated
 /// device maps with it while CoE reads the identity object there, and the
 /// daemon takes that PDO's entries from the device's description instead
-/// of the identity values CoE returns (issue 27). The same checks as every
+/// of the identity values CoE returns, which it once took for the PDO's
+/// entries. The same checks as every
 /// fixture: OP, process data, the file's PDO entries.
 #[test]
 fn a_pdo_numbered_at_a_standard_objects_index_is_described_from_the_file() {

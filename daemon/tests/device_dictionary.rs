@@ -1,4 +1,4 @@
-//! Issue 33: a slave's object dictionary read from the slave itself (CoE
+//! A slave's object dictionary read from the slave itself (docs/mailbox.md; CoE
 //! SDO Information through the host's mailbox channel), for every device
 //! in ../shared/fixtures whose ESI has a `<Dictionary>`: simulated as its
 //! file describes it, with no ESI configured in the daemon, the dictionary

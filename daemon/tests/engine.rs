@@ -164,7 +164,8 @@ fn sdo_read_write_abort_and_slave_info() {
 
 /// An SDO read costs its start, the polls of the slave's time and the
 /// exchange that brings the last poll's answer, which is the result: 5
-/// exchanges from the caller's call to its answer (issue 26). It took 7
+/// exchanges from the caller's call to its answer, each one link time that
+/// an SDO-heavy client waits. It once took 7
 /// here: an immediate poll, an emergency question in the gap between two
 /// reads, a guarded GET. At a 1 ms cycle the FIFO exchange takes a tenth
 /// of the link, so the count is the transaction's own (at 125 us it is
@@ -197,7 +198,8 @@ fn an_sdo_read_takes_its_start_its_polls_and_one_exchange_for_the_answer() {
 
 /// A read the chip gives up on (the EEPROM slower than the 100 ms the
 /// daemon's request allows) is an error to the client, never the word an
-/// earlier read left in the chip's result (issue 28).
+/// earlier read left in the chip's result (a timed-out EEPROM read once
+/// handed the client the previous word with error code 0).
 #[test]
 fn a_timed_out_eeprom_read_never_returns_data_to_a_client() {
     let (m, sim, _serial) = start();
@@ -273,8 +275,8 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
 /// A network that reaches OP again and again but delivers no input frame
 /// (the chip's TxFIFO stalled for 2 s) is one recovery spell: one
 /// RECOVERING event, the attempts counted, and RECOVERED only once input
-/// frames flow again, after the phase says RUNNING (issue 29: it used to
-/// say "network back after a fault" after every attempt while nothing
+/// frames flow again, after the phase says RUNNING (it used to say
+/// "network back after a fault" after every attempt while nothing
 /// flowed).
 #[test]
 fn a_stalled_network_stays_recovering_until_input_frames_flow() {
@@ -634,7 +636,8 @@ fn streamed_frames_play_once_each_in_order_one_per_cycle() {
 
 /// A slave that refuses SAFE-OP at bring-up is named, with its state and
 /// AL status code and text, in the error the daemon logs and reports
-/// (issue 27: "ECAT_STATE_CHECK: failed on the chip" named no one).
+/// (the chip's error bit alone gave "ECAT_STATE_CHECK: failed on the
+/// chip", which named no one).
 #[test]
 fn a_bring_up_refusal_names_the_slave_its_state_and_al_status() {
     let _serial = SERIAL.lock().unwrap_or_else(|e| e.into_inner());

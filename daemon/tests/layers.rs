@@ -64,31 +64,118 @@ fn no_import_circle_between_the_daemons_modules() {
             .into_iter()
             // Front ends beside each other, none under the master.
             .chain([("sparkplug", "api"), ("api", "sparkplug"), ("gateway", "api"), ("api", "gateway")])
+            .chain([
+                ("sparkplug", "gateway"),
+                ("gateway", "sparkplug"),
+                ("metrics", "sparkplug"),
+                ("metrics", "gateway"),
+            ])
             .chain([("master", "sparkplug"), ("master", "gateway"), ("engine", "sparkplug")])
     {
         assert!(!graph[low].contains(high), "{low} uses {high}: layers point one way");
     }
 }
 
-/// Front ends reach the engine through the master alone (issue 30): no
-/// file under `api/` names `crate::engine`; what it needs, the master
-/// re-exports. A second front end (MQTT, a mailbox gateway) gets the same
-/// one door.
+/// The daemon's front ends: each serves the master's domain in its own
+/// protocol.
+const FRONT_ENDS: [&str; 4] = ["api", "sparkplug", "gateway", "metrics"];
+
+/// What a front-end file reaches past the master: the engine
+/// (`crate::engine`), the chip's codec (`ecmxf_wire`), or another front end
+/// (`crate::api` from `sparkplug/`...). Comment lines are left out.
+fn front_end_offences(src: &Path) -> Vec<String> {
+    let mut out = Vec::new();
+    for front in FRONT_ENDS {
+        let mut files = Vec::new();
+        let dir = src.join(front);
+        if dir.is_dir() {
+            rust_files(&dir, &mut files);
+        } else if src.join(format!("{front}.rs")).is_file() {
+            files.push(src.join(format!("{front}.rs")));
+        }
+        for f in files {
+            let text = std::fs::read_to_string(&f).unwrap();
+            let name = f.strip_prefix(src).unwrap().display().to_string();
+            let used = uses(&text);
+            for other in FRONT_ENDS.iter().filter(|o| **o != front).chain(&["engine"]) {
+                if used.contains(*other) {
+                    out.push(format!("{name} uses crate::{other}"));
+                }
+            }
+            let code = text.lines().map(str::trim_start).filter(|l| !l.starts_with("//"));
+            if code.clone().any(|l| l.contains("ecmxf_wire")) {
+                out.push(format!("{name} uses ecmxf_wire"));
+            }
+        }
+    }
+    out
+}
+
+/// Front ends reach the chip through the master alone: no file under
+/// `api/`, `sparkplug/`, `gateway/` or `metrics/` names `crate::engine`,
+/// the wire crate, or another front end; what they need the master
+/// re-exports or does for them (a new front end gets the same one door).
 #[test]
-fn the_api_imports_the_master_not_the_engine() {
+fn front_ends_import_the_master_not_the_engine_the_wire_or_each_other() {
     let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src");
-    let mut files = Vec::new();
-    rust_files(&src.join("api"), &mut files);
-    assert!(files.len() >= 10, "the api files were not found");
-    // The other front ends too: the MQTT node and the mailbox gateway.
-    rust_files(&src.join("sparkplug"), &mut files);
-    rust_files(&src.join("gateway"), &mut files);
-    let offenders: Vec<String> = files
-        .iter()
-        .filter(|f| uses(&std::fs::read_to_string(f).unwrap()).contains("engine"))
-        .map(|f| f.strip_prefix(&src).unwrap().display().to_string())
-        .collect();
-    assert!(offenders.is_empty(), "front-end files that import crate::engine (use crate::master): {offenders:?}");
+    let mut api = Vec::new();
+    rust_files(&src.join("api"), &mut api);
+    assert!(api.len() >= 10, "the api files were not found");
+    let offences = front_end_offences(&src);
+    assert!(offences.is_empty(), "front-end files that reach past the master: {offences:#?}");
+}
+
+/// The front-end check can fail: a planted file of each kind of offence
+/// is named.
+#[test]
+fn a_front_end_reaching_past_the_master_is_found() {
+    let dir = std::env::temp_dir().join(format!("ecmxf-front-ends-{}", std::process::id()));
+    std::fs::create_dir_all(dir.join("api")).unwrap();
+    std::fs::create_dir_all(dir.join("gateway")).unwrap();
+    std::fs::write(
+        dir.join("api/ok.rs"),
+        "// ecmxf_wire in a comment
+use crate::master::Master;
+",
+    )
+    .unwrap();
+    assert_eq!(front_end_offences(&dir), Vec::<String>::new());
+    std::fs::write(
+        dir.join("api/sdo.rs"),
+        "use ecmxf_wire::payload::sdo::SdoAbortCode;
+",
+    )
+    .unwrap();
+    std::fs::write(
+        dir.join("gateway/mod.rs"),
+        "use crate::engine::slot::Job;
+use crate::api::Context;
+",
+    )
+    .unwrap();
+    let found = front_end_offences(&dir);
+    std::fs::remove_dir_all(&dir).unwrap();
+    assert_eq!(
+        found,
+        ["api/sdo.rs uses ecmxf_wire", "gateway/mod.rs uses crate::api", "gateway/mod.rs uses crate::engine"],
+    );
+}
+
+/// `api::Context` holds what the gRPC front end alone needs (roles, its
+/// streams' stop, its metrics): the domain's state (leases, their TTL)
+/// is the master's, shared by every front end.
+#[test]
+fn the_api_context_holds_no_domain_state() {
+    let src = Path::new(env!("CARGO_MANIFEST_DIR")).join("src/api/mod.rs");
+    let text = std::fs::read_to_string(src).unwrap();
+    let start = text.find("pub struct Context").expect("api::Context");
+    let body = &text[start..start + text[start..].find("\n}").unwrap()];
+    for field in ["lease", "Leases", "image", "shadow"] {
+        assert!(
+            !body.lines().filter(|l| !l.trim_start().starts_with("//")).any(|l| l.contains(field)),
+            "api::Context holds {field}: the master owns it"
+        );
+    }
 }
 
 /// The file-level modules of one folder (`engine/`, the wire crate) and
@@ -179,8 +266,8 @@ fn first_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String
 }
 
 /// No circle between the files of any folder of the workspace's crates
-/// (issue 30: bring-up and the held outputs used each other in the
-/// engine; framing and header in the wire crate). Each folder is checked
+/// (bring-up and the held outputs once used each other in the engine;
+/// framing and header in the wire crate). Each folder is checked
 /// on its own: its files, and its subfolders as one module each.
 #[test]
 fn no_import_circle_between_the_files_of_any_folder() {

@@ -545,10 +545,10 @@ impl Drop for Daemon {
         }
         let _ = std::fs::remove_dir_all(&self.dir);
         // Every error an embedded daemon answered in this test binary was
-        // words, not Rust Debug output (issue 29): the API's error layer
+        // words a user can read, not Rust Debug output: the API's error layer
         // records any that was not.
         if matches!(self.running, Running::Embedded { .. }) && !std::thread::panicking() {
-            let debug = ecmxfd::api::status::debug_looking_messages();
+            let debug = ecmxfd::debug_looking_messages();
             assert!(debug.is_empty(), "error messages that read like Rust Debug output: {debug:#?}");
         }
     }

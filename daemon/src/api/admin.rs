@@ -7,14 +7,14 @@ use std::time::Duration;
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::foe_server::Foe as FoeApi;
 use ecmxf_proto::v1::registers_server::Registers as RegistersApi;
-use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead};
 use tonic::{Request, Response, Status};
 
-use super::auth::{Caller, Role};
+use super::auth::Role;
 use super::bounded;
 use super::status::bad_argument;
 use super::{BoxStream, Context};
 use crate::master::TransferProgress;
+use crate::master::transactions::{DatagramCommand, RawAnswer};
 
 /// FoE transfers may take long: the default deadline when the client sets none.
 const FOE_TIMEOUT: Duration = Duration::from_secs(120);
@@ -23,7 +23,7 @@ const PROGRESS_EVERY: Duration = Duration::from_millis(50);
 
 /// The `Foe` service.
 #[derive(Debug, Clone)]
-pub struct FoeService(pub Arc<Context>);
+pub(crate) struct FoeService(pub Arc<Context>);
 
 type ProgressStream = BoxStream<pb::FoeProgress>;
 
@@ -110,22 +110,18 @@ impl FoeApi for FoeService {
 
 /// The `Registers` service.
 #[derive(Debug, Clone)]
-pub struct RegistersService(pub Arc<Context>);
+pub(crate) struct RegistersService(pub Arc<Context>);
 
 fn u16_field(v: u32, field: &'static str) -> Result<u16, Status> {
     u16::try_from(v).map_err(|_| bad_argument(field, format!("{v:#x} is outside 0..=0xFFFF")))
 }
 
-impl RegistersService {
-    async fn send(&self, caller: &Caller, head: DatagramHead, data: Vec<u8>) -> Result<pb::DatagramResponse, Status> {
-        let a = bounded(caller, self.0.master.raw_datagram(head, data, caller.deadline)).await?;
-        Ok(pb::DatagramResponse { working_counter: a.working_counter.into(), data: a.data })
-    }
+fn answer_pb(a: RawAnswer) -> pb::DatagramResponse {
+    pb::DatagramResponse { working_counter: a.working_counter.into(), data: a.data }
 }
 
-fn head(command: DatagramCommand, adp: u16, ado: u16, length: usize) -> Result<DatagramHead, Status> {
-    let length = u16::try_from(length).map_err(|_| bad_argument("length", format!("{length} bytes")))?;
-    Ok(DatagramHead { command, length, adp, ado, logical: 0, timeout_us: 10_000 })
+fn length_field(length: usize) -> Result<u16, Status> {
+    u16::try_from(length).map_err(|_| bad_argument("length", format!("{length} bytes")))
 }
 
 #[tonic::async_trait]
@@ -140,14 +136,10 @@ impl RegistersApi for RegistersService {
             c => c,
         };
         let (adp, ado) = (u16_field(r.adp, "adp")?, u16_field(r.ado, "ado")?);
-        let logical = matches!(command, DatagramCommand::Lrd | DatagramCommand::Lwr | DatagramCommand::Lrw);
-        let length = if command.writes() { r.data.len() } else { r.length as usize };
-        let mut h = head(command, adp, ado, length)?;
-        if logical {
-            h.logical = (u32::from(adp) << 16) | u32::from(ado);
-        }
+        let length = length_field(if command.writes() { r.data.len() } else { r.length as usize })?;
         let data = if command.writes() { r.data } else { Vec::new() };
-        Ok(Response::new(self.send(&caller, h, data).await?))
+        let a = bounded(&caller, self.0.master.datagram(command, adp, ado, length, data, caller.deadline)).await?;
+        Ok(Response::new(answer_pb(a)))
     }
 
     async fn read_registers(
@@ -160,13 +152,10 @@ impl RegistersApi for RegistersService {
         if r.length == 0 {
             return Err(bad_argument("length", "0 bytes"));
         }
-        let h = head(
-            DatagramCommand::Aprd,
-            0u16.wrapping_sub(s.into()),
-            u16_field(r.address, "address")?,
-            r.length as usize,
-        )?;
-        Ok(Response::new(self.send(&caller, h, Vec::new()).await?))
+        let address = u16_field(r.address, "address")?;
+        let length = length_field(r.length as usize)?;
+        let a = bounded(&caller, self.0.master.read_registers(s, address, length, caller.deadline)).await?;
+        Ok(Response::new(answer_pb(a)))
     }
 
     async fn write_registers(
@@ -179,9 +168,9 @@ impl RegistersApi for RegistersService {
         if r.data.is_empty() {
             return Err(bad_argument("data", "no bytes to write"));
         }
-        let h =
-            head(DatagramCommand::Apwr, 0u16.wrapping_sub(s.into()), u16_field(r.address, "address")?, r.data.len())?;
+        let address = u16_field(r.address, "address")?;
         let data = r.data.clone();
-        Ok(Response::new(self.send(&caller, h, data).await?))
+        let a = bounded(&caller, self.0.master.write_registers(s, address, data, caller.deadline)).await?;
+        Ok(Response::new(answer_pb(a)))
     }
 }

@@ -13,11 +13,11 @@ use tonic::transport::server::{TcpConnectInfo, TlsConnectInfo, UdsConnectInfo};
 use tonic::{Request, Status};
 
 use crate::config::api::ApiConfig;
-pub use crate::config::api::Role;
+pub(crate) use crate::config::api::Role;
 
 /// A caller, as authenticated.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct Caller {
+pub(crate) struct Caller {
     /// Their role.
     pub role: Role,
     /// Who, for logs and errors ("uid 1000", "token ci-robot").
@@ -31,7 +31,7 @@ pub struct Caller {
 
 /// The rules from `[api]`.
 #[derive(Debug)]
-pub struct Authenticator {
+pub(crate) struct Authenticator {
     own_uid: u32,
     users: HashMap<u32, Option<Role>>,
     groups: HashMap<u32, Option<Role>>,
@@ -46,7 +46,7 @@ fn fingerprint(bytes: &[u8]) -> String {
 
 impl Authenticator {
     /// The rules of `config`; `own_uid` (the daemon's) is always admin.
-    pub fn new(config: &ApiConfig, own_uid: u32) -> Self {
+    pub(crate) fn new(config: &ApiConfig, own_uid: u32) -> Self {
         let fp = |list: &[crate::config::api::TokenRole]| {
             list.iter().map(|t| (t.sha256.to_ascii_lowercase(), (t.role.role(), t.name.clone()))).collect()
         };
@@ -61,7 +61,7 @@ impl Authenticator {
     }
 
     /// Identifies the caller of `request`.
-    pub fn identify<T>(&self, request: &Request<T>) -> Result<Caller, Status> {
+    pub(crate) fn identify<T>(&self, request: &Request<T>) -> Result<Caller, Status> {
         let client_id = client_id(request);
         if let Some(value) = request.metadata().get("authorization") {
             let token = value
@@ -108,7 +108,7 @@ impl Authenticator {
     /// The role of a Unix peer: root and the daemon's own user are admin;
     /// then `[[api.user]]` by uid, `[[api.group]]` by gid, else
     /// `api.default_role`. `None`: no access.
-    pub fn unix_role(&self, uid: u32, gid: u32) -> Option<Role> {
+    pub(crate) fn unix_role(&self, uid: u32, gid: u32) -> Option<Role> {
         if uid == 0 || uid == self.own_uid {
             Some(Role::Admin)
         } else if let Some(r) = self.users.get(&uid) {
@@ -121,7 +121,7 @@ impl Authenticator {
     }
 
     /// Identifies the caller and checks they have `needed`.
-    pub fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
+    pub(crate) fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
         let mut caller = self.identify(request)?;
         caller.deadline = super::deadline(request);
         if caller.role < needed {

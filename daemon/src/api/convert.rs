@@ -1,15 +1,16 @@
 //! Conversions between engine/wire types and `ecmxf.v1` messages, and the
 //! typed-value codec (CiA 301 data types, little-endian as on EtherCAT).
 
+use crate::master::EcatState;
 use ecmxf_proto::v1 as pb;
-use ecmxf_wire::EcatState;
 use tonic::Status;
 
 use super::status::bad_argument;
 use crate::master::Phase;
+use crate::master::value::{DataType, Value};
 
 /// Wire state to API state.
-pub fn state_to_pb(s: EcatState) -> pb::EcatState {
+pub(crate) fn state_to_pb(s: EcatState) -> pb::EcatState {
     match s {
         EcatState::Init => pb::EcatState::Init,
         EcatState::PreOp => pb::EcatState::PreOp,
@@ -22,7 +23,7 @@ pub fn state_to_pb(s: EcatState) -> pb::EcatState {
 }
 
 /// API state (as sent: an i32) to a requestable wire state.
-pub fn state_from_pb(v: i32, field: &'static str) -> Result<EcatState, Status> {
+pub(crate) fn state_from_pb(v: i32, field: &'static str) -> Result<EcatState, Status> {
     match pb::EcatState::try_from(v) {
         Ok(pb::EcatState::Init) => Ok(EcatState::Init),
         Ok(pb::EcatState::PreOp) => Ok(EcatState::PreOp),
@@ -34,7 +35,7 @@ pub fn state_from_pb(v: i32, field: &'static str) -> Result<EcatState, Status> {
 }
 
 /// Engine phase to API phase.
-pub fn phase_to_pb(p: Phase) -> pb::EnginePhase {
+pub(crate) fn phase_to_pb(p: Phase) -> pb::EnginePhase {
     match p {
         Phase::Starting => pb::EnginePhase::Starting,
         Phase::BringUp => pb::EnginePhase::BringingUp,
@@ -46,14 +47,14 @@ pub fn phase_to_pb(p: Phase) -> pb::EnginePhase {
 }
 
 /// A slave position from a request (0..=127, the chip's addressing range).
-pub fn slave(v: u32) -> Result<u8, Status> {
+pub(crate) fn slave(v: u32) -> Result<u8, Status> {
     u8::try_from(v).ok().filter(|s| *s < 128).ok_or_else(|| bad_argument("slave", format!("{v} is outside 0..=127")))
 }
 
 /// A slave position from a request that must name a slave on the ring
 /// (`count` found): the chip would only answer "refused" for one that is
 /// not there. Errors name `field`.
-pub fn existing_slave(v: u32, count: usize, field: &'static str) -> Result<u8, Status> {
+pub(crate) fn existing_slave(v: u32, count: usize, field: &'static str) -> Result<u8, Status> {
     let s = slave(v).map_err(|_| bad_argument(field, format!("{v} is outside 0..=127")))?;
     if usize::from(s) >= count {
         return Err(bad_argument(field, format!("slave {s} does not exist ({count} found)")));
@@ -62,113 +63,104 @@ pub fn existing_slave(v: u32, count: usize, field: &'static str) -> Result<u8, S
 }
 
 /// An object index from a request.
-pub fn index(v: u32) -> Result<u16, Status> {
+pub(crate) fn index(v: u32) -> Result<u16, Status> {
     u16::try_from(v).map_err(|_| bad_argument("index", format!("{v:#x} is outside 0..=0xFFFF")))
 }
 
 /// A subindex from a request.
-pub fn subindex(v: u32) -> Result<u8, Status> {
+pub(crate) fn subindex(v: u32) -> Result<u8, Status> {
     u8::try_from(v).map_err(|_| bad_argument("subindex", format!("{v:#x} is outside 0..=0xFF")))
 }
 
-pub use ecmxf_proto::value::{decode_value, type_size};
+pub(crate) use ecmxf_proto::value::{decode_value, type_size};
 
 /// A type from a request field.
-pub fn data_type(v: i32) -> Result<pb::DataType, Status> {
+pub(crate) fn data_type(v: i32) -> Result<pb::DataType, Status> {
     pb::DataType::try_from(v).map_err(|_| bad_argument("data_type", format!("{v} is not a DataType")))
 }
 
 /// Encodes `value` as `t`: raw bytes exactly the type's size (any length
 /// for a string or an unknown type), text only to a string type, numbers
 /// within the type. Errors name `value` (or `data_type`) and say why.
-pub fn encode_value(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, Status> {
+pub(crate) fn encode_value(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, Status> {
     encode(t, value).map_err(|(field, reason)| bad_argument(field, reason))
 }
 
-/// A type's name as users write it: "UNSIGNED16", not "DATA_TYPE_UNSIGNED16".
-pub fn type_name(t: pb::DataType) -> &'static str {
-    t.as_str_name().trim_start_matches("DATA_TYPE_")
+/// A request's value as the master's [`Value`].
+pub(crate) fn domain_value(kind: &pb::value::Kind) -> Value {
+    use pb::value::Kind;
+    match kind {
+        Kind::Boolean(b) => Value::Bool(*b),
+        Kind::Integer(i) => Value::Int(*i),
+        Kind::Unsigned(u) => Value::UInt(*u),
+        Kind::Real(f) => Value::Real(*f),
+        Kind::Text(s) => Value::Text(s.clone()),
+        Kind::Raw(b) => Value::Bytes(b.clone()),
+    }
+}
+
+/// The master's type for an API type (`None`: not known). A string's
+/// length is the value's own: an SDO writes what it is given.
+fn domain_type(t: pb::DataType, value: &pb::value::Kind) -> Option<DataType> {
+    use pb::DataType as T;
+    use pb::value::Kind;
+    let len = match value {
+        Kind::Text(s) => s.len(),
+        Kind::Raw(b) => b.len(),
+        _ => 0,
+    };
+    let len = u16::try_from(len).unwrap_or(u16::MAX);
+    Some(match t {
+        T::Unspecified => return None,
+        T::Boolean => DataType::Bool,
+        T::Integer8 => DataType::Int8,
+        T::Integer16 => DataType::Int16,
+        T::Integer32 => DataType::Int32,
+        T::Integer64 => DataType::Int64,
+        T::Unsigned8 => DataType::UInt8,
+        T::Unsigned16 => DataType::UInt16,
+        T::Unsigned32 => DataType::UInt32,
+        T::Unsigned64 => DataType::UInt64,
+        T::Real32 => DataType::Real32,
+        T::Real64 => DataType::Real64,
+        T::VisibleString => DataType::VisibleString(len),
+        T::OctetString => DataType::OctetString(len),
+    })
 }
 
 /// [`encode_value`] with the failing field and the reason apart, for
 /// callers that put the target in the message (an output entry's name).
-pub fn encode(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, (&'static str, String)> {
-    use pb::DataType as T;
+/// Raw bytes for an object of unknown type go as they are; everything
+/// else is the master's encoding ([`Value::encode`]).
+pub(crate) fn encode(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, (&'static str, String)> {
     use pb::value::Kind;
     let kind = value.kind.as_ref().ok_or(("value", "no value given".to_string()))?;
-    if let Kind::Raw(b) = kind {
-        // Raw bytes are the object's own: exactly its size when the type
-        // says one, never silently cut or padded.
-        return match type_size(t) {
-            Some(n) if b.len() != n => {
-                Err(("value", format!("{} raw bytes given for a {} object, which has {n}", b.len(), type_name(t))))
-            }
-            _ => Ok(b.clone()),
-        };
+    match (domain_type(t, kind), kind) {
+        (None, Kind::Raw(b)) => Ok(b.clone()),
+        (None, Kind::Text(_)) => Err((
+            "value",
+            "text goes only to string objects, and this object's type is not known: \
+             give data_type VISIBLE_STRING, or a raw value"
+                .to_string(),
+        )),
+        (None, _) => Err(("data_type", "the object's type is not known: give data_type, or a raw value".to_string())),
+        (Some(d), _) => domain_value(kind).encode(d, d.bits()).map_err(|e| ("value", e.to_string())),
     }
-    if let Kind::Text(s) = kind {
-        return match t {
-            T::VisibleString | T::OctetString => Ok(s.as_bytes().to_vec()),
-            T::Unspecified => Err((
-                "value",
-                "text goes only to string objects, and this object's type is not known: \
-                 give data_type VISIBLE_STRING, or a raw value"
-                    .to_string(),
-            )),
-            _ => Err(("value", format!("text given for a {} object", type_name(t)))),
-        };
-    }
-    let Some(size) = type_size(t) else {
-        return Err(("data_type", "the object's type is not known: give data_type, or a raw value".to_string()));
-    };
-    let out_of_range = |v: String| ("value", format!("{v} does not fit {}", type_name(t)));
-    let bytes: Vec<u8> = match (t, kind) {
-        (T::Real32, Kind::Real(f)) => (*f as f32).to_le_bytes().to_vec(),
-        (T::Real64, Kind::Real(f)) => f.to_le_bytes().to_vec(),
-        (T::Real32 | T::Real64, Kind::Integer(i)) => return encode(t, &real(*i as f64)),
-        (T::Real32 | T::Real64, Kind::Unsigned(u)) => return encode(t, &real(*u as f64)),
-        (_, Kind::Real(f)) => {
-            return Err(("value", format!("{f} is a real; {} wants an integer", type_name(t))));
-        }
-        (_, Kind::Boolean(v)) => {
-            let mut b = vec![0u8; size];
-            b[0] = u8::from(*v);
-            b
-        }
-        (_, Kind::Integer(i)) => {
-            let signed = matches!(t, T::Integer8 | T::Integer16 | T::Integer32 | T::Integer64);
-            let bits = 8 * size as u32;
-            let fits = if signed {
-                bits == 64 || (*i >= -(1i64 << (bits - 1)) && *i < (1i64 << (bits - 1)))
-            } else {
-                *i >= 0 && (bits == 64 || *i < (1i64 << bits))
-            };
-            if !fits {
-                return Err(out_of_range(i.to_string()));
-            }
-            i.to_le_bytes()[..size].to_vec()
-        }
-        (_, Kind::Unsigned(u)) => {
-            let signed = matches!(t, T::Integer8 | T::Integer16 | T::Integer32 | T::Integer64);
-            let bits = 8 * size as u32 - u32::from(signed);
-            if bits < 64 && *u >= (1u64 << bits) {
-                return Err(out_of_range(u.to_string()));
-            }
-            u.to_le_bytes()[..size].to_vec()
-        }
-        (_, Kind::Raw(_) | Kind::Text(_)) => unreachable!("handled above"),
-    };
-    Ok(bytes)
 }
 
-fn real(f: f64) -> pb::Value {
-    pb::Value { kind: Some(pb::value::Kind::Real(f)) }
+/// A value for an output entry as its bytes: the entry's own type and bit
+/// length ([`Value::encode`]).
+pub(crate) fn encode_entry(
+    e: &crate::master::image::Entry,
+    value: &pb::Value,
+) -> Result<Vec<u8>, (&'static str, String)> {
+    let kind = value.kind.as_ref().ok_or(("value", "no value given".to_string()))?;
+    domain_value(kind).encode(e.data_type, e.bit_length).map_err(|e| ("value", e.to_string()))
 }
 
-/// The natural type of an entry of `bits` bits with no better knowledge.
 /// The API's type for a device's CoE type. BITn travels as UNSIGNED8 (its
 /// bit length says how many bits the image has).
-pub fn pb_type(t: ecmxf_devices::od::DataType) -> pb::DataType {
+pub(crate) fn pb_type(t: ecmxf_devices::od::DataType) -> pb::DataType {
     use ecmxf_devices::od::DataType as D;
     use pb::DataType as T;
     match t {
@@ -185,23 +177,6 @@ pub fn pb_type(t: ecmxf_devices::od::DataType) -> pb::DataType {
         D::Real64 => T::Real64,
         D::VisibleString(_) => T::VisibleString,
         D::OctetString(_) => T::OctetString,
-    }
-}
-
-/// A type of `bits` bits when nothing better is known.
-pub fn type_for_bits(bits: u32, signed: bool) -> pb::DataType {
-    use pb::DataType as T;
-    match (bits, signed) {
-        (1, _) => T::Boolean,
-        (8, false) => T::Unsigned8,
-        (16, false) => T::Unsigned16,
-        (32, false) => T::Unsigned32,
-        (64, false) => T::Unsigned64,
-        (8, true) => T::Integer8,
-        (16, true) => T::Integer16,
-        (32, true) => T::Integer32,
-        (64, true) => T::Integer64,
-        _ => T::OctetString,
     }
 }
 

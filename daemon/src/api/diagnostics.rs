@@ -2,11 +2,9 @@
 //! counters with per-slave AL status.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::diagnostics_server::Diagnostics as DiagnosticsApi;
-use ecmxf_wire::payload::emergency::{CoeEmergencyReply, EMERGENCY_MAX, EmergencyRecord};
 use tokio::sync::broadcast::error::RecvError;
 use tonic::{Request, Response, Status};
 
@@ -16,13 +14,12 @@ use super::convert::{phase_to_pb, state_to_pb};
 use super::master::{counters_pb, list_slaves};
 use super::status::{bad_argument, to_status};
 use super::{BoxStream, Context};
-use crate::master::Master;
-use crate::master::transactions::Immediate;
-use crate::master::{Event, EventKind};
+use crate::master::diagnostics::{EmergencyRecord, HistoryError};
+use crate::master::{Event, EventKind, al_status_text};
 
 /// The `Diagnostics` service.
 #[derive(Debug, Clone)]
-pub struct DiagnosticsService(pub Arc<Context>);
+pub(crate) struct DiagnosticsService(pub Arc<Context>);
 
 fn emergency_pb(r: &EmergencyRecord) -> pb::Emergency {
     pb::Emergency {
@@ -35,18 +32,18 @@ fn emergency_pb(r: &EmergencyRecord) -> pb::Emergency {
     }
 }
 
-/// The chip's last `n` emergency records (empty slots left out), newest first.
-pub async fn emergencies(m: &Master, n: u8, t: Option<Duration>) -> Result<Vec<EmergencyRecord>, Status> {
-    let (_, data) = m.immediate(Immediate::Emergencies(n), t).await.map_err(to_status)?;
-    let reply = CoeEmergencyReply::new(&data).map_err(|e| Status::internal(format!("emergency history: {e}")))?;
-    let mut out: Vec<EmergencyRecord> = reply.records().filter(|r| !r.is_empty()).collect();
-    out.sort_by_key(|r| std::cmp::Reverse(r.number));
-    Ok(out)
+impl From<HistoryError> for Status {
+    fn from(e: HistoryError) -> Self {
+        match e {
+            HistoryError::Engine(e) => to_status(e),
+            HistoryError::Unreadable(_) => Status::internal(e.to_string()),
+        }
+    }
 }
 
 /// An engine event as a message: its sentence as `text`, its numbers in
 /// the typed fields.
-pub fn event_pb(e: &Event) -> pb::Event {
+pub(crate) fn event_pb(e: &Event) -> pb::Event {
     use pb::EventKind as K;
     let mut out = pb::Event { time_ns: e.time_ns, text: e.kind.to_string(), ..pb::Event::default() };
     let kind = match &e.kind {
@@ -106,7 +103,7 @@ pub fn event_pb(e: &Event) -> pb::Event {
             out.slave = (*slave).into();
             out.to_state = state_to_pb(*state) as i32;
             out.al_status_code = (*code).into();
-            out.detail = ecmxf_wire::al_status_text(*code).into();
+            out.detail = al_status_text(*code).into();
             K::AlStatus
         }
         EventKind::FramesDry { pushed, action } => {
@@ -165,12 +162,12 @@ impl DiagnosticsApi for DiagnosticsService {
     ) -> Result<Response<pb::GetEmergenciesResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let n = match request.get_ref().count {
-            0 => EMERGENCY_MAX,
-            c @ 1..=8 => c as u8,
+            0 => None,
+            c @ 1..=8 => Some(c as u8),
             c => return Err(bad_argument("count", format!("{c} records; the chip keeps 1..=8"))),
         };
         let t = caller.deadline;
-        let records = bounded(&caller, emergencies(&self.0.master, n, t)).await?;
+        let records = bounded(&caller, self.0.master.emergency_history(n, t)).await?;
         let from =
             |source: &'static str, r: &EmergencyRecord| pb::Emergency { source: source.into(), ..emergency_pb(r) };
         let mut out: Vec<pb::Emergency> = records.iter().map(|r| from("chip", r)).collect();

@@ -20,7 +20,7 @@ use super::status;
 
 /// Wraps a service in [`WithErrorDetails`].
 #[derive(Clone, Copy, Debug, Default)]
-pub struct ErrorDetailsLayer;
+pub(crate) struct ErrorDetailsLayer;
 
 impl<S> tower_layer::Layer<S> for ErrorDetailsLayer {
     type Service = WithErrorDetails<S>;
@@ -32,7 +32,7 @@ impl<S> tower_layer::Layer<S> for ErrorDetailsLayer {
 
 /// Completes the error status of every answer of the inner service.
 #[derive(Clone, Debug)]
-pub struct WithErrorDetails<S>(S);
+pub(crate) struct WithErrorDetails<S>(S);
 
 impl<S, B> tower_service::Service<http::Request<B>> for WithErrorDetails<S>
 where

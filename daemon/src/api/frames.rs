@@ -26,11 +26,11 @@ use crate::master::frame_claims::ClaimError;
 use crate::master::{FrameError, FrameProducer, MAX_STREAMS, Played};
 
 /// How often the daemon reports credits and progress.
-pub const REPORT_EVERY: Duration = Duration::from_millis(5);
+pub(crate) const REPORT_EVERY: Duration = Duration::from_millis(5);
 /// Queue length when the client does not say.
-pub const DEFAULT_QUEUE: u32 = 1024;
+pub(crate) const DEFAULT_QUEUE: u32 = 1024;
 /// The longest queue a client may ask for.
-pub const MAX_QUEUE: u32 = 65_536;
+pub(crate) const MAX_QUEUE: u32 = 65_536;
 /// How long the daemon waits, after the client's last frame, for the
 /// queue to play out before it ends the stream.
 const DRAIN_LIMIT: Duration = Duration::from_secs(10);
@@ -51,7 +51,7 @@ fn frame_range(ctx: &Context, first: &pb::FrameBatch) -> Result<(usize, usize), 
     let mut range: Option<(usize, usize)> = None;
     for s in slaves {
         let slave = ctx.slave(s)?;
-        if !ctx.leases.owns(&first.lease_id, slave) {
+        if !ctx.master.leases().owns(&first.lease_id, slave) {
             return Err(Status::permission_denied(format!(
                 "streaming frames to slave {s} needs a lease on it: {:?} does not own it (see AcquireLease)",
                 first.lease_id
@@ -183,7 +183,7 @@ async fn next_input(inputs: &mut Option<tokio::sync::broadcast::Receiver<Arc<Inp
 }
 
 /// Serves one `StreamFrames` call.
-pub async fn serve(
+pub(crate) async fn serve(
     ctx: Arc<Context>,
     mut input: Streaming<pb::FrameBatch>,
 ) -> Result<BoxStream<pb::FrameReport>, Status> {
@@ -234,7 +234,7 @@ pub async fn serve(
             tokio::select! {
                 msg = input.message(), if draining.is_none() => match msg {
                     Ok(Some(m)) => {
-                        if ctx.leases.keep_alive(&lease).is_err() {
+                        if ctx.master.leases().keep_alive(&lease).is_err() {
                             let e = Status::permission_denied(format!("lease {lease:?} is gone: the stream ends"));
                             let _ = tx.send(Err(e)).await;
                             return;

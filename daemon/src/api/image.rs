@@ -8,7 +8,7 @@ use super::convert::{decode_value, pb_type};
 use crate::master::image::{Entry, Image, read_bits};
 
 /// The message form.
-pub fn to_pb(image: &Image) -> pb::ProcessImage {
+pub(crate) fn to_pb(image: &Image) -> pb::ProcessImage {
     pb::ProcessImage {
         output_bytes: image.output_bytes,
         input_bytes: image.input_bytes,
@@ -34,12 +34,12 @@ pub fn to_pb(image: &Image) -> pb::ProcessImage {
 }
 
 /// An entry's type as the API names it.
-pub fn entry_type(e: &Entry) -> pb::DataType {
+pub(crate) fn entry_type(e: &Entry) -> pb::DataType {
     pb_type(e.data_type)
 }
 
 /// An entry's value in an image.
-pub fn entry_value(e: &Entry, image: &[u8]) -> pb::Value {
+pub(crate) fn entry_value(e: &Entry, image: &[u8]) -> pb::Value {
     let raw = read_bits(image, e.bit_offset, e.bit_length);
     decode_value(entry_type(e), &raw).ok().flatten().unwrap_or(pb::Value { kind: Some(pb::value::Kind::Raw(raw)) })
 }

@@ -8,7 +8,7 @@ use tonic::Status;
 use crate::master::{Lease, LeaseError};
 
 /// The message of a lease.
-pub fn to_pb(l: &Lease) -> pb::Lease {
+pub(crate) fn to_pb(l: &Lease) -> pb::Lease {
     pb::Lease {
         id: l.id.clone(),
         slaves: l.slaves.iter().map(|&s| s.into()).collect(),
@@ -19,7 +19,7 @@ pub fn to_pb(l: &Lease) -> pb::Lease {
 /// The code of a refusal: another holder, a write outside the lease or
 /// under no lease is PERMISSION_DENIED; an unknown id NOT_FOUND; a byte of
 /// no slave INVALID_ARGUMENT (`offset`); the engine's own errors as usual.
-pub fn status(e: LeaseError) -> Status {
+pub(crate) fn status(e: LeaseError) -> Status {
     match e {
         LeaseError::Write(e) => super::status::to_status(e),
         LeaseError::NoSlave(_) => super::status::bad_argument("offset", e.to_string()),

@@ -8,9 +8,6 @@ use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::master_server::Master as MasterApi;
 use ecmxf_proto::v1::slaves_server::Slaves as SlavesApi;
 use ecmxf_proto::v1::state_server::State as StateApi;
-use ecmxf_wire::payload::slave_info::SlaveInfoCode;
-use ecmxf_wire::payload::state::SlaveSelector;
-use ecmxf_wire::{EcatState, al_status_text};
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
@@ -19,15 +16,16 @@ use super::convert::{phase_to_pb, state_from_pb, state_to_pb};
 use super::status::to_status;
 use super::{Context, wait_budget};
 use crate::config::SlaveConfig;
-use crate::master::Master;
+use crate::master::diagnostics::{ErrorFlags, StatusFlags};
+use crate::master::states::{SlaveSelector, selector};
+use crate::master::{Master, al_status_text};
 
 /// The `Master` service.
 #[derive(Debug, Clone)]
-pub struct MasterService(pub Arc<Context>);
+pub(crate) struct MasterService(pub Arc<Context>);
 
 /// The status message from the engine's snapshot.
-pub fn status_pb(m: &Master) -> pb::MasterStatus {
-    use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
+pub(crate) fn status_pb(m: &Master) -> pb::MasterStatus {
     let s = m.status();
     let v = m.verdict(&s);
     let latency = m.output_latency();
@@ -58,7 +56,7 @@ pub fn status_pb(m: &Master) -> pb::MasterStatus {
 }
 
 /// The counters from the engine's snapshot.
-pub fn counters_pb(s: &crate::master::Snapshot) -> pb::Counters {
+pub(crate) fn counters_pb(s: &crate::master::Snapshot) -> pb::Counters {
     pb::Counters {
         crc_errors: s.crc_errors,
         wkc_errors: s.wkc_errors,
@@ -149,12 +147,7 @@ fn sparkplug_pb(m: &Master) -> Option<pb::SparkplugStatus> {
 
 /// The `Slaves` service.
 #[derive(Debug, Clone)]
-pub struct SlavesService(pub Arc<Context>);
-
-/// One numeric item of slave information, read live (SLV_INFO_GET 15).
-async fn number(m: &Master, slave: u8, item: SlaveInfoCode) -> Result<u64, Status> {
-    m.slave_number(slave, item).await.map(u64::from).map_err(to_status)
-}
+pub(crate) struct SlavesService(pub Arc<Context>);
 
 /// What differs between a found slave and its expectation ("" if nothing).
 fn mismatch(found: &pb::Slave, expected: &SlaveConfig) -> String {
@@ -174,13 +167,13 @@ fn mismatch(found: &pb::Slave, expected: &SlaveConfig) -> String {
 }
 
 /// Every slave, read live from the chip, compared with the configuration.
-pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::ListSlavesResponse, Status> {
+pub(crate) async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::ListSlavesResponse, Status> {
     let m = &ctx.master;
     let layout = m.layout();
     let config = m.config();
     // No bring-up has found the network yet: nothing is known of the
     // slaves, so none is "missing"; the reason is bring-up's (which names
-    // the slave that refused, issue 27).
+    // the slave that refused).
     let phase = m.status().phase;
     if layout.slaves.is_empty() && phase != crate::master::Phase::Running {
         let why = crate::master::NotRunning::Phase { phase, last_error: m.last_error() };
@@ -188,40 +181,29 @@ pub async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::List
     }
     let mut slaves = Vec::with_capacity(layout.slaves.len());
     for (i, s) in layout.slaves.iter().enumerate() {
-        let p = i as u8;
-        let state = EcatState::from_u8(number(m, p, SlaveInfoCode::State).await? as u8);
-        let al = number(m, p, SlaveInfoCode::AlStatus).await? as u16;
-        let (vendor_id, product_code, revision, name) = if fresh_identity {
-            let name = m.slave_name(p).await.map_err(to_status)?;
-            (
-                number(m, p, SlaveInfoCode::VendorId).await? as u32,
-                number(m, p, SlaveInfoCode::ProductCode).await? as u32,
-                number(m, p, SlaveInfoCode::Revision).await? as u32,
-                name,
-            )
-        } else {
-            (s.vendor_id, s.product_code, s.revision, s.name.clone())
-        };
+        let live = m.slave_reading(i as u8, fresh_identity).await.map_err(to_status)?;
+        let ((vendor_id, product_code, revision), name) =
+            live.identity.unwrap_or_else(|| ((s.vendor_id, s.product_code, s.revision), s.name.clone()));
         let mut slave = pb::Slave {
             position: i as u32,
-            alias: number(m, p, SlaveInfoCode::Alias).await? as u32,
-            configured_address: number(m, p, SlaveInfoCode::ConfiguredAddress).await? as u32,
+            alias: live.alias,
+            configured_address: live.configured_address,
             vendor_id,
             product_code,
             revision,
             name,
-            state: state_to_pb(state) as i32,
-            al_status_code: al.into(),
-            al_status_text: al_status_text(al).into(),
+            state: state_to_pb(live.state) as i32,
+            al_status_code: live.al_status.into(),
+            al_status_text: al_status_text(live.al_status).into(),
             output_bytes: s.rx_bytes as u32,
             output_offset: s.rx_offset as u32,
             input_bytes: s.tx_bytes as u32,
             input_offset: s.tx_offset as u32,
             dc: Some(pb::DcInfo {
-                supported: number(m, p, SlaveInfoCode::HasDc).await? != 0,
-                active: number(m, p, SlaveInfoCode::DcActive).await? != 0,
-                cycle_ns: number(m, p, SlaveInfoCode::DcCycle).await? as u32,
-                shift_ns: number(m, p, SlaveInfoCode::DcShift).await? as u32 as i32,
+                supported: live.dc_supported,
+                active: live.dc_active,
+                cycle_ns: live.dc_cycle_ns,
+                shift_ns: live.dc_shift_ns,
             }),
             expected: None,
             mismatch: String::new(),
@@ -271,13 +253,11 @@ impl SlavesApi for SlavesService {
 
 /// The `State` service.
 #[derive(Debug, Clone)]
-pub struct StateService(pub Arc<Context>);
+pub(crate) struct StateService(pub Arc<Context>);
 
-fn selector(slave_field: Option<u32>, count: usize) -> Result<SlaveSelector, Status> {
-    match slave_field {
-        None => Ok(SlaveSelector::All),
-        Some(v) => Ok(SlaveSelector::One(super::convert::existing_slave(v, count, "slave")?)),
-    }
+fn target(slave_field: Option<u32>, count: usize) -> Result<SlaveSelector, Status> {
+    let slave = slave_field.map(|v| super::convert::existing_slave(v, count, "slave")).transpose()?;
+    Ok(selector(slave))
 }
 
 #[tonic::async_trait]
@@ -285,45 +265,32 @@ impl StateApi for StateService {
     async fn get_state(&self, request: Request<pb::GetStateRequest>) -> Result<Response<pb::GetStateResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let m = &self.0.master;
-        let target = selector(request.get_ref().slave, m.layout().slaves.len())?;
+        let target = target(request.get_ref().slave, m.layout().slaves.len())?;
         let t = caller.deadline;
-        let out = bounded(&caller, async {
-            let state = m.get_state(target, t).await?;
-            let mut slaves = Vec::new();
-            let (mut al_code, mut al_text) = (0u32, String::new());
-            if let SlaveSelector::One(i) = target {
-                let al = number(m, i, SlaveInfoCode::AlStatus).await? as u16;
-                al_code = al.into();
-                al_text = ecmxf_wire::al_status_text(al).into();
-            }
-            if target == SlaveSelector::All {
-                for i in 0..m.layout().slaves.len() as u8 {
-                    let s = EcatState::from_u8(number(m, i, SlaveInfoCode::State).await? as u8);
-                    let al = number(m, i, SlaveInfoCode::AlStatus).await? as u16;
-                    slaves.push(pb::SlaveState {
-                        position: i.into(),
-                        state: state_to_pb(s) as i32,
-                        al_status_code: al.into(),
-                        al_status_text: al_status_text(al).into(),
-                    });
-                }
-            }
-            Ok::<_, Status>(pb::GetStateResponse {
-                state: state_to_pb(state) as i32,
-                slaves,
-                al_status_code: al_code,
-                al_status_text: al_text,
+        let report = bounded(&caller, m.state_report(target, t)).await?;
+        let slaves = report
+            .slaves
+            .iter()
+            .map(|s| pb::SlaveState {
+                position: s.position.into(),
+                state: state_to_pb(s.state) as i32,
+                al_status_code: s.al_status.into(),
+                al_status_text: al_status_text(s.al_status).into(),
             })
-        })
-        .await?;
-        Ok(Response::new(out))
+            .collect();
+        Ok(Response::new(pb::GetStateResponse {
+            state: state_to_pb(report.state) as i32,
+            slaves,
+            al_status_code: report.al_status.map_or(0, u32::from),
+            al_status_text: report.al_status.map(|al| al_status_text(al).into()).unwrap_or_default(),
+        }))
     }
 
     async fn set_state(&self, request: Request<pb::SetStateRequest>) -> Result<Response<pb::SetStateResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let m = &self.0.master;
         let r = request.get_ref();
-        let target = selector(r.slave, m.layout().slaves.len())?;
+        let target = target(r.slave, m.layout().slaves.len())?;
         let state = state_from_pb(r.state, "state")?;
         let budget = wait_budget(&request, r.timeout_ms, m.default_timeout);
         let wait = r.wait;

@@ -18,43 +18,38 @@ use tonic::{Request, Status};
 
 use crate::master::Master;
 
-pub mod admin;
-pub mod auth;
-pub mod cia402;
-pub mod convert;
-pub mod diagnostics;
-pub mod error_details;
-pub mod frames;
-pub mod image;
-pub mod leases;
-pub mod master;
-pub mod paced;
-pub mod pdo;
-pub mod peripherals;
-pub mod sdo;
-pub mod server;
-pub mod sii;
-pub mod status;
+pub(crate) mod admin;
+pub(crate) mod auth;
+pub(crate) mod cia402;
+pub(crate) mod convert;
+pub(crate) mod diagnostics;
+pub(crate) mod error_details;
+pub(crate) mod frames;
+pub(crate) mod image;
+pub(crate) mod leases;
+pub(crate) mod master;
+pub(crate) mod paced;
+pub(crate) mod pdo;
+pub(crate) mod peripherals;
+pub(crate) mod sdo;
+pub(crate) mod server;
+pub(crate) mod sii;
+pub(crate) mod status;
 
 use auth::{Authenticator, Caller, Role};
 
 /// A server stream as the services return it.
-pub type BoxStream<T> = std::pin::Pin<Box<dyn tokio_stream::Stream<Item = Result<T, Status>> + Send>>;
+pub(crate) type BoxStream<T> = std::pin::Pin<Box<dyn tokio_stream::Stream<Item = Result<T, Status>> + Send>>;
 
 /// What every service shares.
 #[derive(Debug)]
-pub struct Context {
+pub(crate) struct Context {
     /// The engine.
     pub master: Arc<Master>,
     /// Roles (replaced whole on SIGHUP, see [`Context::reload_roles`]).
     pub auth: std::sync::RwLock<Authenticator>,
     /// SDO transfer durations, for the metrics endpoint.
     pub sdo_latency: Arc<crate::metrics::Histogram>,
-    /// Output leases: the master's table (domain state), shown through
-    /// [`leases`].
-    pub leases: Arc<crate::master::Leases>,
-    /// Default lease time-to-live.
-    pub lease_ttl: Duration,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
     pub stream_max_age: Duration,
     /// Set when the daemon stops: every open server stream ends with
@@ -64,13 +59,11 @@ pub struct Context {
 
 impl Context {
     /// A context over `master`.
-    pub fn new(master: Arc<Master>, config: &crate::config::ApiConfig, own_uid: u32) -> Arc<Self> {
+    pub(crate) fn new(master: Arc<Master>, config: &crate::config::ApiConfig, own_uid: u32) -> Arc<Self> {
         Arc::new(Self {
             master,
             auth: std::sync::RwLock::new(Authenticator::new(config, own_uid)),
             sdo_latency: Arc::default(),
-            leases: Arc::default(),
-            lease_ttl: Duration::from_millis(config.lease_ttl_ms.into()),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             stopping: tokio::sync::watch::Sender::new(false),
         })
@@ -78,7 +71,7 @@ impl Context {
 
     /// Ends every open server stream with UNAVAILABLE "daemon stopping"
     /// (see [`Context::until_stopping`]); called as shutdown begins.
-    pub fn stop_streams(&self) {
+    pub(crate) fn stop_streams(&self) {
         self.stopping.send_replace(true);
     }
 
@@ -86,7 +79,7 @@ impl Context {
     /// reason STOPPING, and the end, so a client (ecmxfctl events, the
     /// Python package) tells a stopping daemon from a broken connection.
     /// A stream that ends by itself first ends as it would.
-    pub fn until_stopping<T: Send + 'static>(&self, inner: BoxStream<T>) -> BoxStream<T> {
+    pub(crate) fn until_stopping<T: Send + 'static>(&self, inner: BoxStream<T>) -> BoxStream<T> {
         use tokio_stream::StreamExt;
         let stop = self.stopping.subscribe();
         Box::pin(futures_util::stream::unfold(Some((inner, stop)), |state| async move {
@@ -106,19 +99,19 @@ impl Context {
     /// A slave position from a request that must name a slave on the ring
     /// (INVALID_ARGUMENT naming `slave` otherwise: the chip would only
     /// answer "refused" for a slave that is not there).
-    pub fn slave(&self, v: u32) -> Result<u8, Status> {
+    pub(crate) fn slave(&self, v: u32) -> Result<u8, Status> {
         convert::existing_slave(v, self.master.layout().slaves.len(), "slave")
     }
 
     /// Takes the `[api]` roles, tokens and client certificates of a reloaded
     /// configuration; calls already authorized keep their role.
-    pub fn reload_roles(&self, config: &crate::config::ApiConfig) {
+    pub(crate) fn reload_roles(&self, config: &crate::config::ApiConfig) {
         let own_uid = nix::unistd::getuid().as_raw();
         *self.auth.write().unwrap_or_else(|e| e.into_inner()) = Authenticator::new(config, own_uid);
     }
 
     /// Authorizes a call for `role`.
-    pub fn authorize<T>(&self, request: &Request<T>, role: Role) -> Result<Caller, Status> {
+    pub(crate) fn authorize<T>(&self, request: &Request<T>, role: Role) -> Result<Caller, Status> {
         self.auth.read().unwrap_or_else(|e| e.into_inner()).authorize(request, role)
     }
 }
@@ -128,7 +121,7 @@ impl Context {
 /// DEADLINE_EXCEEDED: tonic's own deadline layer, which fires at the exact
 /// deadline, answers CANCELLED "Timeout expired" (it still may, when the
 /// host stalls longer than the margin). `None` when the client gave none.
-pub fn deadline<T>(request: &Request<T>) -> Option<Duration> {
+pub(crate) fn deadline<T>(request: &Request<T>) -> Option<Duration> {
     let v = request.metadata().get("grpc-timeout")?.to_str().ok()?;
     let (digits, unit) = v.split_at(v.len().checked_sub(1)?);
     let n: u64 = digits.parse().ok()?;
@@ -149,7 +142,7 @@ pub fn deadline<T>(request: &Request<T>) -> Option<Duration> {
 /// SII range or a scan cannot outlive it). At the deadline `work` is
 /// dropped, which withdraws its requests from the engine, and the caller
 /// gets DEADLINE_EXCEEDED.
-pub async fn bounded<T, E: Into<Status>>(
+pub(crate) async fn bounded<T, E: Into<Status>>(
     caller: &Caller,
     work: impl std::future::Future<Output = Result<T, E>>,
 ) -> Result<T, Status> {
@@ -167,7 +160,7 @@ pub async fn bounded<T, E: Into<Status>>(
 }
 
 /// The shorter of the client's deadline and `timeout_ms` (0: none).
-pub fn wait_budget<T>(request: &Request<T>, timeout_ms: u32, default: Duration) -> Duration {
+pub(crate) fn wait_budget<T>(request: &Request<T>, timeout_ms: u32, default: Duration) -> Duration {
     let asked = (timeout_ms > 0).then(|| Duration::from_millis(timeout_ms.into()));
     match (deadline(request), asked) {
         (Some(a), Some(b)) => a.min(b),

@@ -24,12 +24,12 @@ use std::task::{Context, Poll};
 use tokio_stream::Stream;
 
 /// Items handed on before the stream pauses once.
-pub const BURST: u32 = 32;
+pub(crate) const BURST: u32 = 32;
 
 /// A stream that pauses (pending, woken at once) after every [`BURST`]
 /// items in a row.
 #[derive(Debug)]
-pub struct Paced<S> {
+pub(crate) struct Paced<S> {
     inner: S,
     burst: u32,
     in_a_row: u32,
@@ -37,12 +37,12 @@ pub struct Paced<S> {
 
 impl<S> Paced<S> {
     /// Paces `inner` with the default burst.
-    pub fn new(inner: S) -> Self {
+    pub(crate) fn new(inner: S) -> Self {
         Self::with_burst(inner, BURST)
     }
 
     /// Paces `inner`, pausing after `burst` items (at least 1).
-    pub fn with_burst(inner: S, burst: u32) -> Self {
+    pub(crate) fn with_burst(inner: S, burst: u32) -> Self {
         Self { inner, burst: burst.max(1), in_a_row: 0 }
     }
 }

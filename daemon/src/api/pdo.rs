@@ -12,7 +12,7 @@ use tonic::{Request, Response, Status, Streaming};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{encode, existing_slave, pb_type};
+use super::convert::{encode_entry, existing_slave, pb_type};
 use super::image::entry_value;
 use super::leases;
 use super::status::{bad_argument, to_status};
@@ -24,7 +24,7 @@ use crate::master::pdos::{PdoDescription, PdoSource};
 
 /// The `ProcessData` service.
 #[derive(Debug, Clone)]
-pub struct ProcessDataService(pub Arc<Context>);
+pub(crate) struct ProcessDataService(pub Arc<Context>);
 
 fn mapping_pb(list: &[PdoDescription]) -> Vec<pb::Pdo> {
     list.iter()
@@ -87,7 +87,12 @@ fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>,
 /// Applies client writes to the shadow image and sends the touched span as
 /// one write under the lease (so it reaches the slaves in one frame). A bad
 /// write rejects the whole request and changes nothing.
-pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::OutputWrite]) -> Result<(), Status> {
+pub(crate) fn apply_writes(
+    ctx: &Context,
+    image: &Image,
+    lease_id: &str,
+    writes: &[pb::OutputWrite],
+) -> Result<(), Status> {
     if writes.is_empty() {
         return Ok(());
     }
@@ -97,7 +102,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
         match &w.target {
             Some(pb::output_write::Target::Entry(name)) => {
                 let e = output_entry(image, name).map_err(write_status)?;
-                let bytes = encode(super::image::entry_type(e), value)
+                let bytes = encode_entry(e, value)
                     .map_err(|(_, why)| bad_argument("writes.value", format!("entry {name:?}: {why}")))?;
                 staging.entry(e, &bytes).map_err(write_status)?;
             }
@@ -110,7 +115,7 @@ pub fn apply_writes(ctx: &Context, image: &Image, lease_id: &str, writes: &[pb::
             None => return Err(bad_argument("writes.target", "give an entry name or an offset")),
         }
     }
-    staging.commit(&ctx.leases, lease_id).map_err(write_status)
+    staging.commit(ctx.master.leases(), lease_id).map_err(write_status)
 }
 
 /// The status of a refused write: the caller's field INVALID_ARGUMENT, a
@@ -133,19 +138,19 @@ type SampleStream = super::BoxStream<pb::InputSample>;
 /// caller), so what a slow subscriber gets is always recent, never a queue
 /// of seconds-old frames.
 #[derive(Clone, Copy, Debug)]
-pub struct AgeGate {
+pub(crate) struct AgeGate {
     max_age_ns: u64,
 }
 
 impl AgeGate {
     /// A gate that admits samples up to `max_age` old.
-    pub fn new(max_age: Duration) -> Self {
+    pub(crate) fn new(max_age: Duration) -> Self {
         Self { max_age_ns: max_age.as_nanos() as u64 }
     }
 
     /// Whether a frame received at `time_ns` may still go out at `now_ns`
     /// (both on the engine's clock).
-    pub fn admit(&self, time_ns: u64, now_ns: u64) -> bool {
+    pub(crate) fn admit(&self, time_ns: u64, now_ns: u64) -> bool {
         now_ns.saturating_sub(time_ns) <= self.max_age_ns
     }
 }
@@ -340,19 +345,19 @@ impl ProcessDataApi for ProcessDataService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let r = request.get_ref();
         let ttl = match r.ttl_ms {
-            0 => self.0.lease_ttl,
-            100..=60_000 => Duration::from_millis(r.ttl_ms.into()),
+            0 => None,
+            100..=60_000 => Some(Duration::from_millis(r.ttl_ms.into())),
             v => return Err(bad_argument("ttl_ms", format!("{v} ms is outside 100..=60000"))),
         };
         let count = self.0.master.layout().slaves.len();
         let slaves = r.slaves.iter().map(|&s| existing_slave(s, count, "slaves")).collect::<Result<Vec<u8>, _>>()?;
-        let lease = self.0.leases.acquire(&self.0.master, &slaves, ttl, &caller.who).map_err(leases::status)?;
+        let lease = self.0.master.acquire_lease(&slaves, ttl, &caller.who).map_err(leases::status)?;
         Ok(Response::new(leases::to_pb(&lease)))
     }
 
     async fn keep_alive(&self, request: Request<pb::KeepAliveRequest>) -> Result<Response<pb::Lease>, Status> {
         self.0.authorize(&request, Role::Operator)?;
-        let lease = self.0.leases.keep_alive(&request.get_ref().lease_id).map_err(leases::status)?;
+        let lease = self.0.master.leases().keep_alive(&request.get_ref().lease_id).map_err(leases::status)?;
         Ok(Response::new(leases::to_pb(&lease)))
     }
 
@@ -361,7 +366,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::ReleaseLeaseRequest>,
     ) -> Result<Response<pb::ReleaseLeaseResponse>, Status> {
         self.0.authorize(&request, Role::Operator)?;
-        self.0.leases.release(&request.get_ref().lease_id).map_err(leases::status)?;
+        self.0.master.leases().release(&request.get_ref().lease_id).map_err(leases::status)?;
         Ok(Response::new(pb::ReleaseLeaseResponse {}))
     }
 

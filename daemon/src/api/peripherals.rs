@@ -1,52 +1,38 @@
 //! `Peripherals` service: the chip's GPIO, ADC, DAC and encoder input.
 
 use std::sync::Arc;
-use std::time::Duration;
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::peripherals_server::Peripherals as PeripheralsApi;
-use ecmxf_wire::flags::GpioMask;
-use ecmxf_wire::payload::gpio::{GpioConfig, GpioFunc, GpioMode, GpioPull};
-use ecmxf_wire::payload::periph::{AdcInput, AdcOp, DacOp, DacTrigger, QeiMode, QeiOp};
 use tonic::{Request, Response, Status};
 
 use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::status::{bad_argument, to_status};
-
-use crate::master::transactions::Immediate;
-
-/// Lines 0..=19.
-const ALL_LINES: u32 = 0x000F_FFFF;
+use crate::master::peripherals::{AdcError, DAC_MAX, GPIO_LINES, GpioLevels, GpioMode, GpioPull, QeiAction};
 
 /// The `Peripherals` service.
 #[derive(Debug, Clone)]
-pub struct PeripheralsService(pub Arc<Context>);
-
-fn word(data: &[u8]) -> u32 {
-    let mut b = [0u8; 4];
-    let n = data.len().min(4);
-    b[..n].copy_from_slice(&data[..n]);
-    u32::from_le_bytes(b)
-}
+pub(crate) struct PeripheralsService(pub Arc<Context>);
 
 fn lines(v: u32, field: &'static str) -> Result<u32, Status> {
-    if v & !ALL_LINES != 0 {
+    if v & !GPIO_LINES != 0 {
         return Err(bad_argument(field, format!("{v:#x} names lines above 19")));
     }
     Ok(v)
 }
 
-impl PeripheralsService {
-    async fn call(&self, c: Immediate, t: Option<Duration>) -> Result<Vec<u8>, Status> {
-        self.0.master.immediate(c, t).await.map(|(_, d)| d).map_err(to_status)
-    }
+fn levels_pb(l: GpioLevels) -> pb::GpioLevels {
+    pb::GpioLevels { levels: l.levels, interrupt_flags: l.interrupt_flags }
+}
 
-    async fn levels(&self, t: Option<Duration>) -> Result<pb::GpioLevels, Status> {
-        let levels = word(&self.call(Immediate::Gpio(GpioFunc::ExtGetValue), t).await?);
-        let flags = word(&self.call(Immediate::Gpio(GpioFunc::ExtGetIntFlag), t).await?);
-        Ok(pb::GpioLevels { levels: levels & ALL_LINES, interrupt_flags: flags & ALL_LINES })
+impl From<AdcError> for Status {
+    fn from(e: AdcError) -> Self {
+        match e {
+            AdcError::Engine(e) => to_status(e),
+            AdcError::NotComplete => Status::deadline_exceeded(e.to_string()),
+        }
     }
 }
 
@@ -73,17 +59,7 @@ impl PeripheralsApi for PeripheralsService {
             Err(_) => return Err(bad_argument("pull", format!("{} is not a GpioPull", r.pull))),
         };
         let t = caller.deadline;
-        bounded(&caller, async {
-            if l & 0xFFFF != 0 {
-                self.call(Immediate::GpioConfig(GpioConfig::SetMode { lines: l as u16, mode, pull }), t).await?;
-            }
-            if l >> 16 != 0 {
-                self.call(Immediate::GpioConfig(GpioConfig::SetModeExt { lines: (l >> 16) as u8, mode, pull }), t)
-                    .await?;
-            }
-            Ok::<_, Status>(())
-        })
-        .await?;
+        bounded(&caller, self.0.master.configure_gpio(l, mode, pull, t)).await?;
         Ok(Response::new(pb::ConfigureGpioResponse {}))
     }
 
@@ -91,55 +67,32 @@ impl PeripheralsApi for PeripheralsService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let l = lines(request.get_ref().levels, "levels")?;
         let t = caller.deadline;
-        let out = bounded(&caller, async {
-            self.call(Immediate::Gpio(GpioFunc::ExtSetValue { values: GpioMask(l) }), t).await?;
-            self.levels(t).await
-        })
-        .await?;
-        Ok(Response::new(out))
+        let out = bounded(&caller, self.0.master.set_gpio(l, t)).await?;
+        Ok(Response::new(levels_pb(out)))
     }
 
     async fn get_gpio(&self, request: Request<pb::GetGpioRequest>) -> Result<Response<pb::GpioLevels>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let t = caller.deadline;
-        Ok(Response::new(bounded(&caller, self.levels(t)).await?))
+        Ok(Response::new(levels_pb(bounded(&caller, self.0.master.gpio_levels(t)).await?)))
     }
 
     async fn read_adc(&self, request: Request<pb::ReadAdcRequest>) -> Result<Response<pb::ReadAdcResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let input = if request.get_ref().differential { AdcInput::Differential } else { AdcInput::SingleEnded };
+        let differential = request.get_ref().differential;
         let t = caller.deadline;
-        let value = bounded(&caller, async {
-            self.call(Immediate::Adc(AdcOp::Open(input)), t).await?;
-            self.call(Immediate::Adc(AdcOp::ConfigSampleModule), t).await?;
-            self.call(Immediate::Adc(AdcOp::StartConv), t).await?;
-            for _ in 0..50 {
-                if word(&self.call(Immediate::Adc(AdcOp::GetDataValidFlag), t).await?) != 0 {
-                    return Ok(word(&self.call(Immediate::Adc(AdcOp::GetConvData), t).await?) & 0x0FFF);
-                }
-                // The chip raises no event for a finished conversion (v049
-                // ADC commands): its flag is asked again after a ms, the
-                // conversion's own time.
-                tokio::time::sleep(Duration::from_millis(1)).await;
-            }
-            Err(Status::deadline_exceeded("the ADC conversion did not complete in 50 ms"))
-        })
-        .await?;
-        Ok(Response::new(pb::ReadAdcResponse { value }))
+        let value = bounded(&caller, self.0.master.read_adc(differential, t)).await?;
+        Ok(Response::new(pb::ReadAdcResponse { value: value.into() }))
     }
 
     async fn write_dac(&self, request: Request<pb::WriteDacRequest>) -> Result<Response<pb::WriteDacResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let v = request.get_ref().value;
-        if v > 4095 {
+        if v > u32::from(DAC_MAX) {
             return Err(bad_argument("value", format!("{v} is outside 0..=4095")));
         }
         let t = caller.deadline;
-        bounded(&caller, async {
-            self.call(Immediate::Dac(DacOp::Open(DacTrigger::OnSetData)), t).await?;
-            self.call(Immediate::Dac(DacOp::SetData(v as u16)), t).await
-        })
-        .await?;
+        bounded(&caller, self.0.master.write_dac(v as u16, t)).await?;
         Ok(Response::new(pb::WriteDacResponse {}))
     }
 
@@ -148,22 +101,14 @@ impl PeripheralsApi for PeripheralsService {
             .map_err(|_| bad_argument("action", format!("{} is not a QeiAction", request.get_ref().action)))?;
         let role = if action == pb::QeiAction::Read { Role::Observer } else { Role::Operator };
         let caller = self.0.authorize(&request, role)?;
+        let action = match action {
+            pb::QeiAction::Read => QeiAction::Read,
+            pb::QeiAction::Start => QeiAction::Start,
+            pb::QeiAction::Stop => QeiAction::Stop,
+            pb::QeiAction::Unspecified => return Err(bad_argument("action", "give READ, START or STOP")),
+        };
         let t = caller.deadline;
-        let count = bounded(&caller, async {
-            match action {
-                pb::QeiAction::Start => {
-                    self.call(Immediate::Qei(QeiOp::Open(QeiMode::X4Free)), t).await?;
-                    self.call(Immediate::Qei(QeiOp::Start), t).await?;
-                }
-                pb::QeiAction::Stop => {
-                    self.call(Immediate::Qei(QeiOp::Stop), t).await?;
-                }
-                pb::QeiAction::Read => {}
-                pb::QeiAction::Unspecified => return Err(bad_argument("action", "give READ, START or STOP")),
-            }
-            Ok(word(&self.call(Immediate::Qei(QeiOp::GetCount), t).await?))
-        })
-        .await?;
+        let count = bounded(&caller, self.0.master.qei(action, t)).await?;
         Ok(Response::new(pb::QeiResponse { count }))
     }
 }

@@ -17,7 +17,7 @@ use crate::master::objects::{KNOWN, axis_index, lookup};
 
 /// The `Sdo` service.
 #[derive(Debug, Clone)]
-pub struct SdoService(pub Arc<Context>);
+pub(crate) struct SdoService(pub Arc<Context>);
 
 /// The type to use for an object: the caller's, else the one the device
 /// described (SDO Information, when read before), else the standard one.

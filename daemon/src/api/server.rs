@@ -143,11 +143,11 @@ const SERVICES: [&str; 12] = [
 ];
 
 /// The largest request body the daemon decodes: the largest legitimate
-/// one is a whole FoE file (the chip stages at most `FOE_FLASH_SIZE`, 256
+/// one is a whole FoE file (the chip stages at most `FOE_MAX_FILE`, 256
 /// KiB) or an SII image (at most 64 KiB), plus room for the message around
 /// it. A larger body is refused with OUT_OF_RANGE before it is read whole
 /// (proto/README.md lists it).
-pub const MAX_REQUEST_BYTES: usize = ecmxf_wire::payload::foe::FOE_FLASH_SIZE as usize + 64 * 1024;
+pub(crate) const MAX_REQUEST_BYTES: usize = crate::master::transactions::FOE_MAX_FILE + 64 * 1024;
 
 fn routes(
     ctx: &Arc<Context>,
@@ -295,7 +295,11 @@ async fn track_health(master: Arc<Master>, reporter: HealthReporter) {
 }
 
 /// Serves the API until `shutdown` changes; removes the socket file after.
-pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Receiver<()>) -> Result<(), ServeError> {
+pub(crate) async fn serve(
+    ctx: Arc<Context>,
+    config: ApiConfig,
+    mut shutdown: watch::Receiver<()>,
+) -> Result<(), ServeError> {
     let (reporter, health) = tonic_health::server::health_reporter();
     for name in SERVICES {
         reporter.set_service_status(name, ServingStatus::NotServing).await;
@@ -312,7 +316,7 @@ pub async fn serve(ctx: Arc<Context>, config: ApiConfig, mut shutdown: watch::Re
         let mut tick = tokio::time::interval(Duration::from_millis(50));
         loop {
             tick.tick().await;
-            sweeper.leases.sweep();
+            sweeper.master.sweep_leases();
         }
     });
 

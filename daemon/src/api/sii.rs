@@ -15,11 +15,11 @@ use super::status::{bad_argument, to_status};
 use crate::master::sii::Categories;
 
 /// Most words one Read or Write moves.
-pub const MAX_WORDS: u32 = 4096;
+pub(crate) const MAX_WORDS: u32 = 4096;
 
 /// The `Sii` service.
 #[derive(Debug, Clone)]
-pub struct SiiService(pub Arc<Context>);
+pub(crate) struct SiiService(pub Arc<Context>);
 
 fn word(v: u32) -> Result<u16, Status> {
     u16::try_from(v).map_err(|_| bad_argument("word", format!("{v:#x} is outside 0..=0xFFFF")))

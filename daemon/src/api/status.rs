@@ -10,7 +10,7 @@ use tonic_types::{ErrorDetails, StatusExt};
 use crate::master::EngineError;
 
 /// The `google.rpc.ErrorInfo` domain of every error the daemon answers.
-pub const DOMAIN: &str = "ecmxf";
+pub(crate) const DOMAIN: &str = "ecmxf";
 
 /// The gRPC status for an engine error: its details are a full
 /// `google.rpc.Status` (the same code and message, which grpc-go and
@@ -18,7 +18,7 @@ pub const DOMAIN: &str = "ecmxf";
 /// kind of error and whose metadata carries its facts (the SDO abort code,
 /// the argument at fault), so clients in any language read them without
 /// parsing the message.
-pub fn to_status(e: EngineError) -> Status {
+pub(crate) fn to_status(e: EngineError) -> Status {
     let message = e.to_string();
     let info = |reason: &str, metadata: &[(&str, &str)]| {
         let metadata: HashMap<String, String> =
@@ -61,7 +61,7 @@ pub fn to_status(e: EngineError) -> Status {
 /// services' own checks, the authentication interceptor, or tonic itself
 /// (an unknown method, a request that does not decode). Applied to every
 /// answer by [`super::error_details`].
-pub fn with_details(status: &Status) -> Option<Status> {
+pub(crate) fn with_details(status: &Status) -> Option<Status> {
     if status.code() == Code::Ok || !status.details().is_empty() {
         return None;
     }
@@ -79,7 +79,7 @@ impl From<EngineError> for Status {
 /// `Option`, a struct or enum dump, a path) instead of words: such text
 /// says nothing to a user of grpcurl or Python. Quoted names (`"1.foo"`)
 /// and durations (`100ms`) are words.
-pub fn looks_like_debug(message: &str) -> bool {
+pub(crate) fn looks_like_debug(message: &str) -> bool {
     const MARKS: [&str; 9] = ["Some(", "None", "Ok(", "Err(", "::", " { ", "\\\"", "One(", "All)"];
     if MARKS.iter().any(|m| message.contains(m)) {
         return true;
@@ -102,7 +102,7 @@ static DEBUG_LOOKING: std::sync::Mutex<Vec<String>> = std::sync::Mutex::new(Vec:
 /// Records `message` if it reads like Rust Debug output: every error the
 /// API answers passes here (`error_details`), so the tests can require
 /// that none did.
-pub fn note_message(message: &str) {
+pub(crate) fn note_message(message: &str) {
     #[cfg(debug_assertions)]
     if looks_like_debug(message) {
         let mut seen = DEBUG_LOOKING.lock().unwrap_or_else(|e| e.into_inner());
@@ -125,13 +125,13 @@ pub fn debug_looking_messages() -> Vec<String> {
 
 /// How every server stream ends when the daemon stops: UNAVAILABLE with
 /// the ErrorInfo reason STOPPING (proto/README.md).
-pub fn stopping() -> Status {
+pub(crate) fn stopping() -> Status {
     let details = ErrorDetails::with_error_info("STOPPING", DOMAIN, HashMap::new());
     Status::with_error_details(Code::Unavailable, "daemon stopping: the stream ends", details)
 }
 
 /// INVALID_ARGUMENT naming `field`, for checks made in the API layer.
-pub fn bad_argument(field: &'static str, reason: impl Into<String>) -> Status {
+pub(crate) fn bad_argument(field: &'static str, reason: impl Into<String>) -> Status {
     to_status(EngineError::BadArgument { field, reason: reason.into() })
 }
 
@@ -170,9 +170,8 @@ mod debug_text_tests {
 
 #[cfg(test)]
 mod tests {
-    use ecmxf_wire::payload::sdo::SdoAbortCode;
-
     use super::*;
+    use crate::master::SdoAbortCode;
 
     #[test]
     fn every_engine_error_maps_to_its_code() {

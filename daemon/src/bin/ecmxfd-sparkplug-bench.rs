@@ -1,4 +1,4 @@
-//! What the Sparkplug B edge node costs (issue 34): 64 simulated IO slaves
+//! What the Sparkplug B edge node costs (docs/sparkplug.md): 64 simulated IO slaves
 //! at a 1 ms cycle whose process data all change every 100 ms, published
 //! at 10 Hz with deadband 0, against the same network without the node.
 //!
@@ -28,7 +28,6 @@ use std::time::{Duration, Instant};
 
 use ecmxfd::config::sparkplug::BrokerUrl;
 use ecmxfd::config::{Config, LinkConfig, SparkplugConfig};
-use ecmxfd::master::Leases;
 use ecmxfd::master::entry_writes::Staging;
 use support::{cpu_seconds, serve, started};
 
@@ -105,11 +104,10 @@ fn main() -> Result<(), String> {
     let image = rt.block_on(master.image()).map_err(|e| e.to_string())?;
     let outputs: Vec<usize> =
         image.entries.iter().enumerate().filter(|(_, e)| e.output && e.index == 0x7000).map(|(i, _)| i).collect();
-    let leases = Arc::new(Leases::default());
-    let lease = leases.acquire(&master, &[], Duration::from_secs(5), "bench").map_err(|e| e.to_string())?;
+    let lease = master.acquire_lease(&[], Some(Duration::from_secs(5)), "bench").map_err(|e| e.to_string())?;
     // The plant's application: every output byte changes every 100 ms.
     rt.spawn({
-        let (master, leases, image) = (Arc::clone(&master), Arc::clone(&leases), Arc::clone(&image));
+        let (master, image) = (Arc::clone(&master), Arc::clone(&image));
         async move {
             let mut tick = tokio::time::interval(Duration::from_millis(100));
             for n in 0u64.. {
@@ -118,7 +116,7 @@ fn main() -> Result<(), String> {
                 for &i in &outputs {
                     let _ = staging.entry(&image.entries[i], &[(n % 255) as u8 + 1]);
                 }
-                if let Err(e) = staging.commit(&leases, &lease.id) {
+                if let Err(e) = staging.commit(master.leases(), &lease.id) {
                     eprintln!("writer: {e}");
                 }
             }
@@ -157,14 +155,7 @@ fn main() -> Result<(), String> {
         let stats = Arc::clone(master.sparkplug_state());
         let (stop, stopped) = tokio::sync::watch::channel(());
         let prepared = ecmxfd::sparkplug::prepare(&sparkplug).map_err(|e| e.to_string())?;
-        let node = rt.spawn(ecmxfd::sparkplug::serve(
-            Arc::clone(&master),
-            Arc::clone(&leases),
-            prepared,
-            Duration::from_secs(2),
-            Arc::clone(&stats),
-            stopped,
-        ));
+        let node = rt.spawn(ecmxfd::sparkplug::serve(Arc::clone(&master), prepared, Arc::clone(&stats), stopped));
         // Connected and born, then measured.
         let t = Instant::now();
         while stats.connected.load(Relaxed) == 0 && t.elapsed() < Duration::from_secs(10) {

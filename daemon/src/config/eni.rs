@@ -103,7 +103,7 @@ fn startup_sdos(cmds: &[CoeInitCmd], source: &str) -> Vec<StartupSdo> {
 /// (0x0400 divider, 0x0410 PDI, 0x0420 sync manager) it does not set: an
 /// ENI's values for them are replayed, by raw datagram (RAW_ECAT_FUNC_REQ
 /// 137) to the slave's position.
-pub fn register_fate(c: &RegisterInitCmd) -> Result<InitTransition, &'static str> {
+pub(super) fn register_fate(c: &RegisterInitCmd) -> Result<InitTransition, &'static str> {
     let reason = match c.ado {
         _ if !c.writes() => "checks the chip's state machine makes itself",
         0x0010..=0x0013 => "station addresses: the chip's ECAT_INIT",
@@ -346,7 +346,8 @@ pub(super) fn esi_device<'a>(file: &'a EsiFile, slave: &SlaveConfig) -> Option<&
 impl Config {
     /// Without an ENI, the CoE init commands of each `[[slave]] esi`
     /// device become its first start-up SDOs, as a configuration tool
-    /// writes them into an ENI (issue 32). The key and message of a file
+    /// writes them into an ENI, so a network described by ESI files alone
+    /// starts as it would from that tool's ENI. The key and message of a file
     /// that does not read.
     pub(super) fn apply_esi_init_cmds(&mut self) -> Result<(), (String, String)> {
         for (i, s) in self.slaves.iter_mut().enumerate() {
@@ -369,7 +370,7 @@ impl Config {
 
 /// What `--check-config` says about the ESI init commands of `[[slave]]`
 /// `i` (written, skipped, or not known without a product code).
-pub fn esi_init_notes(i: usize, slave: &SlaveConfig, file: &EsiFile) -> Vec<String> {
+pub(super) fn esi_init_notes(i: usize, slave: &SlaveConfig, file: &EsiFile) -> Vec<String> {
     let Some(device) = esi_device(file, slave) else {
         return if file.devices.iter().any(|d| !d.init_cmds.is_empty()) {
             vec![format!(
@@ -431,7 +432,7 @@ fn register_notes(who: &str, cmds: &[RegisterInitCmd]) -> String {
 
 /// What `--check-config` says about an ENI: what is applied, and every
 /// element that is not, by slave.
-pub fn eni_notes(eni: &Eni) -> Vec<String> {
+pub(super) fn eni_notes(eni: &Eni) -> Vec<String> {
     let mut notes = Vec::new();
     for (i, s) in eni.slaves.iter().enumerate() {
         let who = format!("eni: slave {i} {:?} (line {})", s.name, s.line);

@@ -11,6 +11,8 @@ use serde::{Deserialize, Serialize};
 pub mod api;
 mod eni;
 mod files;
+#[cfg(feature = "sim")]
+pub(crate) mod sim_network;
 pub mod sparkplug;
 
 pub use api::{ApiConfig, Role};
@@ -24,7 +26,7 @@ pub use ecmxf_devices::config_file::ConfigError;
 /// The file format version this build reads.
 pub const VERSION: u32 = 1;
 
-/// The DC cycle range, us: at least 125 us (PROTOCOL-NOTES "Chip limits"),
+/// The DC cycle range, us: at least 125 us (v049 簡介; docs/protocol.md §17),
 /// at most what SYNC0's 32-bit nanosecond register holds (ECAT_INIT's
 /// cycle field, v049 命令 1).
 pub const SYNC0_US: std::ops::RangeInclusive<u32> = 125..=(u32::MAX / 1000);

@@ -90,16 +90,16 @@ pub enum MetricNames {
 
 mod defaults {
     use super::RoleName;
-    pub fn keep_alive_s() -> u16 {
+    pub(super) fn keep_alive_s() -> u16 {
         30
     }
-    pub fn data_period_ms() -> u32 {
+    pub(super) fn data_period_ms() -> u32 {
         100
     }
-    pub fn diagnostics_period_ms() -> u32 {
+    pub(super) fn diagnostics_period_ms() -> u32 {
         1000
     }
-    pub fn commands() -> RoleName {
+    pub(super) fn commands() -> RoleName {
         RoleName::None
     }
 }

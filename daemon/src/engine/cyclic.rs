@@ -4,7 +4,7 @@
 //! avoid.
 //!
 //! The header's FIFO counts are two exchanges late (vendor comment;
-//! PROTOCOL-NOTES): the answer to a FIFO call, fetched by its guarded
+//! docs/protocol.md §12): the answer to a FIFO call, fetched by its guarded
 //! resend, reports the level just before the call's own push. The estimate
 //! of the level therefore starts from that count, adds the push, and takes
 //! off one frame per cycle elapsed since then.
@@ -24,11 +24,11 @@ use std::time::{Duration, Instant};
 /// The longest time between two FIFO exchanges, whatever the marks allow:
 /// inputs reach clients at least this often, so process data that stops
 /// flowing is seen within a bounded time (see `supervisor::FlowWatch`).
-pub const MAX_EXCHANGE_INTERVAL: Duration = Duration::from_millis(20);
+pub(crate) const MAX_EXCHANGE_INTERVAL: Duration = Duration::from_millis(20);
 
 /// Frame sizes, cycle and marks.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Plan {
+pub(crate) struct Plan {
     /// Output frame size.
     pub rx_size: usize,
     /// Input frame size.
@@ -47,7 +47,7 @@ pub struct Plan {
 
 /// The RxFIFO levels the exchange keeps, frames.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Levels {
+pub(crate) struct Levels {
     /// The level each push brings the FIFO back to.
     pub target: i64,
     /// Below this (plus two frames) an exchange is due at once.
@@ -64,7 +64,7 @@ impl Plan {
     /// chip's own, so the target is the budget in cycles less one, at
     /// least 2 frames and never deeper than the midpoint; the floor is half
     /// of it (or the low mark, when lower).
-    pub fn levels(&self) -> Levels {
+    pub(crate) fn levels(&self) -> Levels {
         let (low, high) = (i64::from(self.low), i64::from(self.high));
         let mid = (low + high) / 2;
         match self.budget {
@@ -84,7 +84,7 @@ impl Plan {
 /// gets at most a quarter of the memory and the RxFIFO, which is what keeps
 /// outputs flowing, the rest, with the marks scaled by the same ratio.
 /// Returns (rx depth, tx depth, low, high).
-pub fn fit_fifo(depth: u8, low: u8, high: u8, tx_depth: u8, rx_size: usize, tx_size: usize) -> (u8, u8, u8, u8) {
+pub(crate) fn fit_fifo(depth: u8, low: u8, high: u8, tx_depth: u8, rx_size: usize, tx_size: usize) -> (u8, u8, u8, u8) {
     let budget = ecmxf_wire::payload::fifo::FIFO_BUDGET;
     if usize::from(depth) * rx_size + usize::from(tx_depth) * tx_size <= budget {
         return (depth, tx_depth, low, high);
@@ -109,7 +109,7 @@ impl Plan {
     /// writes after every bring-up would wait for all of it (2.4 s with
     /// marks up to 240 at a 10 ms cycle, an ENI's usual one) before the
     /// budget held.
-    pub fn prefill(&self) -> usize {
+    pub(crate) fn prefill(&self) -> usize {
         let high = usize::from(self.high.max(1));
         match self.budget {
             Some(_) => usize::try_from(self.levels().target).unwrap_or(1).clamp(1, high),
@@ -120,7 +120,7 @@ impl Plan {
 
 /// The cyclic state.
 #[derive(Debug)]
-pub struct Cyclic {
+pub(crate) struct Cyclic {
     /// Output frame size.
     pub rx_size: usize,
     /// Input frame size.
@@ -137,8 +137,8 @@ pub struct Cyclic {
     /// Input frames the last FIFO call left in the TxFIFO: the answer's
     /// count (the level before the call's read) less the frames it read.
     /// A read that fills a packet with nothing left behind is no reason to
-    /// exchange again at once (issue 26: a one-frame-per-packet network
-    /// made four exchanges a cycle that way).
+    /// exchange again at once (a one-frame-per-packet network once made
+    /// four exchanges a cycle that way).
     backlog: u8,
     /// Level reported just before that push.
     reported: u8,
@@ -155,7 +155,7 @@ impl Cyclic {
     /// A plan and the packet's data size. `outputs` is the image to start
     /// from (the one clients wrote before a recovery) when it has the
     /// plan's size; otherwise the image starts zeroed.
-    pub fn new(plan: Plan, data_size: usize, outputs: Vec<u8>) -> Self {
+    pub(crate) fn new(plan: Plan, data_size: usize, outputs: Vec<u8>) -> Self {
         let now = Instant::now();
         let Plan { rx_size, tx_size, cycle, tx_depth, .. } = plan;
         let outputs = if outputs.len() == rx_size { outputs } else { vec![0; rx_size] };
@@ -178,7 +178,7 @@ impl Cyclic {
     }
 
     /// The DC cycle.
-    pub fn cycle(&self) -> Duration {
+    pub(crate) fn cycle(&self) -> Duration {
         self.cycle
     }
 
@@ -188,7 +188,7 @@ impl Cyclic {
 
     /// Whether the RxFIFO is below its floor (plus a margin of two
     /// frames): never for a network without outputs, which has none to keep.
-    pub fn outputs_low(&self, now: Instant) -> bool {
+    pub(crate) fn outputs_low(&self, now: Instant) -> bool {
         self.rx_size > 0 && self.estimate(now) < self.levels.floor + 2
     }
 
@@ -197,10 +197,10 @@ impl Cyclic {
     /// plus one a cycle since): three packets' worth, or a quarter of the
     /// TxFIFO when that is less, so a host stall still has three quarters
     /// of it before the chip drops the oldest. The count the chip reported
-    /// lags by up to two exchanges (PROTOCOL-NOTES), so this reads high by
+    /// lags by up to two exchanges (docs/protocol.md §12), so this reads high by
     /// a packet or so; two packets made every other SDO read wait for a
     /// FIFO exchange it did not need.
-    pub fn inputs_pressing(&self, now: Instant, tx_room: usize) -> bool {
+    pub(crate) fn inputs_pressing(&self, now: Instant, tx_room: usize) -> bool {
         let waiting = u64::from(self.backlog) + self.cycles_since(self.last_push.0, now);
         let limit = (3 * tx_room.max(1) as u64).min(u64::from(self.tx_depth / 4).max(1));
         self.tx_size > 0 && waiting >= limit
@@ -210,12 +210,12 @@ impl Cyclic {
     /// below the level aimed at: one packet later than an exchange is due,
     /// the most an exchange may wait for the blocking slot's turn, so the
     /// margin against a host stall stays what the plan keeps.
-    pub fn outputs_behind(&self, now: Instant, rx_room: usize) -> bool {
+    pub(crate) fn outputs_behind(&self, now: Instant, rx_room: usize) -> bool {
         self.rx_size > 0 && self.estimate(now) < self.target() - 2 * rx_room.max(1) as i64
     }
 
     /// The estimated RxFIFO level now.
-    pub fn estimate(&self, now: Instant) -> i64 {
+    pub(crate) fn estimate(&self, now: Instant) -> i64 {
         let (at, pushed) = self.last_push;
         i64::from(self.reported) + i64::from(pushed) - self.cycles_since(at, now) as i64
     }
@@ -226,7 +226,7 @@ impl Cyclic {
     }
 
     /// Frames to push in an exchange now, at most `room`.
-    pub fn frames_to_push(&self, now: Instant, room: usize) -> u8 {
+    pub(crate) fn frames_to_push(&self, now: Instant, room: usize) -> u8 {
         (self.target() - self.estimate(now)).clamp(0, room.min(255) as i64) as u8
     }
 
@@ -240,7 +240,7 @@ impl Cyclic {
     /// or less.
     /// A network without outputs has no RxFIFO level to keep: only inputs
     /// and the cap decide.
-    pub fn next_exchange(&self, now: Instant, rx_room: usize, tx_room: usize) -> Instant {
+    pub(crate) fn next_exchange(&self, now: Instant, rx_room: usize, tx_room: usize) -> Instant {
         let refill_at = (self.target() - rx_room as i64).max(self.levels.floor);
         let by_level =
             if self.rx_size == 0 { Duration::MAX } else { self.cycle * (self.estimate(now) - refill_at).max(0) as u32 };
@@ -257,7 +257,7 @@ impl Cyclic {
 
     /// The bytes of `n` output frames: each the current image, after the
     /// next frame of every stream was taken into its range.
-    pub fn push_frames(&mut self, n: u8, streams: &mut [super::frames::FrameConsumer]) -> &[u8] {
+    pub(crate) fn push_frames(&mut self, n: u8, streams: &mut [super::frames::FrameConsumer]) -> &[u8] {
         self.push_buf.clear();
         for s in streams.iter_mut() {
             s.start_push();
@@ -275,7 +275,7 @@ impl Cyclic {
     /// answer reported `count` output frames queued just before the push
     /// and `waiting` input frames queued before its read, and that read
     /// `read` input frames.
-    pub fn answered(&mut self, now: Instant, pushed: u8, count: u8, waiting: u8, read: usize) {
+    pub(crate) fn answered(&mut self, now: Instant, pushed: u8, count: u8, waiting: u8, read: usize) {
         self.last_push = (now, pushed);
         self.reported = count;
         self.backlog = usize::from(waiting).saturating_sub(read).min(usize::from(u8::MAX)) as u8;
@@ -295,7 +295,7 @@ impl Cyclic {
     /// cycles: then it counts low, never high; a network without outputs
     /// consumes none and counts none). Call before [`Cyclic::answered`]
     /// records this call.
-    pub fn inputs_lost(&mut self, ahead: u8, waiting: u8) -> u64 {
+    pub(crate) fn inputs_lost(&mut self, ahead: u8, waiting: u8) -> u64 {
         let consumed = self.pushed_total.saturating_sub(u64::from(ahead));
         let seen = self.read_total + u64::from(waiting);
         let lost =
@@ -305,7 +305,7 @@ impl Cyclic {
     }
 
     /// When the last exchange was, if any.
-    pub fn last_exchange(&self) -> Option<Instant> {
+    pub(crate) fn last_exchange(&self) -> Option<Instant> {
         let (t, _) = self.last_push;
         (t > self.started).then_some(t)
     }

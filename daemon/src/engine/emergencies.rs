@@ -26,19 +26,19 @@ use crate::port::{Port, PortError};
 
 /// How often the newest record is read, at the soonest: an emergency reaches
 /// clients within [`POLL_LONGEST`] plus one exchange (the goal: 10 ms).
-pub const POLL: Duration = Duration::from_millis(4);
+pub(crate) const POLL: Duration = Duration::from_millis(4);
 
 /// With cyclic data a question waits for a FIFO exchange to ride along
 /// with, but never longer than this since the last one.
-pub const POLL_LONGEST: Duration = Duration::from_millis(6);
+pub(crate) const POLL_LONGEST: Duration = Duration::from_millis(6);
 
 /// How long an asked question may wait for an exchange to bring its answer
 /// before the engine makes one for it (idle slot, slow cycle).
-pub const ANSWER_WAIT: Duration = Duration::from_millis(1);
+pub(crate) const ANSWER_WAIT: Duration = Duration::from_millis(1);
 
 /// Remembers the newest record seen, across recoveries.
 #[derive(Debug, Default)]
-pub struct EmergencyWatch {
+pub(crate) struct EmergencyWatch {
     /// Whether the history was looked at once.
     looked: bool,
     /// The newest running number seen (None: the history was empty).
@@ -57,14 +57,14 @@ impl EmergencyWatch {
     /// Asks for the newest record; its answer comes with the next exchange
     /// (see [`EmergencyWatch::check`]). The exchange refreshes the status
     /// header like any other, so it can stand in for a status poll.
-    pub fn ask<L: Link>(&mut self, port: &mut Port<L>) -> Result<(), PortError> {
+    pub(crate) fn ask<L: Link>(&mut self, port: &mut Port<L>) -> Result<(), PortError> {
         port.send_once(&NEWEST)?;
         self.asked = Some(port.stats().exchanges);
         Ok(())
     }
 
     /// Whether a question is out.
-    pub fn asked(&self) -> bool {
+    pub(crate) fn asked(&self) -> bool {
         self.asked.is_some()
     }
 
@@ -73,7 +73,7 @@ impl EmergencyWatch {
     /// record not seen before, oldest first. The first look only learns
     /// where the history stands (what came before the daemon is in
     /// GetEmergencies). Allocates nothing.
-    pub fn check<L: Link>(
+    pub(crate) fn check<L: Link>(
         &mut self,
         port: &mut Port<L>,
         mut emit: impl FnMut(EmergencyRecord),

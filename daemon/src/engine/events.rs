@@ -28,9 +28,9 @@ use super::telemetry::Phase;
 use crate::config::WriterGoneAction;
 
 /// Shortest interval between two reports of the same counter.
-pub const COUNTER_QUIET: Duration = Duration::from_millis(100);
+pub(crate) const COUNTER_QUIET: Duration = Duration::from_millis(100);
 /// Events the ring holds before the oldest unread are lost.
-pub const RING: usize = 256;
+pub(crate) const RING: usize = 256;
 
 /// One event.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -260,13 +260,13 @@ impl Event {
 }
 
 /// How long without an alarm ends its spell.
-pub const SPELL_QUIET: Duration = Duration::from_secs(1);
+pub(crate) const SPELL_QUIET: Duration = Duration::from_secs(1);
 
 /// The daemon's log of events: each one as it comes, except an alarm that
 /// repeats (the RxFIFO running dry): the first of a spell at once, then
 /// one line when the spell ends (no alarm for `SPELL_QUIET`) saying how
-/// many there were and for how long (issue 26: a stall of a few seconds
-/// wrote thousands of WARN lines). API subscribers still get every event.
+/// many there were and for how long (logged one by one, a stall of a few
+/// seconds once wrote thousands of WARN lines). API subscribers still get every event.
 #[derive(Debug, Default)]
 pub struct EventLog {
     spell: Option<Spell>,
@@ -325,7 +325,7 @@ impl EventLog {
 
 /// The engine side: detects changes and pushes events.
 #[derive(Debug)]
-pub struct EventSink {
+pub(crate) struct EventSink {
     ring: rtrb::Producer<Event>,
     epoch: Instant,
     waker: Option<Thread>,
@@ -359,7 +359,7 @@ impl Seen {
 
 impl EventSink {
     /// A sink into `ring`; `waker` is unparked after each push.
-    pub fn new(ring: rtrb::Producer<Event>, epoch: Instant, waker: Option<Thread>) -> Self {
+    pub(crate) fn new(ring: rtrb::Producer<Event>, epoch: Instant, waker: Option<Thread>) -> Self {
         Self {
             ring,
             epoch,
@@ -375,7 +375,7 @@ impl EventSink {
     }
 
     /// Pushes an event (counted as lost when the ring is full).
-    pub fn emit(&mut self, kind: EventKind) {
+    pub(crate) fn emit(&mut self, kind: EventKind) {
         let time_ns = self.epoch.elapsed().as_nanos() as u64;
         if self.lost > 0 && self.ring.slots() >= 2 {
             let lost = std::mem::take(&mut self.lost);
@@ -392,7 +392,7 @@ impl EventSink {
     /// Compares an answer's header with the previous one; `totals` are the
     /// CRC and WKC error totals after it. A chip that answers NOP (just
     /// reset) has no meaningful state and is skipped.
-    pub fn header(&mut self, h: &ResponseHeader, totals: (u64, u64), now: Instant) {
+    pub(crate) fn header(&mut self, h: &ResponseHeader, totals: (u64, u64), now: Instant) {
         if h.is_nop() {
             return;
         }
@@ -425,7 +425,7 @@ impl EventSink {
 
     /// A write was late for the budget; told at most every
     /// [`COUNTER_QUIET`] (the misses are counted in the telemetry).
-    pub fn output_late(&mut self, budget_us: u32, latency_us: u32, now: Instant) {
+    pub(crate) fn output_late(&mut self, budget_us: u32, latency_us: u32, now: Instant) {
         if quiet(&mut self.late_reported, now) {
             self.emit(EventKind::OutputLate { budget_us, latency_us });
         }
@@ -433,7 +433,7 @@ impl EventSink {
 
     /// Forgets the previous header (after a chip reset or re-init, the
     /// first header is a new baseline).
-    pub fn rebase(&mut self) {
+    pub(crate) fn rebase(&mut self) {
         self.seen = None;
     }
 }

@@ -1,5 +1,5 @@
-//! Per-cycle output frames a client streams (issue 15: the chip plays one
-//! RxFIFO frame per DC cycle, so a host that queues distinct frames gives
+//! Per-cycle output frames a client streams (the chip plays one
+//! RxFIFO frame per DC cycle, docs/protocol.md §12, so a host that queues distinct frames gives
 //! the slaves a distinct setpoint every cycle). A stream covers one byte
 //! range of the output image (its slaves' share); each frame pushed into
 //! the RxFIFO takes the next queued frame into that range, so frames reach
@@ -58,7 +58,7 @@ pub struct StreamCounters {
 
 /// What a dry queue does to the stream's range.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum DryAction {
+pub(crate) enum DryAction {
     /// Keep the last frame (the chip's own behaviour on an empty RxFIFO).
     Hold,
     /// Zero the range.
@@ -103,7 +103,7 @@ pub struct FrameProducer {
 
 /// The engine's side.
 #[derive(Debug)]
-pub struct FrameConsumer {
+pub(crate) struct FrameConsumer {
     ring: rtrb::Consumer<u8>,
     /// What a dry queue does to the range.
     pub on_dry: DryAction,
@@ -122,7 +122,7 @@ pub struct FrameConsumer {
 
 /// A stream of frames of `len` bytes for the output image's bytes
 /// `start..start + len`, queuing up to `capacity` frames.
-pub fn channel(start: usize, len: usize, capacity: usize) -> (FrameProducer, FrameConsumer) {
+pub(crate) fn channel(start: usize, len: usize, capacity: usize) -> (FrameProducer, FrameConsumer) {
     let (p, c) = rtrb::RingBuffer::new(capacity.max(1) * (SEQ_LEN + len));
     // Room for every queued frame and a full push more: the producer's
     // side reads it at every report.
@@ -204,14 +204,14 @@ impl FrameProducer {
 impl FrameConsumer {
     /// A new push starts: frames taken before whose answer never came
     /// (the call failed) are not reported as played.
-    pub fn start_push(&mut self) {
+    pub(crate) fn start_push(&mut self) {
         self.pending.clear();
     }
 
     /// Takes the next frame into `image` (its range) as frame `index` of
     /// the push on its way; `None` when the queue is empty (the image keeps
     /// the last frame: counted as dry).
-    pub fn next_into(&mut self, image: &mut [u8], index: u8) -> Option<u64> {
+    pub(crate) fn next_into(&mut self, image: &mut [u8], index: u8) -> Option<u64> {
         let Ok(chunk) = self.ring.read_chunk(SEQ_LEN + self.len) else {
             // Before the first frame, and after the client closed, an
             // empty queue is no shortage.
@@ -246,13 +246,13 @@ impl FrameConsumer {
 
     /// The producer closed the stream or is gone, and every frame it
     /// queued was taken.
-    pub fn finished(&self) -> bool {
+    pub(crate) fn finished(&self) -> bool {
         (self.ring.is_abandoned() || self.counters.closed.load(Relaxed)) && self.ring.is_empty()
     }
 
     /// Whether a dry spell started since the last call (once per spell):
     /// the engine reports it and applies what needs more than the image.
-    pub fn take_dry_start(&mut self) -> bool {
+    pub(crate) fn take_dry_start(&mut self) -> bool {
         match self.dry {
             Some(false) => {
                 self.dry = Some(true);
@@ -265,7 +265,7 @@ impl FrameConsumer {
     /// The push's answer came: its first frame plays in DC cycle
     /// `first_cycle`, each next one a cycle later. Frames the producer's
     /// side has no room for are not reported (it reads at every report).
-    pub fn played(&mut self, first_cycle: u64) {
+    pub(crate) fn played(&mut self, first_cycle: u64) {
         for &(index, seq) in &self.pending {
             let _ = self.played.push(Played { seq, cycle: first_cycle + u64::from(index) });
         }
@@ -273,7 +273,7 @@ impl FrameConsumer {
     }
 
     /// Frames taken so far.
-    pub fn pushed(&self) -> u64 {
+    pub(crate) fn pushed(&self) -> u64 {
         self.counters.pushed.load(Relaxed)
     }
 }

@@ -1,4 +1,5 @@
-//! The engine's one door (issue 30): [`spawn`] starts the real-time thread
+//! The engine's one door (the rest of the daemon reaches the engine only
+//! through it): [`spawn`] starts the real-time thread
 //! over a link, and the input distributor beside it, and returns the
 //! [`EngineHandle`] the rest of the daemon uses. In: one command channel
 //! for every request (jobs, reconfigure, network actions, frame streams,
@@ -19,6 +20,7 @@ use std::time::Duration;
 
 use tokio::sync::{broadcast, watch};
 
+use super::error::{EngineError, NotRunning};
 use super::events::{Event, RING as EVENT_RING};
 use super::inputs::{InputFrame, read_record};
 use super::layout::NetworkLayout;
@@ -37,26 +39,29 @@ pub const SUBSCRIBER_BACKLOG: usize = 4096;
 /// Events a subscriber may fall behind by before losing some.
 pub const EVENT_BACKLOG: usize = 1024;
 
-/// The running engine, as the rest of the daemon holds it.
+/// The running engine, as the rest of the daemon holds it: requests go in
+/// through [`EngineHandle::send`], output writes through the sender
+/// [`EngineHandle::output_sender`] hands out; what the engine publishes is
+/// read through the other methods, without the engine.
 #[derive(Debug)]
-pub struct EngineHandle {
+pub(crate) struct EngineHandle {
     /// Every request in.
-    pub commands: SyncSender<Command>,
+    commands: SyncSender<Command>,
     /// Output writes in (the hot path beside the commands).
-    pub outputs: SyncSender<OutputWrite>,
+    outputs: SyncSender<OutputWrite>,
     /// Status out, read without the engine.
-    pub telemetry: Arc<Telemetry>,
+    pub(super) telemetry: Arc<Telemetry>,
     /// Where each slave's data sits, written at bring-up only.
-    pub layout: Arc<Mutex<NetworkLayout>>,
+    pub(super) layout: Arc<Mutex<NetworkLayout>>,
     /// Input frames out.
-    pub inputs: broadcast::Sender<Arc<InputFrame>>,
+    inputs: broadcast::Sender<Arc<InputFrame>>,
     /// The newest input frame, kept by the distributor (what a front end
     /// reads a drive's state from, and waits on for the next one).
-    pub latest: watch::Sender<Option<Arc<InputFrame>>>,
+    latest: watch::Sender<Option<Arc<InputFrame>>>,
     /// Supervision events out.
-    pub events: broadcast::Sender<Event>,
+    events: broadcast::Sender<Event>,
     /// Output writer leases, counted for `outputs.on_last_writer_gone`.
-    pub writers: Arc<Writers>,
+    pub(super) writers: Arc<Writers>,
     threads: Mutex<Vec<JoinHandle<()>>>,
     pub(super) stop_engine: Arc<AtomicBool>,
     stop_distributor: Arc<AtomicBool>,
@@ -64,7 +69,7 @@ pub struct EngineHandle {
 
 /// Starts the engine thread (real-time as configured) over `link`, and the
 /// input distributor.
-pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
+pub(crate) fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
     let (commands, command_rx) = sync_channel(QUEUE_DEPTH);
     let (outputs, output_rx) = sync_channel(OUTPUT_QUEUE);
     let telemetry = Arc::new(Telemetry::default());
@@ -132,9 +137,64 @@ pub fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle {
 }
 
 impl EngineHandle {
+    /// Queues `command` for the engine: refused at once when the queue is
+    /// full or the engine has stopped, never waiting on it.
+    pub(crate) fn send(&self, command: Command) -> Result<(), EngineError> {
+        self.commands.try_send(command).map_err(|e| match e {
+            TrySendError::Full(_) => EngineError::QueueFull,
+            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
+        })
+    }
+
+    /// A sender of output writes (the hot path beside the commands).
+    pub(crate) fn output_sender(&self) -> SyncSender<OutputWrite> {
+        self.outputs.clone()
+    }
+
+    /// What the engine reports of itself, read without it.
+    pub(crate) fn telemetry(&self) -> &Telemetry {
+        &self.telemetry
+    }
+
+    /// The network as bring-up found it, shared with output writers.
+    pub(crate) fn layout(&self) -> &Arc<Mutex<NetworkLayout>> {
+        &self.layout
+    }
+
+    /// The counted output writers (`outputs.on_last_writer_gone`).
+    pub(crate) fn writers(&self) -> &Arc<Writers> {
+        &self.writers
+    }
+
+    /// A new subscriber to input frames.
+    pub(crate) fn subscribe_inputs(&self) -> broadcast::Receiver<Arc<InputFrame>> {
+        self.inputs.subscribe()
+    }
+
+    /// The newest input frame, if any arrived.
+    pub(crate) fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
+        self.latest.borrow().clone()
+    }
+
+    /// A watcher of the newest input frame.
+    pub(crate) fn watch_latest_inputs(&self) -> watch::Receiver<Option<Arc<InputFrame>>> {
+        self.latest.subscribe()
+    }
+
+    /// A new subscriber to supervision events.
+    pub(crate) fn subscribe_events(&self) -> broadcast::Receiver<Event> {
+        self.events.subscribe()
+    }
+
+    /// Publishes an event found outside the engine (an emergency a host
+    /// mailbox read fetched) to the same subscribers.
+    pub(crate) fn publish_event(&self, event: Event) {
+        let _ = self.events.send(event);
+    }
+
     /// Safe stop, then waits for the threads (blocking). A bring-up or
     /// recovery under way ends at once.
-    pub fn stop(&self) {
+    pub(crate) fn stop(&self) {
         self.stop_engine.store(true, Ordering::Relaxed);
         // A full queue still takes the stop: retry briefly.
         for _ in 0..100 {

@@ -25,14 +25,14 @@ fn keys(slaves: &[SlaveSummary]) -> impl Iterator<Item = (Key, &SlaveSummary)> {
 
 /// Output bytes per slave (allocated at recovery, never on the cycle).
 #[derive(Debug, Default)]
-pub struct HeldOutputs {
+pub(crate) struct HeldOutputs {
     slaves: Vec<(Key, Vec<u8>)>,
 }
 
 impl HeldOutputs {
     /// Takes the image a run ended with, for the slaves of that run; the
     /// bytes of slaves not in it are kept.
-    pub fn keep(&mut self, slaves: &[SlaveSummary], image: &[u8]) {
+    pub(crate) fn keep(&mut self, slaves: &[SlaveSummary], image: &[u8]) {
         for (key, s) in keys(slaves) {
             let Some(bytes) = image.get(s.rx_offset..s.rx_offset + s.rx_bytes) else { continue };
             match self.slaves.iter_mut().find(|(k, _)| *k == key) {
@@ -43,13 +43,13 @@ impl HeldOutputs {
     }
 
     /// Forgets everything (policy "zero": the next run starts from zeros).
-    pub fn clear(&mut self) {
+    pub(crate) fn clear(&mut self) {
         self.slaves.clear();
     }
 
     /// The output image for a network of `slaves` with `rx_size` output
     /// bytes: each slave's kept bytes where they still fit, zeros elsewhere.
-    pub fn image_for(&self, slaves: &[SlaveSummary], rx_size: usize) -> Vec<u8> {
+    pub(crate) fn image_for(&self, slaves: &[SlaveSummary], rx_size: usize) -> Vec<u8> {
         let mut image = vec![0u8; rx_size];
         for (key, s) in keys(slaves) {
             let kept = self.slaves.iter().find(|(k, _)| *k == key).map(|(_, b)| b);

@@ -19,11 +19,11 @@ use std::time::{Duration, Instant};
 use rtrb::Producer;
 
 /// Bytes before each frame in the input ring.
-pub const RECORD_HEADER: usize = 4 + 8 + 8 + 8;
+pub(crate) const RECORD_HEADER: usize = 4 + 8 + 8 + 8;
 
 /// The engine's side of the input ring.
 #[derive(Debug)]
-pub struct InputPublisher {
+pub(crate) struct InputPublisher {
     ring: Producer<u8>,
     epoch: Instant,
     /// Sequence number of the last frame received.
@@ -41,14 +41,14 @@ pub struct InputPublisher {
 
 impl InputPublisher {
     /// A publisher into `ring`; frame times count from `epoch`.
-    pub fn new(ring: Producer<u8>, epoch: Instant) -> Self {
+    pub(crate) fn new(ring: Producer<u8>, epoch: Instant) -> Self {
         Self { ring, epoch, seq: 0, last_frame: None, pending_gap: 0, received: 0, ring_overflows: 0 }
     }
 
     /// A new run of the cyclic exchange starts at `now` (after bring-up or
     /// recovery) with DC cycle `cycle`: the cycles since the last frame
     /// received are frames that will never come, and are numbered as such.
-    pub fn resume(&mut self, now: Instant, cycle: Duration) {
+    pub(crate) fn resume(&mut self, now: Instant, cycle: Duration) {
         if let Some(t) = self.last_frame {
             let missed = now.saturating_duration_since(t).as_nanos() / cycle.as_nanos().max(1);
             self.pending_gap = self.pending_gap.saturating_add(u64::try_from(missed).unwrap_or(u64::MAX));
@@ -57,14 +57,14 @@ impl InputPublisher {
 
     /// `n` input frames the chip dropped before the next ones: numbered
     /// as a gap before them.
-    pub fn lost(&mut self, n: u64) {
+    pub(crate) fn lost(&mut self, n: u64) {
         self.pending_gap = self.pending_gap.saturating_add(n);
     }
 
     /// Publishes the input frames of `frame_size` bytes in an answer's
     /// data; returns how many frames were received (whether or not the ring
     /// had room for them).
-    pub fn publish(&mut self, data: &[u8], frame_size: usize, now: Instant) -> usize {
+    pub(crate) fn publish(&mut self, data: &[u8], frame_size: usize, now: Instant) -> usize {
         if frame_size == 0 {
             return 0;
         }
@@ -98,14 +98,14 @@ impl InputPublisher {
     }
 
     /// Sequence number of the last frame received.
-    pub fn seq(&self) -> u64 {
+    pub(crate) fn seq(&self) -> u64 {
         self.seq
     }
 }
 
 /// One input frame as read back from the ring.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct InputRecord {
+pub(crate) struct InputRecord {
     /// DC-cycle sequence number.
     pub seq: u64,
     /// When the engine received it, ns since the engine started.
@@ -131,7 +131,7 @@ pub struct InputFrame {
 }
 
 /// Reads the next record from the ring's consumer side, if whole.
-pub fn read_record(c: &mut rtrb::Consumer<u8>) -> Option<InputRecord> {
+pub(crate) fn read_record(c: &mut rtrb::Consumer<u8>) -> Option<InputRecord> {
     // Records are committed whole, so a header means its frame is there too;
     // the check below only guards against a foreign writer.
     let available = c.slots();

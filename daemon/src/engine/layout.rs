@@ -1,8 +1,8 @@
 //! What bring-up found and set up: the network's slaves, their place in
 //! the process image, and the FIFO plan. Read by the running loop, the
 //! held outputs and the master; written by bring-up alone. A module of its
-//! own so that none of its readers imports bring-up (issue 30: bring-up
-//! and the held outputs used each other).
+//! own so that none of its readers imports bring-up (bring-up and the held
+//! outputs once used each other).
 
 use ecmxf_wire::EcatState;
 

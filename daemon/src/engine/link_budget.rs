@@ -13,9 +13,9 @@
 //! Each FIFO call costs two packets: it is guarded (see `port`), because
 //! its reads take the input frames out of the chip's TxFIFO and a lost
 //! answer would lose them. So a plan needs two packets per `frames per
-//! packet` cycles at least, and that is the load counted here (issue 26:
-//! counting one packet, a network that needed 94 % of the link was let
-//! through with no warning and ran its RxFIFO dry every 45 ms). Above
+//! packet` cycles at least, and that is the load counted here (counted as
+//! one packet, a network that needed 94 % of the link was once let through
+//! with no warning and ran its RxFIFO dry every 45 ms). Above
 //! [`MAX_LOAD`] the network is refused: what is left cannot absorb the
 //! host's jitter, let alone requests.
 //!

@@ -14,8 +14,8 @@
 //!   exchange due within the next [`PULL_FORWARD`] exchanges goes now
 //!   (its headers carry the busy bit as well as a poll), once per
 //!   command and only before its first poll, so it is done before the command ends instead of standing
-//!   between the command's end and its result (issue 26: an SDO read took
-//!   9 exchanges, 2.24 ms, at a 125 us cycle; now 5);
+//!   between the command's end and its result (without this an SDO read
+//!   took 9 exchanges, 2.24 ms, at a 125 us cycle; with it 5);
 //! - once the command ended, or a GET's answer is on its way, the
 //!   transaction goes first: the FIFO only when pressing;
 //! - a new transaction's start goes before a FIFO exchange that is only
@@ -33,16 +33,16 @@
 //! shows as underruns, counted and reported).
 
 /// FIFO exchanges that may go first in a row while a transaction waits.
-pub const SLOT_SKIPS: u32 = 4;
+pub(super) const SLOT_SKIPS: u32 = 4;
 
 /// While a blocking command runs on the chip, a FIFO exchange due within
 /// this many exchange times goes at once: an SDO's slave time (hundreds
 /// of us) holds one guarded FIFO call.
-pub const PULL_FORWARD: u32 = 4;
+pub(super) const PULL_FORWARD: u32 = 4;
 
 /// What the blocking slot is doing, as far as the link is concerned.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub enum Slot {
+pub(super) enum Slot {
     /// Nothing in it or queued. `just_freed`: a transaction ended less
     /// than an exchange time ago.
     Empty {
@@ -73,7 +73,7 @@ pub enum Slot {
 
 /// What the FIFO plan says now.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct Fifo {
+pub(super) struct Fifo {
     /// An exchange is due now.
     pub due: bool,
     /// An exchange is due within [`PULL_FORWARD`] exchange times.
@@ -85,7 +85,7 @@ pub struct Fifo {
 
 /// Whether the next exchange is the FIFO's; `skipped` counts FIFO
 /// exchanges that went first in a row while a transaction waited.
-pub fn fifo_goes_first(fifo: Fifo, slot: Slot, skipped: u32) -> bool {
+pub(super) fn fifo_goes_first(fifo: Fifo, slot: Slot, skipped: u32) -> bool {
     let may_skip = skipped < SLOT_SKIPS;
     let urgent = fifo.pressing && may_skip;
     match slot {

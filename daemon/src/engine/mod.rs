@@ -14,26 +14,29 @@
 //! events through a ring of their own ([`events`]). Once running, nothing
 //! on this thread allocates (daemon/tests/zero_alloc.rs).
 
-pub mod bringup;
-pub mod cyclic;
-pub mod emergencies;
-pub mod error;
-pub mod events;
-pub mod failure;
-pub mod frames;
+pub(crate) mod bringup;
+pub(crate) mod cyclic;
+pub(crate) mod emergencies;
+pub(crate) mod error;
+pub(crate) mod events;
+pub(crate) mod failure;
+pub(crate) mod frames;
 mod handle;
-pub use handle::{EVENT_BACKLOG, EngineHandle, QUEUE_DEPTH, SUBSCRIBER_BACKLOG, spawn};
-pub mod held;
-pub mod inputs;
-pub mod layout;
+// Re-exported by the master as its own (the one door).
+#[allow(unreachable_pub)]
+pub use handle::{EVENT_BACKLOG, QUEUE_DEPTH, SUBSCRIBER_BACKLOG};
+pub(crate) use handle::{EngineHandle, spawn};
+pub(crate) mod held;
+pub(crate) mod inputs;
+pub(crate) mod layout;
 pub mod link_budget;
 mod link_turn;
-pub mod network_action;
-pub mod output_writes;
+pub(crate) mod network_action;
+pub(crate) mod output_writes;
 mod running;
-pub mod slot;
-pub mod supervisor;
-pub mod telemetry;
+pub(crate) mod slot;
+pub(crate) mod supervisor;
+pub(crate) mod telemetry;
 
 use std::sync::atomic::AtomicBool;
 use std::sync::atomic::Ordering::Relaxed;
@@ -67,7 +70,7 @@ use telemetry::{CounterTotal, Phase, Telemetry};
 /// Messages to the engine: its one way in besides the output writes (the
 /// hot path, lock-free) and the stop flag that ends a wait at once.
 #[derive(Debug)]
-pub enum Command {
+pub(crate) enum Command {
     /// A request for the blocking slot.
     Job(Job),
     /// A new configuration to bring the network up with, and its number
@@ -209,7 +212,7 @@ impl<L: Link> Engine<L> {
     }
 
     /// Runs until stopped: bring-up, cyclic exchange, recovery.
-    pub fn run(mut self) {
+    pub(crate) fn run(mut self) {
         let mut backoff = Duration::from_millis(self.config.recovery.backoff_ms);
         let mut first = true;
         loop {

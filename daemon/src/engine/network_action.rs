@@ -6,7 +6,7 @@
 /// next loop turn (no queue: asking twice is asking once, and a warm reset,
 /// ordered above a re-init, wins).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, PartialOrd, Ord)]
-pub enum NetworkAction {
+pub(crate) enum NetworkAction {
     /// Scan again and redo the bring-up from the configuration.
     Reinit = 1,
     /// Warm-reset the chip (cmd 127), then redo the bring-up.

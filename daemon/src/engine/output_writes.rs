@@ -12,7 +12,7 @@ use std::time::Instant;
 /// applies them together (see [`OutputAssembler`]) so a frame never carries
 /// half of a write, e.g. new targets for one axis and old ones for the next.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct OutputWrite {
+pub(crate) struct OutputWrite {
     /// Which client write this chunk belongs to.
     pub batch: u32,
     /// Whether this is the write's last chunk.
@@ -29,11 +29,11 @@ pub struct OutputWrite {
 }
 
 /// Bytes per [`OutputWrite`].
-pub const OUTPUT_CHUNK: usize = 32;
+pub(crate) const OUTPUT_CHUNK: usize = 32;
 
 /// Collects the chunks of one client write and applies them at once.
 #[derive(Debug)]
-pub struct OutputAssembler {
+pub(crate) struct OutputAssembler {
     pending: Vec<OutputWrite>,
     batch: Option<u32>,
 }
@@ -51,7 +51,7 @@ impl OutputAssembler {
     /// came (its sender found the queue full) is dropped when the next one
     /// starts: a partial write is never applied. Returns when the write
     /// reached the daemon, once it is applied.
-    pub fn push(&mut self, w: OutputWrite, image: Option<&mut [u8]>) -> Option<Instant> {
+    pub(crate) fn push(&mut self, w: OutputWrite, image: Option<&mut [u8]>) -> Option<Instant> {
         if self.batch != Some(w.batch) {
             self.pending.clear();
             self.batch = Some(w.batch);
@@ -80,32 +80,32 @@ impl OutputAssembler {
 /// as it goes, so the engine can apply `outputs.on_last_writer_gone`
 /// without a lock or a message on the cycle path.
 #[derive(Debug, Default)]
-pub struct Writers {
+pub(crate) struct Writers {
     count: AtomicUsize,
     gone: AtomicBool,
 }
 
 impl Writers {
     /// A writer arrives.
-    pub fn acquire(&self) {
+    pub(crate) fn acquire(&self) {
         self.count.fetch_add(1, Ordering::AcqRel);
     }
 
     /// A writer leaves; the last one raises the flag.
-    pub fn release(&self) {
+    pub(crate) fn release(&self) {
         if self.count.fetch_sub(1, Ordering::AcqRel) == 1 {
             self.gone.store(true, Ordering::Release);
         }
     }
 
     /// Writers now.
-    pub fn count(&self) -> usize {
+    pub(crate) fn count(&self) -> usize {
         self.count.load(Ordering::Acquire)
     }
 
     /// Whether the last writer left since the previous call, and no new one
     /// came meanwhile.
-    pub fn take_gone(&self) -> bool {
+    pub(crate) fn take_gone(&self) -> bool {
         self.gone.swap(false, Ordering::AcqRel) && self.count() == 0
     }
 }

@@ -17,7 +17,7 @@ use tokio::sync::watch;
 
 /// The longest the [`watch`] of snapshots goes without a new one while the
 /// engine exchanges packets (counters move without a change of phase).
-pub const ANNOUNCE_EVERY: Duration = Duration::from_millis(10);
+pub(crate) const ANNOUNCE_EVERY: Duration = Duration::from_millis(10);
 
 /// What the engine is doing.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Default)]
@@ -68,7 +68,7 @@ impl Phase {
 
 /// The published values.
 #[derive(Debug, Default)]
-pub struct Telemetry {
+pub(crate) struct Telemetry {
     phase: AtomicU8,
     ecat_state: AtomicU8,
     error_byte: AtomicU8,
@@ -147,7 +147,7 @@ pub struct Telemetry {
 /// The latest [`LatencyWindow::LEN`] latencies, us, written by the engine
 /// without a lock; readers copy them and take percentiles.
 #[derive(Debug)]
-pub struct LatencyWindow {
+pub(crate) struct LatencyWindow {
     samples: [AtomicU32; LatencyWindow::LEN],
     recorded: AtomicU64,
 }
@@ -160,7 +160,7 @@ impl Default for LatencyWindow {
 
 /// Percentiles of a [`LatencyWindow`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct LatencyStats {
+pub(crate) struct LatencyStats {
     /// Median, us.
     pub p50_us: u32,
     /// 99th percentile, us.
@@ -171,10 +171,10 @@ pub struct LatencyStats {
 
 impl LatencyWindow {
     /// Samples kept.
-    pub const LEN: usize = 512;
+    pub(crate) const LEN: usize = 512;
 
     /// Records one latency (the engine thread).
-    pub fn record(&self, us: u32) {
+    pub(crate) fn record(&self, us: u32) {
         let n = self.recorded.load(Relaxed);
         self.samples[(n % Self::LEN as u64) as usize].store(us, Relaxed);
         self.recorded.store(n + 1, Relaxed);
@@ -182,7 +182,7 @@ impl LatencyWindow {
 
     /// Median and 99th percentile of the latest samples; `None` before the
     /// first. Sorts a copy: for readers, never the engine thread.
-    pub fn stats(&self) -> Option<LatencyStats> {
+    pub(crate) fn stats(&self) -> Option<LatencyStats> {
         let n = (self.recorded.load(Relaxed) as usize).min(Self::LEN);
         if n == 0 {
             return None;
@@ -201,7 +201,7 @@ impl LatencyWindow {
 /// baseline. Headers come at least every few ms, far fewer than 256 errors
 /// apart.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct CounterTotal {
+pub(crate) struct CounterTotal {
     last: Option<u8>,
     /// Errors counted since the start.
     pub total: u64,
@@ -209,7 +209,7 @@ pub struct CounterTotal {
 
 impl CounterTotal {
     /// Adds what the counter rose by since the last header; returns the total.
-    pub fn update(&mut self, raw: u8) -> u64 {
+    pub(crate) fn update(&mut self, raw: u8) -> u64 {
         if let Some(last) = self.last {
             self.total += u64::from(raw.wrapping_sub(last));
         }
@@ -219,7 +219,7 @@ impl CounterTotal {
 
     /// The next value is a baseline (the chip reset, or its counter was
     /// cleared).
-    pub fn rebase(&mut self) {
+    pub(crate) fn rebase(&mut self) {
         self.last = None;
     }
 }
@@ -315,17 +315,17 @@ impl Snapshot {
 
 impl Telemetry {
     /// Sets the phase.
-    pub fn set_phase(&self, p: Phase) {
+    pub(crate) fn set_phase(&self, p: Phase) {
         self.phase.store(p as u8, Relaxed);
     }
 
     /// The phase.
-    pub fn phase(&self) -> Phase {
+    pub(crate) fn phase(&self) -> Phase {
         Phase::from_u8(self.phase.load(Relaxed))
     }
 
     /// Stores a header's status.
-    pub fn header(&self, h: &ResponseHeader) {
+    pub(crate) fn header(&self, h: &ResponseHeader) {
         self.ecat_state.store(h.ecat_state.to_u8(), Relaxed);
         self.error_byte.store(h.errors.bits(), Relaxed);
         self.status_byte.store(h.status.to_byte(), Relaxed);
@@ -335,24 +335,24 @@ impl Telemetry {
 
     /// Forgets the network's state: the engine is bringing it up again, and
     /// until it answers, the state from before the fault is not the truth.
-    pub fn forget_network(&self) {
+    pub(crate) fn forget_network(&self) {
         self.ecat_state.store(EcatState::None.to_u8(), Relaxed);
         self.flow_limit_ns.store(0, Relaxed);
     }
 
     /// Records why bring-up failed or recovery started.
-    pub fn set_error(&self, e: Failure) {
+    pub(crate) fn set_error(&self, e: Failure) {
         *self.last_error.lock().unwrap_or_else(|p| p.into_inner()) = Some(e);
     }
 
     /// The last failure, if any.
-    pub fn last_error(&self) -> Option<Failure> {
+    pub(crate) fn last_error(&self) -> Option<Failure> {
         self.last_error.lock().unwrap_or_else(|p| p.into_inner()).clone()
     }
 
     /// What a waiter may be waiting for, from the values now (as
     /// [`Snapshot::key`]): a change is announced at once.
-    pub fn key(&self) -> (Phase, EcatState, u64, u64) {
+    pub(crate) fn key(&self) -> (Phase, EcatState, u64, u64) {
         (
             self.phase(),
             EcatState::from_u8(self.ecat_state.load(Relaxed)),
@@ -363,19 +363,19 @@ impl Telemetry {
 
     /// Sends the snapshot to every waiter; returns what was sent. Nothing
     /// here allocates: the value is a copy, the waiters' list is intrusive.
-    pub fn announce(&self) -> Snapshot {
+    pub(crate) fn announce(&self) -> Snapshot {
         let s = self.snapshot();
         self.changes.send_replace(s);
         s
     }
 
     /// Snapshots as the engine announces them; the current one at once.
-    pub fn watch(&self) -> watch::Receiver<Snapshot> {
+    pub(crate) fn watch(&self) -> watch::Receiver<Snapshot> {
         self.changes.subscribe()
     }
 
     /// A copy.
-    pub fn snapshot(&self) -> Snapshot {
+    pub(crate) fn snapshot(&self) -> Snapshot {
         Snapshot {
             phase: self.phase(),
             ecat_state: EcatState::from_u8(self.ecat_state.load(Relaxed)),

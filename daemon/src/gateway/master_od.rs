@@ -15,9 +15,8 @@
 //!
 //! Everything else aborts as missing; a download aborts as read-only.
 
-use ecmxf_wire::mbx::sdo::{SdoRequest, SdoResponse};
-use ecmxf_wire::payload::sdo::SdoAbortCode;
-use ecmxf_wire::payload::slave_info::SlaveInfoCode;
+use crate::master::SlaveInfoCode;
+use crate::master::mailbox_channel::framing::{SdoAbortCode, SdoRequest, SdoResponse};
 
 use crate::master::Master;
 
@@ -81,7 +80,7 @@ async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, Sdo
 
 /// The CoE body answering a CoE body sent to the master; `None` when it is
 /// not an SDO request.
-pub async fn answer(master: &Master, body: &[u8]) -> Option<Vec<u8>> {
+pub(crate) async fn answer(master: &Master, body: &[u8]) -> Option<Vec<u8>> {
     let request = SdoRequest::decode(body).ok()?;
     let response = match request {
         SdoRequest::Upload { index, subindex, complete_access: false } => match value(master, index, subindex).await {

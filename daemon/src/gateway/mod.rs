@@ -1,4 +1,4 @@
-//! The ETG.8200 mailbox gateway (issue 33): engineering tools (TwinCAT,
+//! The ETG.8200 mailbox gateway (docs/mailbox.md): engineering tools (TwinCAT,
 //! the EtherCAT Configurator, the TwinSAFE Loader) reach the slaves behind
 //! this master over UDP port 0x88A4 (34980). A request is one datagram: a
 //! 2-byte EtherCAT header (bits 0..10 length, bits 12..15 type, 5 =
@@ -22,7 +22,7 @@
 //! A front end like the gRPC API: it reaches the engine through the master
 //! only, and the engine's cycle never waits for it.
 
-pub mod master_od;
+pub(crate) mod master_od;
 
 use std::collections::HashSet;
 use std::net::{IpAddr, SocketAddr};
@@ -30,8 +30,8 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::Duration;
 
-use ecmxf_wire::EcatState;
-use ecmxf_wire::mbx::{self, MailboxError, MailboxHeader, MailboxType, Message};
+use crate::master::EcatState;
+use crate::master::mailbox_channel::framing::{self as mbx, MailboxError, MailboxHeader, MailboxType, Message};
 use tokio::net::UdpSocket;
 
 use crate::config::GatewayConfig;
@@ -93,12 +93,12 @@ fn refusal(request: &MailboxHeader, error: MailboxError) -> Vec<u8> {
 }
 
 /// Binds `[gateway] listen`.
-pub async fn bind(config: &GatewayConfig) -> Result<UdpSocket, GatewayError> {
+pub(crate) async fn bind(config: &GatewayConfig) -> Result<UdpSocket, GatewayError> {
     UdpSocket::bind(config.listen).await.map_err(|source| GatewayError { listen: config.listen, source })
 }
 
 /// Serves the gateway on `socket` until `stop` changes.
-pub async fn serve(
+pub(crate) async fn serve(
     master: Arc<Master>,
     config: GatewayConfig,
     socket: UdpSocket,
@@ -165,7 +165,7 @@ async fn answer(master: &Master, request: MailboxHeader, body: &[u8]) -> Result<
     let Some(slave) = master.slave_at_station(request.address).await else {
         return Err(refusal(&request, MailboxError::INVALID_HEADER));
     };
-    let state = master.slave_number(slave, ecmxf_wire::payload::slave_info::SlaveInfoCode::State).await;
+    let state = master.slave_number(slave, crate::master::SlaveInfoCode::State).await;
     let state = state.map(|s| EcatState::from_u8(s as u8)).unwrap_or(EcatState::None);
     if !matches!(state, EcatState::PreOp | EcatState::SafeOp | EcatState::Op) {
         return Err(refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED));

@@ -90,7 +90,8 @@ fn drain_int0_edges(
 /// A GPIO error as an `io::Error` that keeps what the kernel said: the
 /// errno of a failed system call (EACCES, EBUSY, ENOENT, EINVAL...), or
 /// [`NotGpioChip`] for a path that is no GPIO chip, so `ecmxfd probe`
-/// diagnoses from the cause, not from the text (issue 30).
+/// diagnoses from the cause, not from the text (message words change; a
+/// "busy" in another cause's text must not read as a held line).
 fn gpio_err(what: String, e: gpiocdev::Error) -> LinkError {
     use gpiocdev::Error as G;
     let source = match &e {

@@ -185,7 +185,7 @@ impl DeviceDictionary {
     }
 
     /// The type of `index:subindex`, if the device described it.
-    pub fn data_type(&self, index: u16, subindex: u8) -> Option<DataType> {
+    pub(crate) fn data_type(&self, index: u16, subindex: u8) -> Option<DataType> {
         self.entry(index, subindex).map(|e| data_type(e.data_type, e.bit_length))
     }
 }
@@ -203,7 +203,7 @@ impl Master {
 
     /// The dictionary of the device at `slave` as read before (in memory
     /// or on disk): never a mailbox exchange. For the value codec.
-    pub fn known_device_dictionary(&self, slave: u8) -> Option<Arc<DeviceDictionary>> {
+    pub(crate) fn known_device_dictionary(&self, slave: u8) -> Option<Arc<DeviceDictionary>> {
         let identity = self.identity(slave)?;
         let reads = self.dictionaries.reads.lock().unwrap_or_else(|e| e.into_inner());
         match &*reads.get(&identity)?.borrow() {
@@ -293,7 +293,7 @@ impl Master {
 
     /// Whether the slave says (SII General, CoE details bit 1) that it
     /// answers SDO Information.
-    pub async fn supports_sdo_info(&self, slave: u8) -> Result<bool, EngineError> {
+    pub(crate) async fn supports_sdo_info(&self, slave: u8) -> Result<bool, EngineError> {
         let sii = self.sii(slave, super::sii::Categories::Only(&[ecmxf_devices::sii::category::GENERAL])).await?;
         Ok(sii.general.is_some_and(|g| g.coe_details & 0x02 != 0))
     }

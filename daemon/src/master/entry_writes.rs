@@ -80,7 +80,7 @@ impl WriteError {
     /// The request field a front end blames, for the caller's mistakes
     /// ([`WriteError::Streamed`], [`WriteError::HelperBits`] and
     /// [`WriteError::Lease`] are the state's, not a field's).
-    pub fn field(&self) -> Option<&'static str> {
+    pub(crate) fn field(&self) -> Option<&'static str> {
         match self {
             Self::NoEntry(_) | Self::Input(_) => Some("writes.entry"),
             Self::WrongSize { .. } | Self::TooBig { .. } => Some("writes.value"),
@@ -184,7 +184,7 @@ impl<'m> Staging<'m> {
     }
 
     /// Stages raw `bytes` at byte `offset` of the output image.
-    pub fn raw(&mut self, offset: usize, bytes: &[u8]) -> Result<(), WriteError> {
+    pub(crate) fn raw(&mut self, offset: usize, bytes: &[u8]) -> Result<(), WriteError> {
         let size = self.staged.len();
         if offset.checked_add(bytes.len()).is_none_or(|end| end > size) {
             return Err(WriteError::PastImage { offset, len: bytes.len(), size });

@@ -15,21 +15,21 @@ use super::Master;
 
 /// Parsed ESI files by path.
 #[derive(Debug, Default)]
-pub struct EsiLibrary {
+pub(crate) struct EsiLibrary {
     files: Mutex<HashMap<PathBuf, Arc<EsiFile>>>,
     enis: Mutex<HashMap<PathBuf, Arc<Eni>>>,
 }
 
 /// One device of a parsed ESI file.
 #[derive(Clone, Debug)]
-pub struct EsiRef {
+pub(crate) struct EsiRef {
     file: Arc<EsiFile>,
     at: usize,
 }
 
 impl EsiRef {
     /// The device.
-    pub fn device(&self) -> &EsiDevice {
+    pub(crate) fn device(&self) -> &EsiDevice {
         &self.file.devices[self.at]
     }
 }
@@ -37,7 +37,7 @@ impl EsiRef {
 /// Why a device description the configuration names cannot be used:
 /// which file, and the cause with its type.
 #[derive(Clone, Debug)]
-pub enum DescriptionError {
+pub(crate) enum DescriptionError {
     /// The file could not be read.
     Read {
         /// The file.
@@ -99,7 +99,7 @@ impl std::error::Error for DescriptionError {
 
 impl EsiLibrary {
     /// The file at `path`, parsed (on a blocking thread the first time).
-    pub async fn file(&self, path: &Path) -> Result<Arc<EsiFile>, DescriptionError> {
+    pub(crate) async fn file(&self, path: &Path) -> Result<Arc<EsiFile>, DescriptionError> {
         if let Some(f) = self.files.lock().unwrap_or_else(|e| e.into_inner()).get(path) {
             return Ok(Arc::clone(f));
         }
@@ -121,7 +121,7 @@ impl EsiLibrary {
 
     /// The device of the file at `path` with this identity: the same
     /// revision when the file has it, else the highest of that product.
-    pub async fn device(
+    pub(crate) async fn device(
         &self,
         path: &Path,
         vendor: u32,
@@ -150,7 +150,7 @@ impl EsiLibrary {
 
 impl EsiLibrary {
     /// The ENI at `path`, parsed (on a blocking thread the first time).
-    pub async fn eni(&self, path: &Path) -> Result<Arc<Eni>, DescriptionError> {
+    pub(crate) async fn eni(&self, path: &Path) -> Result<Arc<Eni>, DescriptionError> {
         if let Some(f) = self.enis.lock().unwrap_or_else(|e| e.into_inner()).get(path) {
             return Ok(Arc::clone(f));
         }
@@ -170,7 +170,7 @@ impl Master {
     /// The device the configuration's ENI describes at `slave`'s place
     /// (its PDOs with names and types, no dictionary), when the
     /// configuration came from one and that entry has the slave's identity.
-    pub async fn eni_device(&self, slave: u8) -> Option<EsiDevice> {
+    pub(crate) async fn eni_device(&self, slave: u8) -> Option<EsiDevice> {
         let path = self.config.lock().unwrap_or_else(|e| e.into_inner()).eni.clone()?;
         let eni = match self.esi.eni(&path).await {
             Ok(e) => e,
@@ -186,7 +186,7 @@ impl Master {
 
     /// The ESI device configured for `slave`, matched to the identity the
     /// slave reported: `None` when no ESI is configured for it.
-    pub async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, DescriptionError>> {
+    pub(crate) async fn esi_device(&self, slave: u8) -> Option<Result<EsiRef, DescriptionError>> {
         let path = {
             let config = self.config.lock().unwrap_or_else(|e| e.into_inner());
             config.slaves.get(usize::from(slave)).and_then(|c| c.esi.clone())?

@@ -9,7 +9,7 @@ use super::MAX_STREAMS;
 
 /// Why a range could not be claimed.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub enum ClaimError {
+pub(crate) enum ClaimError {
     /// Another stream feeds some of these bytes.
     Overlap,
     /// [`MAX_STREAMS`] streams are open.
@@ -18,7 +18,7 @@ pub enum ClaimError {
 
 /// The claimed ranges.
 #[derive(Debug, Default)]
-pub struct FrameClaims(Mutex<Vec<Claim>>);
+pub(crate) struct FrameClaims(Mutex<Vec<Claim>>);
 
 #[derive(Clone, Copy, Debug)]
 struct Claim {
@@ -36,7 +36,7 @@ impl Claim {
 
 /// A range claimed while its stream is open; dropping it gives it back.
 #[derive(Debug)]
-pub struct Claimed {
+pub(crate) struct Claimed {
     claims: Arc<FrameClaims>,
     id: u64,
 }
@@ -53,7 +53,7 @@ impl FrameClaims {
     }
 
     /// Claims `start..start + len` for a new stream.
-    pub fn claim(self: &Arc<Self>, start: usize, len: usize) -> Result<Claimed, ClaimError> {
+    pub(crate) fn claim(self: &Arc<Self>, start: usize, len: usize) -> Result<Claimed, ClaimError> {
         static NEXT: AtomicU64 = AtomicU64::new(1);
         let mut claims = self.lock();
         if claims.iter().any(|c| c.overlaps(start, start + len)) {
@@ -68,7 +68,7 @@ impl FrameClaims {
     }
 
     /// The first claimed range that shares a byte with `from..to`, if any.
-    pub fn overlapping(&self, from: usize, to: usize) -> Option<(usize, usize)> {
+    pub(crate) fn overlapping(&self, from: usize, to: usize) -> Option<(usize, usize)> {
         self.lock().iter().find(|c| c.overlaps(from, to)).map(|c| (c.start, c.len))
     }
 }

@@ -1,5 +1,5 @@
-//! The process image, the master's (issue 30: every front end reads the same
-//! one): every mapped PDO entry with a name, its variable name, its place in
+//! The process image, the master's (every front end, gRPC or any other,
+//! reads the same one): every mapped PDO entry with a name, its variable name, its place in
 //! the output or input image in bits, and its CoE type. Built
 //! from each slave's assigned PDOs from the best source it has
 //! ([`crate::master::pdos`]: CoE, else SII, else ESI) and the offsets
@@ -10,9 +10,9 @@
 //! slot (every other turn, see `engine::slot::DAEMON_CLIENT`), several
 //! slaves at a time, and keeps it across recoveries that find the same
 //! network. A call that needs it before it is ready waits for that one
-//! build; its deadline can end the wait, never the work (issue 26: with
-//! the build inside the first caller's deadline, a busy daemon threw it
-//! away call after call).
+//! build; its deadline can end the wait, never the work (when the build
+//! ran inside the first caller's deadline, a busy daemon threw it away
+//! call after call).
 
 use std::collections::HashMap;
 use std::sync::Arc;
@@ -83,7 +83,7 @@ pub struct Image {
 impl Image {
     /// Reads the PDOs of every slave with process data, `BUILDERS` slaves
     /// at a time, and lays them out as bring-up placed them (`key`).
-    pub async fn build(master: &Arc<Master>, key: &LayoutKey) -> Result<Self, EngineError> {
+    pub(crate) async fn build(master: &Arc<Master>, key: &LayoutKey) -> Result<Self, EngineError> {
         // One copy of the configuration for the whole build.
         let config = master.config();
         let mut image = Image {
@@ -243,18 +243,18 @@ impl Image {
     }
 
     /// An entry by name, or by variable name.
-    pub fn get(&self, name: &str) -> Option<&Entry> {
+    pub(crate) fn get(&self, name: &str) -> Option<&Entry> {
         self.by_name.get(name).or_else(|| self.by_variable.get(name)).map(|&i| &self.entries[i])
     }
 
     /// The input entry of `slave` for CiA 402 object `index`.
-    pub fn find(&self, slave: u8, index: u16, output: bool) -> Option<&Entry> {
+    pub(crate) fn find(&self, slave: u8, index: u16, output: bool) -> Option<&Entry> {
         self.entries.iter().find(|e| e.slave == slave && e.index == index && e.subindex == 0 && e.output == output)
     }
 }
 
 /// Reads `bits` bits at bit `offset` of `image` (little-endian, LSB first).
-pub fn read_bits(image: &[u8], offset: u32, bits: u32) -> Vec<u8> {
+pub(crate) fn read_bits(image: &[u8], offset: u32, bits: u32) -> Vec<u8> {
     let mut out = vec![0u8; bits.div_ceil(8) as usize];
     for i in 0..bits {
         let src = offset + i;
@@ -267,7 +267,7 @@ pub fn read_bits(image: &[u8], offset: u32, bits: u32) -> Vec<u8> {
 }
 
 /// Writes `bits` bits of `value` at bit `offset` of `image`.
-pub fn write_bits(image: &mut [u8], offset: u32, bits: u32, value: &[u8]) {
+pub(crate) fn write_bits(image: &mut [u8], offset: u32, bits: u32, value: &[u8]) {
     for i in 0..bits {
         let dst = offset + i;
         let bit = value.get((i / 8) as usize).is_some_and(|b| b >> (i % 8) & 1 == 1);
@@ -283,7 +283,7 @@ pub fn write_bits(image: &mut [u8], offset: u32, bits: u32, value: &[u8]) {
 
 /// A type of `bits` bits when nothing better is known: unsigned, BOOL for
 /// one bit, octets for odd sizes.
-pub fn type_for_bits(bits: u32) -> DataType {
+pub(crate) fn type_for_bits(bits: u32) -> DataType {
     match bits {
         1 => DataType::Bool,
         8 => DataType::UInt8,
@@ -326,7 +326,7 @@ async fn read_all_pdos(master: &Arc<Master>, slaves: &[SlaveSummary]) -> Result<
 /// bring-up found (identities, process data sizes and offsets). A recovery
 /// that finds the same keeps the image.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct LayoutKey {
+pub(crate) struct LayoutKey {
     generation: u64,
     slaves: Vec<SlaveSummary>,
     rx_size: usize,
@@ -335,7 +335,7 @@ pub struct LayoutKey {
 
 impl LayoutKey {
     /// The master's now.
-    pub fn of(master: &Master) -> Self {
+    pub(crate) fn of(master: &Master) -> Self {
         let generation = master.status().config_generation;
         let layout = master.layout();
         Self { generation, slaves: layout.slaves, rx_size: layout.rx_size, tx_size: layout.tx_size }
@@ -351,7 +351,7 @@ struct Built {
 
 /// The image of the network in force, kept built by the daemon.
 #[derive(Debug)]
-pub struct ImageCache {
+pub(crate) struct ImageCache {
     built: watch::Sender<Option<Built>>,
     /// A caller found a failed build and wants another try.
     wanted: Notify,
@@ -368,7 +368,7 @@ impl ImageCache {
     /// after the build under way (or a new try, when the last one failed)
     /// ends. A network that does not run and has no image is an error at
     /// once: nothing would build one.
-    pub async fn get(&self, master: &Master) -> Result<Arc<Image>, EngineError> {
+    pub(crate) async fn get(&self, master: &Master) -> Result<Arc<Image>, EngineError> {
         let mut built = self.built.subscribe();
         let mut asked = false;
         loop {
@@ -395,7 +395,7 @@ impl ImageCache {
     /// The image for the network in force if one was built (or its build
     /// failed), without waiting or asking for one: for front ends that
     /// publish on their own clock (Sparkplug) and try again next time.
-    pub fn current(&self, master: &Master) -> Option<Result<Arc<Image>, EngineError>> {
+    pub(crate) fn current(&self, master: &Master) -> Option<Result<Arc<Image>, EngineError>> {
         let key = LayoutKey::of(master);
         self.built.borrow().as_ref().filter(|b| b.key == key).map(|b| b.result.clone())
     }
@@ -405,7 +405,7 @@ impl ImageCache {
     /// a failed build once the engine's phase, state or configuration
     /// changes or a caller asks. Waits on the engine's status changes (not
     /// on its periodic snapshots) and on callers; idle otherwise.
-    pub async fn keep_built(&self, master: Arc<Master>) {
+    pub(crate) async fn keep_built(&self, master: Arc<Master>) {
         let mut status = master.watch_status();
         let mut just_failed = false;
         loop {

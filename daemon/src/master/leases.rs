@@ -2,7 +2,7 @@
 //! holds one of the engine's counted output writers, so when the last lease
 //! goes (released, expired without keep-alive, or its stream closed) the
 //! engine applies `outputs.on_last_writer_gone` — the configured safe action.
-//! Domain state of the master (issue 30): any front end (gRPC, MQTT, a
+//! Domain state of the master, not of the API: any front end (gRPC, MQTT, a
 //! mailbox gateway) shares the one table; the API maps [`Lease`] and
 //! [`LeaseError`] to its messages and codes.
 
@@ -104,7 +104,13 @@ impl Leases {
     }
 
     /// Takes `slaves` (positions on the ring; all when empty) for `who`.
-    pub fn acquire(&self, master: &Master, slaves: &[u8], ttl: Duration, who: &str) -> Result<Lease, LeaseError> {
+    pub(crate) fn acquire(
+        &self,
+        master: &Master,
+        slaves: &[u8],
+        ttl: Duration,
+        who: &str,
+    ) -> Result<Lease, LeaseError> {
         let wanted: Vec<u8> = if slaves.is_empty() {
             (0..master.layout().slaves.len() as u8).collect()
         } else {
@@ -136,7 +142,7 @@ impl Leases {
     }
 
     /// Extends a lease by its time-to-live.
-    pub fn keep_alive(&self, id: &str) -> Result<Lease, LeaseError> {
+    pub(crate) fn keep_alive(&self, id: &str) -> Result<Lease, LeaseError> {
         let mut held = self.lock();
         self.expire(&mut held, Instant::now());
         let h = held.get_mut(id).ok_or_else(|| LeaseError::Unknown(id.to_owned()))?;
@@ -145,7 +151,7 @@ impl Leases {
     }
 
     /// Gives a lease up.
-    pub fn release(&self, id: &str) -> Result<(), LeaseError> {
+    pub(crate) fn release(&self, id: &str) -> Result<(), LeaseError> {
         let gone = self.lock().remove(id).ok_or_else(|| LeaseError::Unknown(id.to_owned()))?;
         tracing::info!(lease = %id, who = %gone.who, "output lease released");
         Ok(())
@@ -176,12 +182,12 @@ impl Leases {
     }
 
     /// Whether lease `id` exists and owns `slave`.
-    pub fn owns(&self, id: &str, slave: u8) -> bool {
+    pub(crate) fn owns(&self, id: &str, slave: u8) -> bool {
         self.lock().get(id).is_some_and(|h| h.slaves.contains(&slave))
     }
 
     /// Drops expired leases (their writers go with them).
-    pub fn sweep(&self) {
+    pub(crate) fn sweep(&self) {
         let mut held = self.lock();
         self.expire(&mut held, Instant::now());
     }

@@ -1,7 +1,8 @@
 //! Which mailbox protocols each slave speaks, from its SII (word 0x1C,
 //! ETG.1000.6 table 2): an SDO to a slave without CoE is answered at once,
 //! naming the slave, instead of being sent and timing out in the chip a
-//! second later as "SDO protocol timeout" (issue 27). Read once per slave
+//! second later as "SDO protocol timeout", which names neither the slave
+//! nor the cause. Read once per slave
 //! (one EEPROM request) the first time an SDO goes to it, and kept while
 //! the same device sits at that position.
 
@@ -15,13 +16,13 @@ use crate::engine::error::{EngineError, WrongState};
 const PROTOCOLS_WORD: u16 = 0x1C;
 
 /// The mailbox protocols read so far, by slave position.
-pub type MailboxProtocols = PerSlave<u16>;
+pub(crate) type MailboxProtocols = PerSlave<u16>;
 
 impl Master {
     /// Ok when `slave` speaks CoE, or when its SII cannot say (the SDO then
     /// goes out and the slave answers for itself); [`WrongState::NoCoe`]
     /// when its SII lists the mailbox protocols and CoE is not among them.
-    pub async fn check_coe(&self, slave: u8) -> Result<(), EngineError> {
+    pub(crate) async fn check_coe(&self, slave: u8) -> Result<(), EngineError> {
         let Some(identity) = self.identity(slave) else { return Ok(()) };
         let protocols = match self.mailbox.get(slave, identity) {
             Some(p) => p,

@@ -1,4 +1,4 @@
-//! A host-side mailbox channel to one slave at a time (issue 33): the
+//! A host-side mailbox channel to one slave at a time: the
 //! services the chip does not speak itself (CoE SDO Information; whatever
 //! an ETG.8200 gateway client sends) go to the slave's mailboxes through
 //! the chip's raw datagrams (v049 RAW_ECAT_FUNC_REQ 137 / GET 138), each
@@ -43,6 +43,16 @@
 //! Polls back off from back to back to every [`POLL_MAX`]: a slave answers
 //! in its own time and gives no signal, and each poll is a slot job.
 
+/// The mailbox framing (ETG.1000.4 5.6, ETG.1000.6 5.6) that a front end
+/// forwarding mailbox traffic speaks: the ETG.8200 gateway parses its
+/// clients' requests with it, and answers for the master's own object
+/// dictionary.
+pub(crate) mod framing {
+    pub(crate) use ecmxf_wire::mbx::sdo::{SdoRequest, SdoResponse};
+    pub(crate) use ecmxf_wire::mbx::{HEADER_LEN, MailboxError, MailboxHeader, MailboxType, Message};
+    pub(crate) use ecmxf_wire::payload::sdo::SdoAbortCode;
+}
+
 use std::collections::HashMap;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
@@ -58,11 +68,11 @@ use crate::engine::error::EngineError;
 use crate::engine::events::{Event, EventKind};
 
 /// The longest wait between two polls of a send mailbox.
-pub const POLL_MAX: Duration = Duration::from_millis(10);
+pub(crate) const POLL_MAX: Duration = Duration::from_millis(10);
 /// How long an answer may take by default.
-pub const ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
+pub(crate) const ANSWER_TIMEOUT: Duration = Duration::from_secs(2);
 /// Silence after which a lost answer is asked for again.
-pub const REPEAT_AFTER: Duration = Duration::from_millis(100);
+pub(crate) const REPEAT_AFTER: Duration = Duration::from_millis(100);
 /// SM1's activate register (repeat request in bit 1).
 const SM1_ACTIVATE: u16 = 0x080E;
 /// Raw datagram timeout, us.
@@ -70,7 +80,7 @@ const DATAGRAM_US: u32 = 10_000;
 
 /// Where a slave's mailboxes are (SII words 0x18..0x1B).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct MailboxGeometry {
+pub(crate) struct MailboxGeometry {
     /// Receive mailbox (master to slave): start.
     pub rx_offset: u16,
     /// Its size.
@@ -84,7 +94,7 @@ pub struct MailboxGeometry {
 /// Per-slave state of the channel: geometry read once per identity, and
 /// the lock host exchanges and the master's own CoE requests share.
 #[derive(Debug, Default)]
-pub struct MailboxChannels {
+pub(crate) struct MailboxChannels {
     geometry: PerSlave<MailboxGeometry>,
     locks: Mutex<HashMap<u8, Arc<tokio::sync::RwLock<()>>>>,
     /// The counter of the last message the host read from each slave.
@@ -102,7 +112,7 @@ const EMERGENCIES_KEPT: usize = 8;
 
 /// What the ETG.8200 gateway did (exported as metrics).
 #[derive(Debug, Default)]
-pub struct GatewayCounters {
+pub(crate) struct GatewayCounters {
     /// Requests taken.
     pub requests: std::sync::atomic::AtomicU64,
     /// Answers sent.
@@ -169,24 +179,24 @@ impl Master {
 
     /// A slave's mailbox for a host exchange, alone: held for the whole
     /// exchange (all its fragments).
-    pub async fn mailbox_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockWriteGuard<()> {
+    pub(crate) async fn mailbox_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockWriteGuard<()> {
         self.slave_lock(slave).write_owned().await
     }
 
     /// A slave's mailbox for one of the chip's own CoE requests: shared with
     /// the others, kept from host exchanges.
-    pub async fn coe_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockReadGuard<()> {
+    pub(crate) async fn coe_lock(&self, slave: u8) -> tokio::sync::OwnedRwLockReadGuard<()> {
         self.slave_lock(slave).read_owned().await
     }
 
     /// The gateway's counters.
-    pub fn gateway_counters(&self) -> &GatewayCounters {
+    pub(crate) fn gateway_counters(&self) -> &GatewayCounters {
         &self.channels.gateway
     }
 
     /// The configured station address of the slave at `slave` (SLV_INFO,
     /// read once per identity); `None` when it cannot be read.
-    pub async fn station_address(&self, slave: u8) -> Option<u16> {
+    pub(crate) async fn station_address(&self, slave: u8) -> Option<u16> {
         let identity = self.identity(slave)?;
         if let Some(a) = self.channels.stations.get(slave, identity) {
             return Some(a);
@@ -198,7 +208,7 @@ impl Master {
     }
 
     /// The position of the slave with station address `station`.
-    pub async fn slave_at_station(&self, station: u16) -> Option<u8> {
+    pub(crate) async fn slave_at_station(&self, station: u16) -> Option<u8> {
         let count = self.layout().slaves.len().min(usize::from(u8::MAX)) as u8;
         for slave in 0..count {
             if self.station_address(slave).await == Some(station) {
@@ -209,7 +219,7 @@ impl Master {
     }
 
     /// Where `slave`'s mailboxes are, from its SII (read once per identity).
-    pub async fn mailbox_geometry(&self, slave: u8) -> Result<MailboxGeometry, EngineError> {
+    pub(crate) async fn mailbox_geometry(&self, slave: u8) -> Result<MailboxGeometry, EngineError> {
         let identity = self.identity(slave).ok_or_else(|| EngineError::BadArgument {
             field: "slave",
             reason: format!("slave {slave} does not exist"),
@@ -226,7 +236,7 @@ impl Master {
 
     /// Sends one mailbox message (`kind`, `body`) to `slave` and returns the
     /// answer's header and body. The caller holds [`Master::mailbox_lock`].
-    pub async fn mailbox_exchange(
+    pub(crate) async fn mailbox_exchange(
         &self,
         slave: u8,
         kind: MailboxType,
@@ -256,7 +266,7 @@ impl Master {
 
     /// Reads the next message from `slave`'s send mailbox (a fragment after
     /// the first). The caller holds [`Master::mailbox_lock`].
-    pub async fn mailbox_next(
+    pub(crate) async fn mailbox_next(
         &self,
         slave: u8,
         timeout: Duration,
@@ -426,13 +436,13 @@ impl Master {
             }
             kept.push_back(record);
         }
-        let _ = self.engine.events.send(Event { time_ns: self.now_ns(), kind: EventKind::Emergency(record) });
+        self.engine.publish_event(Event { time_ns: self.now_ns(), kind: EventKind::Emergency(record) });
         true
     }
 
     /// The last emergencies the host's own mailbox reads found (the chip
     /// never saw them: they are not in its history), newest first.
-    pub fn mailbox_emergencies(&self) -> Vec<EmergencyRecord> {
+    pub(crate) fn mailbox_emergencies(&self) -> Vec<EmergencyRecord> {
         self.channels.emergencies.lock().unwrap_or_else(|e| e.into_inner()).iter().rev().copied().collect()
     }
 }

@@ -14,7 +14,6 @@
 //! reset and applying a new configuration.
 
 use std::sync::atomic::{AtomicU64, Ordering};
-use std::sync::mpsc::TrySendError;
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -25,28 +24,34 @@ use crate::engine::slot::{Job, SlotRequest};
 use crate::engine::{Command, EngineHandle};
 use crate::link::SimHandle;
 use crate::link::{Link, LinkError};
-use ecmxf_wire::EcatState;
+pub use ecmxf_wire::payload::sdo::SdoAbortCode;
+pub use ecmxf_wire::payload::slave_info::SlaveInfoCode;
+pub use ecmxf_wire::{EcatState, al_status_text};
 use outputs::OutputSender;
 pub use outputs::OutputWriter;
 pub use transactions::RawAnswer;
 
+pub(crate) mod axes;
 pub mod device_dictionary;
+pub(crate) mod diagnostics;
 pub mod entry_writes;
-pub mod esi;
-pub mod frame_claims;
-pub mod image;
+pub(crate) mod esi;
+pub(crate) mod frame_claims;
+pub(crate) mod image;
 mod leases;
-pub mod mailbox;
-pub mod mailbox_channel;
+pub(crate) mod mailbox;
+pub(crate) mod mailbox_channel;
 mod network;
-pub mod objects;
-pub mod outputs;
+pub(crate) mod objects;
+pub(crate) mod outputs;
 pub mod pdos;
 mod per_slave;
-pub mod sii;
-pub mod sparkplug_state;
-pub mod states;
-pub mod transactions;
+pub(crate) mod peripherals;
+pub(crate) mod sii;
+pub(crate) mod sparkplug_state;
+pub(crate) mod states;
+pub(crate) mod transactions;
+pub(crate) mod value;
 
 /// A slave's identity: (vendor id, product code, revision).
 pub type Identity = (u32, u32, u32);
@@ -56,7 +61,7 @@ pub use crate::engine::slot::{DAEMON_CLIENT, as_client};
 pub use crate::engine::{EVENT_BACKLOG, QUEUE_DEPTH, SUBSCRIBER_BACKLOG};
 
 // What front ends (the gRPC API, and any other) need of the engine, named
-// here so that they import the master alone (issue 30): errors, phases and
+// here so that they import the master alone, never the engine's modules: errors, phases and
 // snapshots, events, the layout, frame streams and transfer progress.
 pub use crate::engine::error::{EngineError, NotRunning, WrongState};
 pub use crate::engine::events::{Event, EventKind, EventLog};
@@ -87,7 +92,7 @@ pub struct Verdict {
 
 impl Verdict {
     /// Healthy, with a cyclic exchange that delivers input frames.
-    pub fn flowing(&self) -> bool {
+    pub(crate) fn flowing(&self) -> bool {
         matches!(self.health, Health::Healthy | Health::SlavesMissing { .. } | Health::Int0Stuck)
             && self.input_age.is_some()
     }
@@ -134,7 +139,7 @@ pub enum Health {
 
 impl Health {
     /// The verdict on a snapshot at `now_ns` (engine epoch).
-    pub fn judge(s: &Snapshot, target: EcatState, now_ns: u64) -> Self {
+    pub(crate) fn judge(s: &Snapshot, target: EcatState, now_ns: u64) -> Self {
         if s.phase != Phase::Running {
             return Self::NotRunning(s.phase);
         }
@@ -238,6 +243,12 @@ pub struct Master {
     dictionaries: device_dictionary::DeviceDictionaries,
     /// The Sparkplug node's connection and counters.
     sparkplug: Arc<sparkplug_state::SparkplugState>,
+    /// Output leases: one table for every front end (gRPC, Sparkplug,
+    /// and the ones to come), swept by [`Master::sweep_leases`].
+    leases: Leases,
+    /// A lease's time-to-live when its taker names none
+    /// (`api.lease_ttl_ms`).
+    lease_ttl: Duration,
 }
 
 /// Opens the link the configuration names. For the in-process simulator,
@@ -289,7 +300,8 @@ impl Master {
     /// real-time thread and the input distributor).
     pub fn start<L: Link + 'static>(link: L, config: Config) -> Self {
         let engine = crate::engine::spawn(link, config.clone());
-        let outputs = Arc::new(OutputSender::new(engine.outputs.clone()));
+        let outputs = Arc::new(OutputSender::new(engine.output_sender()));
+        let lease_ttl = Duration::from_millis(config.api.lease_ttl_ms.into());
         Self {
             engine,
             outputs,
@@ -305,7 +317,32 @@ impl Master {
             channels: mailbox_channel::MailboxChannels::default(),
             dictionaries: device_dictionary::DeviceDictionaries::default(),
             sparkplug: Arc::default(),
+            leases: Leases::default(),
+            lease_ttl,
         }
+    }
+
+    /// The output lease table every front end writes under.
+    pub fn leases(&self) -> &Leases {
+        &self.leases
+    }
+
+    /// Takes the outputs of `slaves` (all when empty) for `who`, for `ttl`
+    /// (`None`: `api.lease_ttl_ms`).
+    pub fn acquire_lease(&self, slaves: &[u8], ttl: Option<Duration>, who: &str) -> Result<Lease, LeaseError> {
+        self.leases.acquire(self, slaves, ttl.unwrap_or(self.lease_ttl), who)
+    }
+
+    /// The time-to-live of a lease whose taker names none.
+    pub(crate) fn lease_ttl(&self) -> Duration {
+        self.lease_ttl
+    }
+
+    /// Drops the leases whose time-to-live ran out without a keep-alive
+    /// (their writers go with them, so `outputs.on_last_writer_gone`
+    /// applies when the last one goes).
+    pub(crate) fn sweep_leases(&self) {
+        self.leases.sweep();
     }
 
     /// The Sparkplug node's connection and counters (zero while none is
@@ -335,11 +372,7 @@ impl Master {
         let client = crate::engine::slot::current_client();
         let buffer = Vec::with_capacity(crate::engine::slot::request::reply_capacity(&request));
         let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client, buffer };
-        match self.engine.commands.try_send(Command::Job(job)) {
-            Ok(()) => {}
-            Err(TrySendError::Full(_)) => return Err(EngineError::QueueFull),
-            Err(TrySendError::Disconnected(_)) => return Err(EngineError::Unavailable(NotRunning::Stopped)),
-        }
+        self.engine.send(Command::Job(job))?;
         match tokio::time::timeout(timeout, rx).await {
             Ok(Ok(r)) => r,
             Ok(Err(_)) => Err(EngineError::Unavailable(NotRunning::Stopped)),
@@ -360,33 +393,33 @@ impl Master {
     /// A counted writer of outputs: when the last one is dropped, the
     /// engine applies `outputs.on_last_writer_gone`.
     pub fn output_writer(&self) -> OutputWriter {
-        self.engine.writers.acquire();
+        self.engine.writers().acquire();
         OutputWriter {
             outputs: Arc::clone(&self.outputs),
-            layout: Arc::clone(&self.engine.layout),
-            writers: Arc::clone(&self.engine.writers),
+            layout: Arc::clone(self.engine.layout()),
+            writers: Arc::clone(self.engine.writers()),
         }
     }
 
     /// Output writers now.
     pub fn output_writers(&self) -> usize {
-        self.engine.writers.count()
+        self.engine.writers().count()
     }
 
     /// A new subscriber to supervision events (state changes, link, DC,
     /// error counters, underruns, recoveries) from now on.
     pub fn events(&self) -> broadcast::Receiver<Event> {
-        self.engine.events.subscribe()
+        self.engine.subscribe_events()
     }
 
     /// A new subscriber to input frames.
     pub fn subscribe(&self) -> broadcast::Receiver<Arc<InputFrame>> {
-        self.engine.inputs.subscribe()
+        self.engine.subscribe_inputs()
     }
 
     /// The engine's status.
     pub fn status(&self) -> Snapshot {
-        self.engine.telemetry.snapshot()
+        self.engine.telemetry().snapshot()
     }
 
     /// The engine's status as it changes: a new snapshot at once when the
@@ -394,7 +427,7 @@ impl Master {
     /// changes, and at least every few ms while the engine exchanges
     /// packets. Await this instead of polling [`Master::status`].
     pub fn watch_status(&self) -> tokio::sync::watch::Receiver<Snapshot> {
-        self.engine.telemetry.watch()
+        self.engine.telemetry().watch()
     }
 
     /// Waits until a snapshot satisfies `done`, for at most `limit`;
@@ -415,13 +448,13 @@ impl Master {
 
     /// The engine's epoch (time 0 of frame and event times) on the host's
     /// CLOCK_MONOTONIC, ns.
-    pub fn epoch_monotonic_ns(&self) -> u64 {
-        self.engine.telemetry.epoch_monotonic_ns.load(Ordering::Relaxed)
+    pub(crate) fn epoch_monotonic_ns(&self) -> u64 {
+        self.engine.telemetry().epoch_monotonic_ns.load(Ordering::Relaxed)
     }
 
     /// Now, ns since the engine's epoch (the time base of frames, events
     /// and the snapshot's `newest_input_ns`).
-    pub fn now_ns(&self) -> u64 {
+    pub(crate) fn now_ns(&self) -> u64 {
         crate::realtime::monotonic_ns().saturating_sub(self.epoch_monotonic_ns())
     }
 
@@ -434,27 +467,27 @@ impl Master {
     }
 
     /// [`Master::health`] of a snapshot already taken, at `now_ns`.
-    pub fn health_of(&self, s: &Snapshot, now_ns: u64) -> Health {
+    pub(crate) fn health_of(&self, s: &Snapshot, now_ns: u64) -> Health {
         let target = self.config.lock().unwrap_or_else(|e| e.into_inner()).cycle.target();
         Health::judge(s, target, now_ns)
     }
 
     /// Whether process data flows, judged on snapshot `s` now: the health
     /// and the newest input frame's age against its limit.
-    pub fn verdict(&self, s: &Snapshot) -> Verdict {
+    pub(crate) fn verdict(&self, s: &Snapshot) -> Verdict {
         let now = self.now_ns();
         Verdict { health: self.health_of(s, now), input_age: s.input_age(now) }
     }
 
     /// Write-to-wire latency of client output writes over the latest ones
     /// (see `Telemetry::output_latency`); `None` before the first.
-    pub fn output_latency(&self) -> Option<crate::engine::telemetry::LatencyStats> {
-        self.engine.telemetry.output_latency.stats()
+    pub(crate) fn output_latency(&self) -> Option<crate::engine::telemetry::LatencyStats> {
+        self.engine.telemetry().output_latency.stats()
     }
 
     /// The output latency budget in force (`cycle.output_latency_us`), us;
     /// read without copying the configuration.
-    pub fn output_latency_budget_us(&self) -> Option<u32> {
+    pub(crate) fn output_latency_budget_us(&self) -> Option<u32> {
         self.config.lock().unwrap_or_else(|e| e.into_inner()).cycle.output_latency_us
     }
 
@@ -477,34 +510,31 @@ impl Master {
             return Err(EngineError::BadArgument { field: "range", reason });
         }
         let (producer, consumer) = crate::engine::frames::channel(start, len, capacity);
-        self.engine.commands.try_send(Command::FrameStream(consumer)).map_err(|e| match e {
-            TrySendError::Full(_) => EngineError::QueueFull,
-            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
-        })?;
+        self.engine.send(Command::FrameStream(consumer))?;
         Ok(producer)
     }
 
     /// Why bring-up last failed or recovery last started.
     pub fn last_error(&self) -> Option<Failure> {
-        self.engine.telemetry.last_error()
+        self.engine.telemetry().last_error()
     }
 
     /// Whether the engine stopped because the network can never run with
     /// the configuration in force (see `BringUpError::is_permanent`).
-    pub fn refused(&self) -> bool {
-        self.engine.telemetry.refused.load(Ordering::Relaxed)
+    pub(crate) fn refused(&self) -> bool {
+        self.engine.telemetry().refused.load(Ordering::Relaxed)
     }
 
     /// (vendor id, product code, revision) of the slave at `position` as
     /// bring-up read them; `None` past the end of the ring.
-    pub fn identity(&self, position: u8) -> Option<Identity> {
-        let layout = self.engine.layout.lock().unwrap_or_else(|e| e.into_inner());
+    pub(crate) fn identity(&self, position: u8) -> Option<Identity> {
+        let layout = self.engine.layout().lock().unwrap_or_else(|e| e.into_inner());
         layout.slaves.get(usize::from(position)).map(|s| (s.vendor_id, s.product_code, s.revision))
     }
 
     /// The network as bring-up found it.
     pub fn layout(&self) -> NetworkLayout {
-        self.engine.layout.lock().unwrap_or_else(|e| e.into_inner()).clone()
+        self.engine.layout().lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     /// Safe stop, then waits for the threads (blocking). A bring-up or
@@ -514,21 +544,21 @@ impl Master {
     }
 
     /// The newest input frame, if any arrived.
-    pub fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
-        self.engine.latest.borrow().clone()
+    pub(crate) fn latest_inputs(&self) -> Option<Arc<InputFrame>> {
+        self.engine.latest_inputs()
     }
 
     /// Waits, at most `limit`, for an input frame newer than the newest
     /// now; false when none came. What a drive reports (its state, its mode)
     /// changes only with a frame, so a waiter looks again after each one.
-    pub async fn next_inputs(&self, limit: Duration) -> bool {
-        let mut rx = self.engine.latest.subscribe();
+    pub(crate) async fn next_inputs(&self, limit: Duration) -> bool {
+        let mut rx = self.engine.watch_latest_inputs();
         matches!(tokio::time::timeout(limit, rx.changed()).await, Ok(Ok(())))
     }
 
     /// The output ranges open frame streams feed (one stream per range;
     /// plain output writes leave them alone).
-    pub fn frame_claims(&self) -> &Arc<frame_claims::FrameClaims> {
+    pub(crate) fn frame_claims(&self) -> &Arc<frame_claims::FrameClaims> {
         &self.frame_claims
     }
 
@@ -540,7 +570,7 @@ impl Master {
 
     /// The process image of the network in force if it is built (or its
     /// build failed), at once ([`image::ImageCache::current`]).
-    pub fn current_image(&self) -> Option<Result<Arc<image::Image>, EngineError>> {
+    pub(crate) fn current_image(&self) -> Option<Result<Arc<image::Image>, EngineError>> {
         self.image.current(self)
     }
 
@@ -553,7 +583,7 @@ impl Master {
 
     /// The output image as front ends last wrote it (zero-filled at start),
     /// to stage writes on and read back (ReadOutputs).
-    pub fn output_shadow(&self) -> std::sync::MutexGuard<'_, Vec<u8>> {
+    pub(crate) fn output_shadow(&self) -> std::sync::MutexGuard<'_, Vec<u8>> {
         self.shadow.lock().unwrap_or_else(|e| e.into_inner())
     }
 }

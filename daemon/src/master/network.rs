@@ -3,7 +3,6 @@
 //! once the network runs again.
 
 use std::sync::atomic::Ordering;
-use std::sync::mpsc::TrySendError;
 use std::time::Duration;
 
 use super::Master;
@@ -55,12 +54,7 @@ impl Master {
         }
         let generation = self.config_generation.fetch_add(1, Ordering::AcqRel) + 1;
         let mut events = self.events();
-        self.engine.commands.try_send(Command::Reconfigure(generation, Box::new(config.clone()))).map_err(
-            |e| match e {
-                TrySendError::Full(_) => EngineError::QueueFull,
-                TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
-            },
-        )?;
+        self.engine.send(Command::Reconfigure(generation, Box::new(config.clone())))?;
         *self.config.lock().unwrap_or_else(|e| e.into_inner()) = config;
         // The first bring-up failure with this configuration is the answer
         // (the engine goes on retrying it meanwhile).
@@ -93,7 +87,7 @@ impl Master {
 
     /// `f` over the `[[axis]]` entries in force (the chip's CiA 402
     /// helper): asked on every output write, so nothing is copied.
-    pub fn with_axes<R>(&self, f: impl FnOnce(&[crate::config::AxisConfig]) -> R) -> R {
+    pub(crate) fn with_axes<R>(&self, f: impl FnOnce(&[crate::config::AxisConfig]) -> R) -> R {
         f(&self.config.lock().unwrap_or_else(|e| e.into_inner()).axes)
     }
 
@@ -108,10 +102,7 @@ impl Master {
     async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
         self.running_or_unavailable()?;
         let before = self.status().recoveries;
-        self.engine.commands.try_send(Command::Network(action)).map_err(|e| match e {
-            TrySendError::Full(_) => EngineError::QueueFull,
-            TrySendError::Disconnected(_) => EngineError::Unavailable(NotRunning::Stopped),
-        })?;
+        self.engine.send(Command::Network(action))?;
         self.until(timeout, |s| s.recoveries > before && s.phase == Phase::Running).await
     }
 

@@ -8,7 +8,7 @@ use ecmxf_devices::od::DataType;
 
 /// One known object (or subindex).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct KnownObject {
+pub(crate) struct KnownObject {
     /// Index (of axis 0 for CiA 402 objects).
     pub index: u16,
     /// Subindex.
@@ -34,7 +34,7 @@ const fn a(index: u16, name: &'static str, data_type: DataType, access: &'static
 use DataType as T;
 
 /// The table.
-pub const KNOWN: &[KnownObject] = &[
+pub(crate) const KNOWN: &[KnownObject] = &[
     o(0x1000, 0, "device_type", T::UInt32, "ro"),
     o(0x1001, 0, "error_register", T::UInt8, "ro"),
     o(0x1008, 0, "device_name", T::VisibleString(0), "ro"),
@@ -128,7 +128,7 @@ pub const KNOWN: &[KnownObject] = &[
 
 /// What the table says of `index:subindex`: the object and, for CiA 402
 /// objects, the axis (0 for the first).
-pub fn lookup(index: u16, subindex: u8) -> Option<(KnownObject, u8)> {
+pub(crate) fn lookup(index: u16, subindex: u8) -> Option<(KnownObject, u8)> {
     if let Some(k) = KNOWN.iter().find(|k| !k.per_axis && k.index == index && k.subindex == subindex) {
         return Some((*k, 0));
     }
@@ -142,7 +142,7 @@ pub fn lookup(index: u16, subindex: u8) -> Option<(KnownObject, u8)> {
 
 /// The process-image name of an entry of `slave`: "1.statusword",
 /// "1.axis2.target_position", "2.0x6000:01".
-pub fn entry_name(slave: u8, index: u16, subindex: u8) -> String {
+pub(crate) fn entry_name(slave: u8, index: u16, subindex: u8) -> String {
     match lookup(index, subindex) {
         Some((k, 0)) => format!("{slave}.{}", k.name),
         Some((k, axis)) => format!("{slave}.axis{axis}.{}", k.name),
@@ -151,7 +151,7 @@ pub fn entry_name(slave: u8, index: u16, subindex: u8) -> String {
 }
 
 /// The index of CiA 402 object `base` (axis 0's) for `axis`.
-pub fn axis_index(base: u16, axis: u8) -> u16 {
+pub(crate) fn axis_index(base: u16, axis: u8) -> u16 {
     base + 0x800 * u16::from(axis)
 }
 

@@ -79,7 +79,7 @@ pub struct SlavePdos {
 
 impl SlavePdos {
     /// A slave with nothing to list, and why.
-    pub fn none(note: impl Into<String>) -> Self {
+    pub(crate) fn none(note: impl Into<String>) -> Self {
         Self { source: PdoSource::None, note: note.into(), rx: Vec::new(), tx: Vec::new() }
     }
 }
@@ -265,7 +265,8 @@ fn is_mapping_index(index: u16) -> bool {
 
 /// A PDO assigned at an index outside the mapping objects' range takes its
 /// entries from the device's description (SII or ESI), which has them;
-/// CoE would have read another object's values as entries (issue 27).
+/// CoE would have read another object's values as entries (a two-channel
+/// drive's TxPDO at 0x1018 once came back as the identity object's values).
 fn from_description(list: &mut [PdoDescription], described: &[PdoDescription]) {
     for p in list.iter_mut().filter(|p| !is_mapping_index(p.index)) {
         match described.iter().find(|d| d.index == p.index) {

@@ -9,7 +9,7 @@ use super::Identity;
 
 /// Values by ring position, each with the identity it was read from.
 #[derive(Debug)]
-pub struct PerSlave<T>(Mutex<HashMap<u8, (Identity, T)>>);
+pub(crate) struct PerSlave<T>(Mutex<HashMap<u8, (Identity, T)>>);
 
 impl<T> Default for PerSlave<T> {
     fn default() -> Self {
@@ -19,13 +19,13 @@ impl<T> Default for PerSlave<T> {
 
 impl<T: Copy> PerSlave<T> {
     /// The value kept for `slave`, if it was read from `identity`.
-    pub fn get(&self, slave: u8, identity: Identity) -> Option<T> {
+    pub(crate) fn get(&self, slave: u8, identity: Identity) -> Option<T> {
         let kept = self.0.lock().unwrap_or_else(|e| e.into_inner());
         kept.get(&slave).filter(|(id, _)| *id == identity).map(|(_, v)| *v)
     }
 
     /// Keeps `value` as read from `identity` at `slave`.
-    pub fn put(&self, slave: u8, identity: Identity, value: T) {
+    pub(crate) fn put(&self, slave: u8, identity: Identity, value: T) {
         self.0.lock().unwrap_or_else(|e| e.into_inner()).insert(slave, (identity, value));
     }
 }

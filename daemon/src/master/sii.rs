@@ -29,7 +29,7 @@ const SIZE_WORD: u16 = 0x3E;
 /// the category area is kept: nothing per device (serial, alias, station
 /// configuration) is. Forgotten whenever the daemon writes an EEPROM.
 #[derive(Debug, Default)]
-pub struct SiiCache {
+pub(crate) struct SiiCache {
     by_identity: Mutex<HashMap<Identity, Arc<OnceCell<Arc<Sii>>>>>,
 }
 
@@ -40,14 +40,14 @@ impl SiiCache {
     }
 
     /// Forgets every description (an EEPROM was written).
-    pub fn forget(&self) {
+    pub(crate) fn forget(&self) {
         self.by_identity.lock().unwrap_or_else(|e| e.into_inner()).clear();
     }
 }
 
 /// Which category bodies to read.
 #[derive(Clone, Copy, Debug)]
-pub enum Categories<'a> {
+pub(crate) enum Categories<'a> {
     /// Every one (a dump).
     All,
     /// Only these types; the others are skipped over (their words stay 0).
@@ -71,7 +71,7 @@ impl Master {
     /// whatever the EEPROM answers there.
     /// With [`Categories::Only`] the fixed area is not wanted: only its size
     /// word is read (the rest stays 0), one request instead of 32.
-    pub async fn sii_words(&self, slave: u8, which: Categories<'_>) -> Result<Vec<u16>, EngineError> {
+    pub(crate) async fn sii_words(&self, slave: u8, which: Categories<'_>) -> Result<Vec<u16>, EngineError> {
         let mut words = match which {
             Categories::All => self.eeprom_read_words(slave, 0, CATEGORIES, None).await?,
             Categories::Only(_) => {
@@ -106,7 +106,7 @@ impl Master {
     }
 
     /// The SII parsed, with the bodies `which` asks for.
-    pub async fn sii(&self, slave: u8, which: Categories<'_>) -> Result<Sii, EngineError> {
+    pub(crate) async fn sii(&self, slave: u8, which: Categories<'_>) -> Result<Sii, EngineError> {
         let words = self.sii_words(slave, which).await?;
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         Sii::parse(&bytes).map_err(|error| EngineError::BadDeviceData { slave, error })
@@ -116,7 +116,7 @@ impl Master {
     /// [`SiiCache`]): `which` must be the same set for every caller of
     /// this, as only the PDO description's reader is. A slave whose
     /// identity bring-up did not learn (all zero) is always read.
-    pub async fn sii_described(&self, slave: u8, which: Categories<'_>) -> Result<Arc<Sii>, EngineError> {
+    pub(crate) async fn sii_described(&self, slave: u8, which: Categories<'_>) -> Result<Arc<Sii>, EngineError> {
         match self.identity(slave).filter(|&id| id != (0, 0, 0)) {
             Some(id) => {
                 let cell = self.sii_cache.cell(id);

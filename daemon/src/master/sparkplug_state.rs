@@ -33,12 +33,12 @@ pub struct SparkplugState {
 
 impl SparkplugState {
     /// The broker of the current or last connection ("" before the first).
-    pub fn broker(&self) -> String {
+    pub(crate) fn broker(&self) -> String {
         self.broker.lock().unwrap_or_else(|e| e.into_inner()).clone()
     }
 
     /// Records the broker a connection was made to.
-    pub fn set_broker(&self, broker: String) {
+    pub(crate) fn set_broker(&self, broker: String) {
         *self.broker.lock().unwrap_or_else(|e| e.into_inner()) = broker;
     }
 }

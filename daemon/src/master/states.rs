@@ -4,9 +4,9 @@
 //! are there or refused) before the next; down in one step, which every
 //! state allows; BOOT only from INIT. A slave asked to jump up refuses with
 //! AL status 0x0011 (invalid requested state change), and the chip then
-//! reports an error the engine must treat as a fault (issue 27: `states
-//! preop; states op` failed on every network and set off a recovery). IgH
-//! and SOEM walk the same way.
+//! reports an error the engine must treat as a fault (`states preop;
+//! states op` would fail on every network and set off a recovery). IgH and
+//! SOEM walk the same way.
 //!
 //! A step a slave refuses ends the walk with an error naming the slave, the
 //! state it is in, the one asked for and its AL status code and text.
@@ -15,7 +15,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_wire::EcatState;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
-use ecmxf_wire::payload::state::SlaveSelector;
+pub(crate) use ecmxf_wire::payload::state::SlaveSelector;
 
 use super::Master;
 use crate::engine::error::{EngineError, WrongState};
@@ -37,7 +37,7 @@ fn rung(s: EcatState) -> Option<usize> {
 /// state off the way up (an error with no state, BOOT, nothing read), the
 /// walk starts at INIT, which every state may go to. BOOT is reached from
 /// INIT only.
-pub fn walk(now: EcatState, target: EcatState) -> Vec<EcatState> {
+pub(crate) fn walk(now: EcatState, target: EcatState) -> Vec<EcatState> {
     if target == EcatState::Boot {
         return if now == EcatState::Init { vec![EcatState::Boot] } else { vec![EcatState::Init, EcatState::Boot] };
     }
@@ -49,7 +49,60 @@ pub fn walk(now: EcatState, target: EcatState) -> Vec<EcatState> {
     }
 }
 
+/// The slaves a state request or reading is for: one (by position) or,
+/// for `None`, all of them.
+pub(crate) fn selector(slave: Option<u8>) -> SlaveSelector {
+    slave.map_or(SlaveSelector::All, SlaveSelector::One)
+}
+
+/// A slave's state and AL status, read live.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct SlaveState {
+    /// Its position.
+    pub position: u8,
+    /// Its EtherCAT state.
+    pub state: EcatState,
+    /// Its AL status code.
+    pub al_status: u16,
+}
+
+/// [`Master::state_report`]: the state of a slave or of the network, read
+/// live.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct StateReport {
+    /// The state of the slave, or of the network.
+    pub state: EcatState,
+    /// For one slave, its AL status code.
+    pub al_status: Option<u16>,
+    /// For the network, every slave's state and AL status.
+    pub slaves: Vec<SlaveState>,
+}
+
 impl Master {
+    /// The state `target` is in now with the AL status of the slave or,
+    /// for the network, of each slave (SLV_INFO_GET, v049 15).
+    pub(crate) async fn state_report(
+        &self,
+        target: SlaveSelector,
+        t: Option<Duration>,
+    ) -> Result<StateReport, EngineError> {
+        let state = self.get_state(target, t).await?;
+        let mut report = StateReport { state, al_status: None, slaves: Vec::new() };
+        match target {
+            SlaveSelector::One(i) => {
+                report.al_status = Some(self.slave_number(i, SlaveInfoCode::AlStatus).await? as u16)
+            }
+            SlaveSelector::All => {
+                for position in 0..self.layout().slaves.len() as u8 {
+                    let s = EcatState::from_u8(self.slave_number(position, SlaveInfoCode::State).await? as u8);
+                    let al_status = self.slave_number(position, SlaveInfoCode::AlStatus).await? as u16;
+                    report.slaves.push(SlaveState { position, state: s, al_status });
+                }
+            }
+        }
+        Ok(report)
+    }
+
     /// Requests a state, walking the state machine (see the module doc);
     /// `timeout` bounds the whole walk. A refused step is
     /// [`WrongState::StepRefused`], naming the slave and why.

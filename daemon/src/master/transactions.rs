@@ -6,16 +6,26 @@
 use std::sync::Arc;
 use std::time::Duration;
 
+use ecmxf_wire::payload::foe::FOE_FLASH_SIZE;
 use ecmxf_wire::payload::pdo::{PdoConfig, PdoConfigReply, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
+pub(crate) use ecmxf_wire::payload::raw::DatagramCommand;
 use ecmxf_wire::payload::raw::{DatagramHead, RAW_MAX_DATA};
-use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
-use ecmxf_wire::payload::state::SlaveSelector;
+use ecmxf_wire::payload::slave_info::SlaveInfo;
+pub(crate) use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::{EcatState, Reply, ReplyFields};
 
 use super::Master;
+use super::states::SlaveSelector;
 use crate::engine::error::EngineError;
-pub use crate::engine::slot::Immediate;
+pub(crate) use crate::engine::slot::Immediate;
 use crate::engine::slot::{SlotRequest, TransferProgress};
+
+/// The largest file FoE moves: what the chip's staging flash holds (FoE
+/// commands, v049).
+pub(crate) const FOE_MAX_FILE: usize = FOE_FLASH_SIZE as usize;
+
+/// How long the chip waits for a raw datagram to come back, us.
+const RAW_TIMEOUT_US: u32 = 10_000;
 
 /// What a raw datagram brought back.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -24,6 +34,11 @@ pub struct RawAnswer {
     pub working_counter: u16,
     /// The datagram's data as it returned.
     pub data: Vec<u8>,
+}
+
+/// Auto-increment addressing: the slave at position n is -n.
+fn position(slave: u8) -> u16 {
+    0u16.wrapping_sub(slave.into())
 }
 
 impl Master {
@@ -146,7 +161,7 @@ impl Master {
     /// A numeric item of slave information (state, AL status code,
     /// identity, sizes, DC), decoded here once for every caller (the API,
     /// the metrics).
-    pub async fn slave_number(&self, slave: u8, item: SlaveInfoCode) -> Result<u32, EngineError> {
+    pub(crate) async fn slave_number(&self, slave: u8, item: SlaveInfoCode) -> Result<u32, EngineError> {
         let d = self.slave_info(slave, item).await?;
         SlaveInfo::decode(item, &d)
             .ok()
@@ -155,7 +170,7 @@ impl Master {
     }
 
     /// The slave's name as the chip reads it (up to the first NUL).
-    pub async fn slave_name(&self, slave: u8) -> Result<String, EngineError> {
+    pub(crate) async fn slave_name(&self, slave: u8) -> Result<String, EngineError> {
         let d = self.slave_info(slave, SlaveInfoCode::Name).await?;
         match SlaveInfo::decode(SlaveInfoCode::Name, &d) {
             Ok(SlaveInfo::Name(n)) => Ok(String::from_utf8_lossy(n).into_owned()),
@@ -212,6 +227,54 @@ impl Master {
             return Err(EngineError::Failed("raw datagram: answer without a working counter".into()));
         };
         Ok(RawAnswer { working_counter: u16::from_le_bytes(*wkc), data: data.to_vec() })
+    }
+
+    /// Sends one datagram as a front end names it: `adp` and `ado` are the
+    /// address (for the logical commands, the high and low halves of the
+    /// logical address); a reading datagram brings back `length` bytes, a
+    /// writing one sends `data` (`length` bytes).
+    pub(crate) async fn datagram(
+        &self,
+        command: DatagramCommand,
+        adp: u16,
+        ado: u16,
+        length: u16,
+        data: Vec<u8>,
+        timeout: Option<Duration>,
+    ) -> Result<RawAnswer, EngineError> {
+        let logical = if matches!(command, DatagramCommand::Lrd | DatagramCommand::Lwr | DatagramCommand::Lrw) {
+            (u32::from(adp) << 16) | u32::from(ado)
+        } else {
+            0
+        };
+        let head = DatagramHead { command, length, adp, ado, logical, timeout_us: RAW_TIMEOUT_US };
+        self.raw_datagram(head, data, timeout).await
+    }
+
+    /// Reads `length` bytes of a slave's ESC registers from `address` on
+    /// (APRD: the slave by its position).
+    pub(crate) async fn read_registers(
+        &self,
+        slave: u8,
+        address: u16,
+        length: u16,
+        timeout: Option<Duration>,
+    ) -> Result<RawAnswer, EngineError> {
+        self.datagram(DatagramCommand::Aprd, position(slave), address, length, Vec::new(), timeout).await
+    }
+
+    /// Writes `data` to a slave's ESC registers from `address` on (APWR:
+    /// the slave by its position).
+    pub(crate) async fn write_registers(
+        &self,
+        slave: u8,
+        address: u16,
+        data: Vec<u8>,
+        timeout: Option<Duration>,
+    ) -> Result<RawAnswer, EngineError> {
+        let length = u16::try_from(data.len())
+            .map_err(|_| EngineError::BadArgument { field: "length", reason: format!("{} bytes", data.len()) })?;
+        self.datagram(DatagramCommand::Apwr, position(slave), address, length, data, timeout).await
     }
 
     /// Writes a file to a slave over FoE (the slave must be in PRE-OP or

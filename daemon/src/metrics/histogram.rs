@@ -11,7 +11,7 @@ const BUCKETS: [f64; 12] = [0.0005, 0.001, 0.002, 0.005, 0.01, 0.02, 0.05, 0.1, 
 
 /// A latency histogram updated lock-free from any task.
 #[derive(Debug, Default)]
-pub struct Histogram {
+pub(crate) struct Histogram {
     counts: [AtomicU64; BUCKETS.len()],
     over: AtomicU64,
     sum_ns: AtomicU64,
@@ -19,7 +19,7 @@ pub struct Histogram {
 
 impl Histogram {
     /// Records one duration.
-    pub fn observe(&self, d: Duration) {
+    pub(crate) fn observe(&self, d: Duration) {
         let s = d.as_secs_f64();
         match BUCKETS.iter().position(|b| s <= *b) {
             Some(i) => self.counts[i].fetch_add(1, Ordering::Relaxed),
@@ -29,7 +29,7 @@ impl Histogram {
     }
 
     /// Appends the `_bucket`, `_sum` and `_count` lines of `name`.
-    pub fn render(&self, out: &mut String, name: &str, help: &str) {
+    pub(crate) fn render(&self, out: &mut String, name: &str, help: &str) {
         let _ = writeln!(out, "# HELP {name} {help}\n# TYPE {name} histogram");
         let mut cumulative = 0u64;
         for (b, c) in BUCKETS.iter().zip(&self.counts) {

@@ -16,8 +16,8 @@ use std::net::SocketAddr;
 use std::sync::Arc;
 use std::time::Duration;
 
-use ecmxf_wire::EcatState;
-use ecmxf_wire::payload::slave_info::SlaveInfoCode;
+use crate::master::EcatState;
+use crate::master::SlaveInfoCode;
 use tokio::io::{AsyncReadExt, AsyncWriteExt};
 use tokio::net::{TcpListener, TcpStream};
 use tokio::sync::watch;
@@ -26,11 +26,11 @@ use crate::master::Master;
 use crate::master::Phase;
 
 mod histogram;
-pub use histogram::Histogram;
+pub(crate) use histogram::Histogram;
 
 /// What the endpoint reads: the engine, and the API's SDO durations.
 #[derive(Debug, Clone)]
-pub struct Sources {
+pub(crate) struct Sources {
     /// The engine.
     pub master: Arc<Master>,
     /// SDO transfer durations through the API.
@@ -74,7 +74,7 @@ fn label(v: &str) -> String {
 }
 
 /// The whole exposition.
-pub async fn render(sources: &Sources) -> String {
+pub(crate) async fn render(sources: &Sources) -> String {
     let master = &sources.master;
     let mut out = String::with_capacity(8192);
     let s = master.status();
@@ -170,13 +170,13 @@ pub async fn render(sources: &Sources) -> String {
             "ecmxf_dc_stable",
             "gauge",
             "1 while the chip reports DC stable.",
-            u8::from(s.status_flags().contains(ecmxf_wire::flags::StatusFlags::DC_STABLE)).to_string(),
+            u8::from(s.status_flags().contains(crate::master::diagnostics::StatusFlags::DC_STABLE)).to_string(),
         ),
         (
             "ecmxf_link_pin",
             "gauge",
             "The chip's LINK pin level.",
-            u8::from(s.error_flags().contains(ecmxf_wire::flags::ErrorFlags::LINK_PIN)).to_string(),
+            u8::from(s.error_flags().contains(crate::master::diagnostics::ErrorFlags::LINK_PIN)).to_string(),
         ),
         ("ecmxf_output_writers", "gauge", "Clients holding output leases.", master.output_writers().to_string()),
         (
@@ -298,7 +298,7 @@ pub async fn render(sources: &Sources) -> String {
 
 /// Binds the endpoint (before the service reports ready, so a taken port
 /// is a start-up error naming `metrics.listen`).
-pub async fn bind(addr: SocketAddr) -> std::io::Result<TcpListener> {
+pub(crate) async fn bind(addr: SocketAddr) -> std::io::Result<TcpListener> {
     let l = TcpListener::bind(addr).await?;
     if let Ok(a) = l.local_addr() {
         tracing::info!(address = %a, "metrics listening on http://{a}/metrics");
@@ -307,7 +307,7 @@ pub async fn bind(addr: SocketAddr) -> std::io::Result<TcpListener> {
 }
 
 /// Serves `/metrics` until `shutdown` changes.
-pub async fn serve(sources: Sources, listener: TcpListener, mut shutdown: watch::Receiver<()>) {
+pub(crate) async fn serve(sources: Sources, listener: TcpListener, mut shutdown: watch::Receiver<()>) {
     loop {
         tokio::select! {
             _ = shutdown.changed() => return,

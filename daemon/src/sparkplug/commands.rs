@@ -19,11 +19,11 @@ use ecmxf_proto::sparkplug::payload::Metric;
 use super::node::{self, Node};
 use crate::config::Role;
 use crate::master::entry_writes::{Staging, WriteError};
-use crate::master::{LeaseError, Leases, Master};
+use crate::master::{LeaseError, Master};
 
 /// What a command asks of the session.
 #[derive(Debug, PartialEq, Eq)]
-pub enum Action {
+pub(super) enum Action {
     /// Nothing more.
     None,
     /// Publish the births again.
@@ -32,24 +32,24 @@ pub enum Action {
 
 /// The node's output leases, one per slave it wrote.
 #[derive(Debug)]
-pub struct Writer {
+pub(super) struct Writer {
     held: HashMap<u8, String>,
     ttl: Duration,
 }
 
 impl Writer {
     /// Leases of `ttl` (`api.lease_ttl_ms`).
-    pub fn new(ttl: Duration) -> Self {
+    pub(super) fn new(ttl: Duration) -> Self {
         Self { held: HashMap::new(), ttl }
     }
 }
 
 /// A refused command: what, and why.
 #[derive(Debug, PartialEq, Eq)]
-pub struct Refusal(pub String);
+pub(super) struct Refusal(pub String);
 
 /// NCMD: Rebirth, when `role` allows it.
-pub fn node_command(node: &Node, role: Option<Role>, payload: &Payload) -> Result<Action, Refusal> {
+pub(super) fn node_command(node: &Node, role: Option<Role>, payload: &Payload) -> Result<Action, Refusal> {
     let mut action = Action::None;
     for m in &payload.metrics {
         let name = node.node_metric(m);
@@ -76,13 +76,12 @@ pub fn node_command(node: &Node, role: Option<Role>, payload: &Payload) -> Resul
 
 /// DCMD to device `position`: writes its output metrics, when `role` is
 /// operator or more. All the command's metrics or none.
-pub fn device_command(
+pub(super) fn device_command(
     node: &Node,
     role: Option<Role>,
     position: u8,
     payload: &Payload,
     master: &Master,
-    leases: &Leases,
     writer: &mut Writer,
 ) -> Result<usize, Refusal> {
     if role < Some(Role::Operator) {
@@ -107,8 +106,9 @@ pub fn device_command(
         let lease = match writer.held.get(&position) {
             Some(id) => id.clone(),
             None => {
-                let l =
-                    leases.acquire(master, &[position], writer.ttl, "sparkplug").map_err(|e| refuse(e.to_string()))?;
+                let l = master
+                    .acquire_lease(&[position], Some(writer.ttl), "sparkplug")
+                    .map_err(|e| refuse(e.to_string()))?;
                 writer.held.insert(position, l.id.clone());
                 l.id
             }
@@ -117,7 +117,7 @@ pub fn device_command(
         for (index, _, bytes) in &targets {
             staging.entry(&image.entries[*index], bytes).map_err(|e| refuse(e.to_string()))?;
         }
-        match staging.commit(leases, &lease) {
+        match staging.commit(master.leases(), &lease) {
             Ok(()) => return Ok(targets.len()),
             // The lease lapsed between commands: take a new one, once.
             Err(WriteError::Lease(LeaseError::NotALease(_))) if attempt == 0 => {

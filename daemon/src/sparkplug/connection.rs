@@ -57,7 +57,7 @@ const QUEUE: usize = 1024;
 
 /// What the MQTT task hands over.
 #[derive(Debug)]
-pub enum Incoming {
+pub(super) enum Incoming {
     /// The CONNACK: accepted, or the refusal in words.
     Connected(Result<(), String>),
     /// A message on a subscribed topic.
@@ -73,7 +73,7 @@ pub enum Incoming {
 
 /// A client for broker `b` and its event loop task, with `will` (topic,
 /// payload) as the MQTT will.
-pub fn open(
+pub(super) fn open(
     prepared: &Prepared,
     client_id: String,
     b: &BrokerUrl,

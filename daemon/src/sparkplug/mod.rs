@@ -1,4 +1,4 @@
-//! The MQTT Sparkplug B edge node (issue 34, docs/sparkplug.md): past one
+//! The MQTT Sparkplug B edge node (docs/sparkplug.md): past one
 //! gateway, plants integrate through an MQTT broker with Eclipse Sparkplug
 //! 3.0, where SCADA/MES hosts (Ignition, HiveMQ, EMQX) subscribe once and
 //! see every gateway and slave. With `[sparkplug]` ecmxfd is one node of
@@ -20,15 +20,15 @@
 use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 
-pub mod commands;
+mod commands;
 mod connection;
-pub mod node;
-pub mod runner;
+mod node;
+mod runner;
 mod seen;
-pub mod session;
-pub mod tls;
-pub mod topic;
-pub mod value;
+mod session;
+mod tls;
+mod topic;
+mod value;
 
 pub use connection::{Prepared, SparkplugError, prepare};
 pub use runner::Runner;

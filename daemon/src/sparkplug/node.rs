@@ -17,19 +17,19 @@
 use std::collections::{BTreeMap, HashMap};
 use std::sync::Arc;
 
+use crate::master::EcatState;
 use ecmxf_proto::sparkplug::payload::Metric;
 use ecmxf_proto::sparkplug::{DataType as SpType, Payload};
-use ecmxf_wire::EcatState;
 
 use super::topic::Kind;
-use super::value::{self, Value};
+use super::value::{self, MetricValueExt, Value};
 use crate::config::sparkplug::MetricNames;
 use crate::master::image::{Image, read_bits};
 use crate::master::{NetworkLayout, Phase, Snapshot};
 
 /// What the node publishes and how.
 #[derive(Clone, Debug, Default)]
-pub struct Settings {
+pub(super) struct Settings {
     /// Process data deadband.
     pub data_deadband: f64,
     /// Node diagnostics deadband.
@@ -58,7 +58,7 @@ pub struct Counts {
 /// The daemon at one instant, as the node reads it (published snapshots:
 /// nothing here waits for the engine).
 #[derive(Clone, Copy, Debug)]
-pub struct View<'a> {
+pub(super) struct View<'a> {
     /// Now, ms since the Unix epoch (the payloads' timestamps).
     pub now_ms: u64,
     /// The engine's snapshot.
@@ -93,7 +93,7 @@ pub struct View<'a> {
 
 /// One message to publish.
 #[derive(Clone, Debug, PartialEq)]
-pub struct Outgoing {
+pub(super) struct Outgoing {
     /// Its type.
     pub kind: Kind,
     /// The device (`None`: the node's).
@@ -165,13 +165,13 @@ const NODE_METRICS: &[(&str, SpType, NodeSource)] = &[
 ];
 
 /// The name of the node metric that asks for a rebirth.
-pub const REBIRTH: &str = "Node Control/Rebirth";
+pub(super) const REBIRTH: &str = "Node Control/Rebirth";
 /// The name of the node metric that asks for a reboot (refused).
-pub const REBOOT: &str = "Node Control/Reboot";
+pub(super) const REBOOT: &str = "Node Control/Reboot";
 /// The folder of a device's output variables (the ones DCMD writes).
-pub const OUTPUTS: &str = "Outputs/";
+pub(super) const OUTPUTS: &str = "Outputs/";
 /// The folder of a device's input variables.
-pub const INPUTS: &str = "Inputs/";
+pub(super) const INPUTS: &str = "Inputs/";
 
 /// A device metric's source.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -208,7 +208,7 @@ struct Device {
 /// The node's publishing state for one process lifetime (aliases stay the
 /// same across connections and rebirths).
 #[derive(Debug)]
-pub struct Node {
+pub(super) struct Node {
     settings: Settings,
     bd_seq: Option<u64>,
     seq: u64,
@@ -219,7 +219,7 @@ pub struct Node {
 
 impl Node {
     /// A node that has published nothing yet.
-    pub fn new(settings: Settings) -> Self {
+    pub(super) fn new(settings: Settings) -> Self {
         Self {
             settings,
             bd_seq: None,
@@ -232,13 +232,13 @@ impl Node {
 
     /// Goes on counting `bdSeq` from a node that ran before in this
     /// process (`next`: its last + 1, 0 for none).
-    pub fn resume(&mut self, next: u64) {
+    pub(super) fn resume(&mut self, next: u64) {
         self.bd_seq = next.checked_sub(1).map(|b| b % 256);
     }
 
     /// A new MQTT connection: the next `bdSeq` (0 first, then +1 modulo
     /// 256, spec 7.1.2), for the will and the NBIRTH that follows.
-    pub fn next_connection(&mut self) -> u64 {
+    pub(super) fn next_connection(&mut self) -> u64 {
         let next = self.bd_seq.map_or(0, |b| (b + 1) % 256);
         self.bd_seq = Some(next);
         next
@@ -246,7 +246,7 @@ impl Node {
 
     /// The NDEATH payload of this connection (the MQTT will; also sent
     /// before a clean disconnect): the timestamp and `bdSeq`, no `seq`.
-    pub fn death(&self, now_ms: u64) -> Payload {
+    pub(super) fn death(&self, now_ms: u64) -> Payload {
         Payload {
             timestamp: Some(now_ms),
             metrics: vec![Metric {
@@ -262,7 +262,7 @@ impl Node {
     /// The births of a (re)connection or a rebirth request: NBIRTH with
     /// `seq` 0, then a DBIRTH for every device alive now. What hosts knew
     /// of devices before is forgotten.
-    pub fn birth(&mut self, view: &View) -> Vec<Outgoing> {
+    pub(super) fn birth(&mut self, view: &View) -> Vec<Outgoing> {
         self.seq = 0;
         self.devices.clear();
         let mut metrics = Vec::with_capacity(NODE_METRICS.len());
@@ -286,7 +286,7 @@ impl Node {
 
     /// Device births and deaths for what changed in `view`, then (with
     /// `data`) a DDATA per born device with what moved.
-    pub fn update(&mut self, view: &View, data: bool) -> Vec<Outgoing> {
+    pub(super) fn update(&mut self, view: &View, data: bool) -> Vec<Outgoing> {
         let mut out = Vec::new();
         let positions: Vec<u8> = (0..view.layout.slaves.len().min(256) as u16)
             .map(|p| p as u8)
@@ -352,7 +352,7 @@ impl Node {
     }
 
     /// NDATA with the node metrics that moved (`None`: none did).
-    pub fn node_data(&mut self, view: &View) -> Option<Outgoing> {
+    pub(super) fn node_data(&mut self, view: &View) -> Option<Outgoing> {
         if self.node_last.len() != NODE_METRICS.len() {
             return None;
         }
@@ -377,7 +377,7 @@ impl Node {
     }
 
     /// The node metric a command names, by name or alias.
-    pub fn node_metric(&self, m: &Metric) -> Option<&'static str> {
+    pub(super) fn node_metric(&self, m: &Metric) -> Option<&'static str> {
         match (&m.name, m.alias) {
             (Some(name), _) => NODE_METRICS.iter().find(|(n, ..)| n == name).map(|(n, ..)| *n),
             (None, Some(alias)) => NODE_METRICS.get(usize::try_from(alias).ok()?.checked_sub(1)?).map(|(n, ..)| *n),
@@ -387,7 +387,7 @@ impl Node {
 
     /// The output entry a DCMD metric of device `p` names (by name or
     /// alias): its index in the image's entries, and the image.
-    pub fn output_target(&self, p: u8, m: &Metric) -> Result<(usize, Arc<Image>), String> {
+    pub(super) fn output_target(&self, p: u8, m: &Metric) -> Result<(usize, Arc<Image>), String> {
         let d = self.devices.get(&p).ok_or_else(|| format!("device slave-{p} is not born (lost, or not in OP)"))?;
         let metric = d
             .metrics
@@ -407,7 +407,8 @@ impl Node {
     }
 
     /// The devices born now.
-    pub fn born(&self) -> impl Iterator<Item = u8> + '_ {
+    #[cfg(test)]
+    pub(crate) fn born(&self) -> impl Iterator<Item = u8> + '_ {
         self.devices.keys().copied()
     }
 
@@ -486,7 +487,7 @@ impl Node {
             NodeSource::InputsDroppedByChip => Value::UInt(s.inputs_dropped_by_chip),
             NodeSource::RxFifo => Value::UInt(s.rx_fifo.into()),
             NodeSource::MaxFifoGapUs => Value::UInt(s.max_fifo_gap_us),
-            NodeSource::ExchangeRate => Value::Double(view.exchange_rate.round()),
+            NodeSource::ExchangeRate => Value::Real(view.exchange_rate.round()),
             NodeSource::Published => Value::UInt(view.counts.published),
             NodeSource::Dropped => Value::UInt(view.counts.dropped),
             NodeSource::Refused => Value::UInt(view.counts.refused),
@@ -497,7 +498,7 @@ impl Node {
 
 /// A variable's metric name: its entry name without the slave's number
 /// (`2.0x6000:01` is `0x6000:01` of device `slave-2`).
-pub fn metric_name(entry: &str) -> &str {
+pub(super) fn metric_name(entry: &str) -> &str {
     entry.split_once('.').map_or(entry, |(_, rest)| rest)
 }
 
@@ -553,7 +554,7 @@ fn device_value(source: &DeviceSource, view: &View, p: u8) -> Value {
         DeviceSource::Entry(i) => match view.image.and_then(|image| image.entries.get(*i)) {
             Some(e) => {
                 let frame = if e.output { view.outputs } else { view.inputs };
-                value::decode(e.data_type, &read_bits(frame, e.bit_offset, e.bit_length))
+                Value::decode(e.data_type, &read_bits(frame, e.bit_offset, e.bit_length))
             }
             None => Value::Bytes(Vec::new()),
         },

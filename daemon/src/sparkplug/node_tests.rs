@@ -6,9 +6,9 @@
 use std::collections::BTreeMap;
 use std::sync::Arc;
 
+use crate::master::EcatState;
 use ecmxf_devices::od::DataType;
 use ecmxf_proto::sparkplug::payload::metric::Value as MetricValue;
-use ecmxf_wire::EcatState;
 
 use super::*;
 use crate::config::sparkplug::MetricNames;

@@ -17,7 +17,7 @@ use tracing::{info, warn};
 use super::connection::{Prepared, SparkplugError, prepare};
 use super::{SharedStats, session};
 use crate::config::SparkplugConfig;
-use crate::master::{Leases, Master};
+use crate::master::Master;
 
 /// How long a node gets to say NDEATH and stop.
 const STOP_WITHIN: Duration = Duration::from_secs(3);
@@ -26,31 +26,22 @@ const STOP_WITHIN: Duration = Duration::from_secs(3);
 #[derive(Debug)]
 pub struct Runner {
     master: Arc<Master>,
-    leases: Arc<Leases>,
-    lease_ttl: Duration,
     stats: SharedStats,
     running: Option<(watch::Sender<()>, JoinHandle<()>)>,
 }
 
 impl Runner {
     /// No node yet.
-    pub fn new(master: Arc<Master>, leases: Arc<Leases>, lease_ttl: Duration) -> Self {
+    pub fn new(master: Arc<Master>) -> Self {
         let stats = Arc::clone(master.sparkplug_state());
-        Self { master, leases, lease_ttl, stats, running: None }
+        Self { master, stats, running: None }
     }
 
     /// Starts a node with `prepared` (none may run).
     pub fn start(&mut self, prepared: Prepared) {
         let (stop, stopped) = watch::channel(());
         self.stats.enabled.store(true, Relaxed);
-        let task = tokio::spawn(session::serve(
-            Arc::clone(&self.master),
-            Arc::clone(&self.leases),
-            prepared,
-            self.lease_ttl,
-            Arc::clone(&self.stats),
-            stopped,
-        ));
+        let task = tokio::spawn(session::serve(Arc::clone(&self.master), prepared, Arc::clone(&self.stats), stopped));
         self.running = Some((stop, task));
     }
 

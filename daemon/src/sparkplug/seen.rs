@@ -8,7 +8,7 @@ use std::collections::BTreeMap;
 use std::sync::Arc;
 use std::time::{Duration, SystemTime, UNIX_EPOCH};
 
-use ecmxf_wire::EcatState;
+use crate::master::EcatState;
 
 use super::SharedStats;
 use super::node::View;
@@ -17,7 +17,7 @@ use crate::master::{EventKind, Master, Phase};
 
 /// Owned copies of what the node reads at one instant ([`View`] borrows
 /// them).
-pub struct Seen {
+pub(super) struct Seen {
     now_ms: u64,
     snapshot: crate::master::Snapshot,
     flowing: bool,
@@ -33,7 +33,7 @@ pub struct Seen {
 
 /// SPI exchanges per second, over at least a second.
 #[derive(Debug, Default)]
-pub struct RateMeter {
+pub(super) struct RateMeter {
     last: Option<(u64, std::time::Instant)>,
     rate: f64,
 }
@@ -41,7 +41,7 @@ pub struct RateMeter {
 impl RateMeter {
     /// The rate with the counter at `exchanges` at `now`: recomputed once a
     /// second has passed since the last sample it kept, else the last.
-    pub fn sample(&mut self, exchanges: u64, now: std::time::Instant) -> f64 {
+    pub(super) fn sample(&mut self, exchanges: u64, now: std::time::Instant) -> f64 {
         match self.last {
             Some((n, t)) if now.duration_since(t) >= Duration::from_secs(1) => {
                 self.rate = exchanges.saturating_sub(n) as f64 / now.duration_since(t).as_secs_f64();
@@ -56,7 +56,7 @@ impl RateMeter {
 
 impl Seen {
     /// The daemon now, from its published snapshots.
-    pub fn now(m: &Master, meter: &mut RateMeter) -> Self {
+    pub(super) fn now(m: &Master, meter: &mut RateMeter) -> Self {
         let snapshot = m.status();
         let exchange_rate = meter.sample(snapshot.exchanges, std::time::Instant::now());
         let verdict = m.verdict(&snapshot);
@@ -88,7 +88,7 @@ impl Seen {
     }
 
     /// The view the node decides on.
-    pub fn view<'a>(&'a self, al: &'a BTreeMap<u8, (EcatState, u16)>, stats: &SharedStats) -> View<'a> {
+    pub(super) fn view<'a>(&'a self, al: &'a BTreeMap<u8, (EcatState, u16)>, stats: &SharedStats) -> View<'a> {
         View {
             now_ms: self.now_ms,
             snapshot: &self.snapshot,
@@ -108,14 +108,14 @@ impl Seen {
 }
 
 /// What births and deaths hang on in a snapshot.
-pub fn status_key(s: &crate::master::Snapshot) -> (Phase, EcatState, u64, u64, u64) {
+pub(super) fn status_key(s: &crate::master::Snapshot) -> (Phase, EcatState, u64, u64, u64) {
     let (phase, state, generation, recoveries) = s.key();
     (phase, state, generation, recoveries, s.slaves)
 }
 
 /// Keeps the AL states slaves reported since the network last came up;
 /// whether that changed anything.
-pub fn track_al(al: &mut BTreeMap<u8, (EcatState, u16)>, kind: &EventKind) -> bool {
+pub(super) fn track_al(al: &mut BTreeMap<u8, (EcatState, u16)>, kind: &EventKind) -> bool {
     match kind {
         EventKind::AlStatus { slave, state, code } => al.insert(*slave, (*state, *code)) != Some((*state, *code)),
         EventKind::Phase(Phase::Running) | EventKind::Recovered { .. } => {
@@ -141,7 +141,7 @@ fn health_word(h: &crate::master::Health) -> &'static str {
     }
 }
 
-pub fn now_ms() -> u64 {
+pub(super) fn now_ms() -> u64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
 }
 

@@ -16,8 +16,8 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::Duration;
 
+use crate::master::EcatState;
 use ecmxf_proto::sparkplug::Payload;
-use ecmxf_wire::EcatState;
 use prost::Message;
 use rumqttc::{AsyncClient, QoS};
 use tokio::sync::{broadcast, mpsc, watch};
@@ -29,7 +29,7 @@ use super::connection::{self, Incoming, Prepared};
 use super::node::{Node, Outgoing, Settings};
 use super::seen::{RateMeter, Seen, now_ms, status_key, track_al};
 use super::topic::{self, Kind, NodeTopics};
-use crate::master::{Leases, Master};
+use crate::master::Master;
 
 /// Pause after a lost connection: doubles up to [`MAX_BACKOFF`].
 const FIRST_BACKOFF: Duration = Duration::from_secs(1);
@@ -53,14 +53,7 @@ enum Ended {
 }
 
 /// Runs the node until `stop` fires.
-pub async fn serve(
-    master: Arc<Master>,
-    leases: Arc<Leases>,
-    prepared: Prepared,
-    lease_ttl: Duration,
-    stats: SharedStats,
-    mut stop: watch::Receiver<()>,
-) {
+pub async fn serve(master: Arc<Master>, prepared: Prepared, stats: SharedStats, mut stop: watch::Receiver<()>) {
     let c = &prepared.config;
     let topics = NodeTopics { group: c.group_id.clone(), node: prepared.node_id.clone() };
     let settings = Settings {
@@ -72,7 +65,7 @@ pub async fn serve(
     };
     let mut node = Node::new(settings);
     node.resume(stats.next_bd_seq.load(Relaxed));
-    let mut writer = Writer::new(lease_ttl);
+    let mut writer = Writer::new(master.lease_ttl());
     let mut backoff = FIRST_BACKOFF;
     let mut broker = 0usize;
     info!(group = %topics.group, node = %topics.node, brokers = c.broker.len(), "sparkplug: edge node starting");
@@ -80,7 +73,7 @@ pub async fn serve(
         let b = &c.broker[broker % c.broker.len()];
         let bd_seq = node.next_connection();
         stats.next_bd_seq.store(bd_seq + 1, Relaxed);
-        let session = Session { master: &master, leases: &leases, prepared: &prepared, topics: &topics, stats: &stats };
+        let session = Session { master: &master, prepared: &prepared, topics: &topics, stats: &stats };
         match session.run(&mut node, &mut writer, b, bd_seq, &mut stop).await {
             Ended::Stop => return,
             Ended::Lost { why, was_up } => {
@@ -104,7 +97,6 @@ pub async fn serve(
 /// One connection's borrowings.
 struct Session<'a> {
     master: &'a Arc<Master>,
-    leases: &'a Leases,
     prepared: &'a Prepared,
     topics: &'a NodeTopics,
     stats: &'a SharedStats,
@@ -325,7 +317,7 @@ impl Session<'_> {
                 let Some(p) = topic::device_position(device) else {
                     return refused(format!("DCMD refused: no device {device:?} (devices are slave-<position>)"));
                 };
-                match commands::device_command(node, role, p, &payload, self.master, self.leases, writer) {
+                match commands::device_command(node, role, p, &payload, self.master, writer) {
                     Ok(n) => {
                         self.stats.commands.fetch_add(1, Relaxed);
                         info!(device, metrics = n, "sparkplug: DCMD written");

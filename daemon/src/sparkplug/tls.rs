@@ -13,7 +13,7 @@ use crate::config::SparkplugConfig;
 
 /// The rustls client configuration for `config`'s mqtts:// brokers
 /// (`None`: no broker uses TLS).
-pub fn client_config(config: &SparkplugConfig) -> Result<Option<Arc<rustls::ClientConfig>>, String> {
+pub(super) fn client_config(config: &SparkplugConfig) -> Result<Option<Arc<rustls::ClientConfig>>, String> {
     if !config.broker.iter().any(|b| b.tls) {
         return Ok(None);
     }

@@ -5,11 +5,11 @@
 use std::fmt;
 
 /// The topic namespace of Sparkplug B.
-pub const NAMESPACE: &str = "spBv1.0";
+pub(super) const NAMESPACE: &str = "spBv1.0";
 
 /// A message type (topic level 3).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
-pub enum Kind {
+pub(super) enum Kind {
     /// Node birth.
     NBirth,
     /// Node death (the MQTT will).
@@ -30,7 +30,7 @@ pub enum Kind {
 
 impl Kind {
     /// Its topic word.
-    pub fn word(self) -> &'static str {
+    pub(super) fn word(self) -> &'static str {
         match self {
             Self::NBirth => "NBIRTH",
             Self::NDeath => "NDEATH",
@@ -60,7 +60,7 @@ impl Kind {
 
 /// The edge node's place in the namespace.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub struct NodeTopics {
+pub(super) struct NodeTopics {
     /// Group id.
     pub group: String,
     /// Edge node id.
@@ -69,23 +69,23 @@ pub struct NodeTopics {
 
 impl NodeTopics {
     /// A node message's topic.
-    pub fn node(&self, kind: Kind) -> String {
+    pub(super) fn node(&self, kind: Kind) -> String {
         format!("{NAMESPACE}/{}/{}/{}", self.group, kind.word(), self.node)
     }
 
     /// A device message's topic.
-    pub fn device(&self, kind: Kind, device: &str) -> String {
+    pub(super) fn device(&self, kind: Kind, device: &str) -> String {
         format!("{NAMESPACE}/{}/{}/{}/{device}", self.group, kind.word(), self.node)
     }
 
     /// The command topics to subscribe to: NCMD, and DCMD of every device.
-    pub fn commands(&self) -> [String; 2] {
+    pub(super) fn commands(&self) -> [String; 2] {
         [self.node(Kind::NCmd), format!("{NAMESPACE}/{}/DCMD/{}/+", self.group, self.node)]
     }
 
     /// What a received topic is: a command to this node or one of its
     /// devices (`None`: another node's, or not Sparkplug).
-    pub fn parse<'t>(&self, topic: &'t str) -> Option<(Kind, Option<&'t str>)> {
+    pub(super) fn parse<'t>(&self, topic: &'t str) -> Option<(Kind, Option<&'t str>)> {
         let mut levels = topic.split('/');
         if levels.next()? != NAMESPACE || levels.next()? != self.group {
             return None;
@@ -107,13 +107,13 @@ impl NodeTopics {
 }
 
 /// A primary host application's STATE topic (3.0: `spBv1.0/STATE/<id>`).
-pub fn host_state(host_id: &str) -> String {
+pub(super) fn host_state(host_id: &str) -> String {
     format!("{NAMESPACE}/STATE/{host_id}")
 }
 
 /// Whether a STATE payload says the host is online: 3.0's JSON
 /// (`{"online": true, "timestamp": ...}`), or 2.x's `ONLINE`/`OFFLINE`.
-pub fn host_online(payload: &[u8]) -> Option<bool> {
+pub(super) fn host_online(payload: &[u8]) -> Option<bool> {
     let text = std::str::from_utf8(payload).ok()?.trim();
     match text {
         "ONLINE" => return Some(true),
@@ -126,12 +126,12 @@ pub fn host_online(payload: &[u8]) -> Option<bool> {
 
 /// A device id for slave `position`: `slave-<position>`, stable across
 /// restarts and network changes that keep the ring.
-pub fn device_id(position: u8) -> String {
+pub(super) fn device_id(position: u8) -> String {
     format!("slave-{position}")
 }
 
 /// The slave position of a device id of [`device_id`].
-pub fn device_position(id: &str) -> Option<u8> {
+pub(super) fn device_position(id: &str) -> Option<u8> {
     let n = id.strip_prefix("slave-")?;
     if n.len() > 1 && n.starts_with('0') {
         return None;

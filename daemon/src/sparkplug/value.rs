@@ -8,46 +8,27 @@
 //! and pysparkplug hosts read them; commands are read the same way and
 //! also sign-extended to 32 bits (as Tahu's Java host writes them).
 
-use ecmxf_devices::od::DataType;
+pub(super) use crate::master::value::DataType;
 use ecmxf_proto::sparkplug::DataType as SpType;
 use ecmxf_proto::sparkplug::payload::metric::Value as MetricValue;
 
-/// A metric's value as the node keeps it.
-#[derive(Clone, Debug, PartialEq)]
-pub enum Value {
-    /// Boolean.
-    Bool(bool),
-    /// Int8..Int64.
-    Int(i64),
-    /// UInt8..UInt64.
-    UInt(u64),
-    /// Float.
-    Float(f32),
-    /// Double.
-    Double(f64),
-    /// String.
-    Text(String),
-    /// Bytes.
-    Bytes(Vec<u8>),
-}
+pub(super) use crate::master::value::Value;
+use crate::master::value::ValueError;
 
-impl Value {
-    /// The value as a number, for deadbands (`None`: not a number).
-    fn number(&self) -> Option<f64> {
-        match self {
-            Self::Int(v) => Some(*v as f64),
-            Self::UInt(v) => Some(*v as f64),
-            Self::Float(v) => Some(f64::from(*v)),
-            Self::Double(v) => Some(*v),
-            _ => None,
-        }
-    }
-
+/// A [`Value`] as a Sparkplug metric: its protobuf form and the deadband
+/// test that decides whether it is published again.
+pub(super) trait MetricValueExt {
     /// Whether `self` moved from `last` enough to be published: numbers by
     /// more than `deadband` (0: any change, and a NaN is a change), other
     /// values when they differ.
-    pub fn moved_from(&self, last: &Value, deadband: f64) -> bool {
-        match (self.number(), last.number()) {
+    fn moved_from(&self, last: &Value, deadband: f64) -> bool;
+    /// The protobuf form, for a metric of `datatype`.
+    fn to_metric(&self, datatype: SpType) -> MetricValue;
+}
+
+impl MetricValueExt for Value {
+    fn moved_from(&self, last: &Value, deadband: f64) -> bool {
+        match (self.as_f64(), last.as_f64()) {
             // A NaN on either side compares as moved.
             (Some(a), Some(b)) if deadband > 0.0 => {
                 matches!((a - b).abs().partial_cmp(&deadband), Some(std::cmp::Ordering::Greater) | None)
@@ -56,8 +37,7 @@ impl Value {
         }
     }
 
-    /// The protobuf form, for a metric of `datatype`.
-    pub fn to_metric(&self, datatype: SpType) -> MetricValue {
+    fn to_metric(&self, datatype: SpType) -> MetricValue {
         match self {
             Self::Bool(b) => MetricValue::BooleanValue(*b),
             Self::Int(v) => match datatype {
@@ -70,8 +50,10 @@ impl Value {
                 SpType::UInt64 | SpType::Int64 => MetricValue::LongValue(*v),
                 _ => MetricValue::IntValue(*v as u32),
             },
-            Self::Float(v) => MetricValue::FloatValue(*v),
-            Self::Double(v) => MetricValue::DoubleValue(*v),
+            Self::Real(v) => match datatype {
+                SpType::Float => MetricValue::FloatValue(*v as f32),
+                _ => MetricValue::DoubleValue(*v),
+            },
             Self::Text(s) => MetricValue::StringValue(s.clone()),
             Self::Bytes(b) => MetricValue::BytesValue(b.clone()),
         }
@@ -79,7 +61,7 @@ impl Value {
 }
 
 /// The Sparkplug datatype of a CoE type.
-pub fn datatype(t: DataType) -> SpType {
+pub(super) fn datatype(t: DataType) -> SpType {
     match t {
         DataType::Bool => SpType::Boolean,
         DataType::Int8 => SpType::Int8,
@@ -97,40 +79,35 @@ pub fn datatype(t: DataType) -> SpType {
     }
 }
 
-/// An entry's value from its bits (`raw`: [`crate::master::image::read_bits`],
-/// little-endian, its bytes rounded up).
-pub fn decode(t: DataType, raw: &[u8]) -> Value {
-    let mut le = [0u8; 8];
-    let n = raw.len().min(8);
-    le[..n].copy_from_slice(&raw[..n]);
-    let u = u64::from_le_bytes(le);
-    match t {
-        DataType::Bool => Value::Bool(u & 1 == 1),
-        DataType::Int8 => Value::Int(i64::from(u as u8 as i8)),
-        DataType::Int16 => Value::Int(i64::from(u as u16 as i16)),
-        DataType::Int32 => Value::Int(i64::from(u as u32 as i32)),
-        DataType::Int64 => Value::Int(u as i64),
-        DataType::UInt8 | DataType::Bits(_) | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => Value::UInt(u),
-        DataType::Real32 => Value::Float(f32::from_bits(u as u32)),
-        DataType::Real64 => Value::Double(f64::from_bits(u)),
-        DataType::VisibleString(_) => {
-            let end = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
-            Value::Text(String::from_utf8_lossy(&raw[..end]).into_owned())
+/// A command's value as the bytes of an entry of type `t` and `bits`
+/// bits (little-endian), or why it cannot be one. The metric is read as
+/// Sparkplug hosts write it (below); the range checks are the master's
+/// ([`Value::encode`]).
+pub(super) fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>, String> {
+    metric_value(t, v)?.encode(t, bits).map_err(|e| match e {
+        ValueError::OutOfRange { value, .. } => {
+            let width = match t {
+                DataType::Bits(n) => u32::from(n),
+                DataType::Bool => 1,
+                _ => t.bits().min(bits),
+            };
+            let kind = if matches!(t, DataType::Int8 | DataType::Int16 | DataType::Int32 | DataType::Int64) {
+                "signed"
+            } else {
+                "unsigned"
+            };
+            format!("{value} does not fit a {width}-bit {kind} entry")
         }
-        DataType::OctetString(_) => Value::Bytes(raw.to_vec()),
-    }
+        e => e.to_string(),
+    })
 }
 
-/// A command's value as the bytes of an entry of type `t` and `bits`
-/// bits (little-endian), or why it cannot be one.
-pub fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>, String> {
-    let bytes = bits.div_ceil(8) as usize;
-    // A number's bytes are at most 8: an entry the device describes as a
-    // number but maps wider is refused, not cut (or overrun).
-    let numeric = !matches!(t, DataType::VisibleString(_) | DataType::OctetString(_));
-    if numeric && (bytes > 8 || bytes == 0) {
-        return Err(format!("the entry's {bits} bits do not hold a {t:?}"));
-    }
+/// A metric's value as the master's [`Value`] for a target of type `t`.
+/// Integers are read as Sparkplug hosts write them: signed ones narrower
+/// than 64 bits as two's complement of their own width (an Int8 -1 is 255,
+/// as Tahu and pysparkplug write it) or sign-extended to 32 bits (Tahu's
+/// Java `int_value`); a whole float is an integer; a boolean is 0 or 1.
+fn metric_value(t: DataType, v: &MetricValue) -> Result<Value, String> {
     let int = |v: &MetricValue| -> Result<i128, String> {
         match v {
             MetricValue::IntValue(u) => Ok(i128::from(*u)),
@@ -141,11 +118,9 @@ pub fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>, String
             other => Err(format!("{} is not an integer", shown(other))),
         }
     };
-    let signed = |width: u32| -> Result<Vec<u8>, String> {
+    let signed = |width: u32| -> Result<Value, String> {
         let raw = int(v)?;
         let span = 1i128 << width;
-        // Two's complement of the type's width (Tahu, pysparkplug) or of
-        // 32 bits (Tahu's Java int_value).
         let value = if raw >= span / 2 && raw < span {
             raw - span
         } else if width < 32 && (1 << 31..1 << 32).contains(&raw) {
@@ -155,52 +130,32 @@ pub fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>, String
         } else {
             raw
         };
-        if value < -(span / 2) || value >= span / 2 {
-            return Err(format!("{raw} does not fit a {width}-bit signed entry"));
-        }
-        Ok((value as i64).to_le_bytes()[..bytes].to_vec())
+        i64::try_from(value).map(Value::Int).map_err(|_| format!("{raw} does not fit a {width}-bit signed entry"))
     };
-    let unsigned = |width: u32| -> Result<Vec<u8>, String> {
+    let unsigned = || -> Result<Value, String> {
         let raw = int(v)?;
-        if raw < 0 || raw >= 1i128 << width {
-            return Err(format!("{raw} does not fit a {width}-bit unsigned entry"));
-        }
-        Ok((raw as u64).to_le_bytes()[..bytes].to_vec())
+        u64::try_from(raw).map(Value::UInt).map_err(|_| format!("{raw} does not fit an unsigned entry"))
     };
     match t {
         DataType::Bool => match v {
-            MetricValue::BooleanValue(b) => Ok(vec![u8::from(*b)]),
-            _ => unsigned(1),
+            MetricValue::BooleanValue(b) => Ok(Value::Bool(*b)),
+            _ => unsigned(),
         },
         DataType::Int8 => signed(8),
         DataType::Int16 => signed(16),
         DataType::Int32 => signed(32),
         DataType::Int64 => signed(64),
-        DataType::Bits(n) => unsigned(u32::from(n)),
-        DataType::UInt8 | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => unsigned(bits.min(64)),
-        DataType::Real32 => match v {
-            MetricValue::FloatValue(f) => Ok(f.to_le_bytes().to_vec()),
-            MetricValue::DoubleValue(f) => Ok((*f as f32).to_le_bytes().to_vec()),
-            other => Ok((int(other)? as f32).to_le_bytes().to_vec()),
+        DataType::Bits(_) | DataType::UInt8 | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => unsigned(),
+        DataType::Real32 | DataType::Real64 => match v {
+            MetricValue::FloatValue(f) => Ok(Value::Real(f64::from(*f))),
+            MetricValue::DoubleValue(f) => Ok(Value::Real(*f)),
+            other => Ok(Value::Int(i64::try_from(int(other)?).map_err(|_| "out of range".to_string())?)),
         },
-        DataType::Real64 => match v {
-            MetricValue::FloatValue(f) => Ok(f64::from(*f).to_le_bytes().to_vec()),
-            MetricValue::DoubleValue(f) => Ok(f.to_le_bytes().to_vec()),
-            other => Ok((int(other)? as f64).to_le_bytes().to_vec()),
+        DataType::VisibleString(_) | DataType::OctetString(_) => match v {
+            MetricValue::StringValue(s) => Ok(Value::Text(s.clone())),
+            MetricValue::BytesValue(b) => Ok(Value::Bytes(b.clone())),
+            other => Err(format!("{} is not a string or bytes", shown(other))),
         },
-        DataType::VisibleString(_) | DataType::OctetString(_) => {
-            let data = match v {
-                MetricValue::StringValue(s) => s.as_bytes().to_vec(),
-                MetricValue::BytesValue(b) => b.clone(),
-                other => return Err(format!("{} is not a string or bytes", shown(other))),
-            };
-            if data.len() > bytes {
-                return Err(format!("{} bytes do not fit the {bytes}-byte entry", data.len()));
-            }
-            let mut out = data;
-            out.resize(bytes, 0);
-            Ok(out)
-        }
     }
 }
 
@@ -233,7 +188,7 @@ mod tests {
         ];
         for &(t, bits, v) in cases {
             let raw = v.to_le_bytes()[..bits.div_ceil(8) as usize].to_vec();
-            let value = decode(t, &raw);
+            let value = Value::decode(t, &raw);
             assert_eq!(value, Value::Int(v), "{t:?}");
             let metric = value.to_metric(datatype(t));
             assert_eq!(encode(t, bits, &metric).unwrap(), raw, "{t:?} {v}");
@@ -252,14 +207,14 @@ mod tests {
 
     #[test]
     fn bits_booleans_floats_and_strings() {
-        assert_eq!(decode(DataType::Bool, &[1]), Value::Bool(true));
+        assert_eq!(Value::decode(DataType::Bool, &[1]), Value::Bool(true));
         assert_eq!(encode(DataType::Bool, 1, &MetricValue::BooleanValue(true)).unwrap(), vec![1]);
         assert_eq!(encode(DataType::Bool, 1, &MetricValue::IntValue(1)).unwrap(), vec![1]);
         assert!(encode(DataType::Bool, 1, &MetricValue::IntValue(2)).is_err());
         assert!(encode(DataType::Bits(2), 2, &MetricValue::IntValue(4)).is_err());
-        assert_eq!(decode(DataType::Real32, &1.5f32.to_le_bytes()), Value::Float(1.5));
+        assert_eq!(Value::decode(DataType::Real32, &1.5f32.to_le_bytes()), Value::Real(1.5));
         assert_eq!(encode(DataType::Real32, 32, &MetricValue::DoubleValue(1.5)).unwrap(), 1.5f32.to_le_bytes());
-        assert_eq!(decode(DataType::VisibleString(4), b"ab\0\0"), Value::Text("ab".into()));
+        assert_eq!(Value::decode(DataType::VisibleString(4), b"ab\0\0"), Value::Text("ab".into()));
         assert_eq!(encode(DataType::VisibleString(4), 32, &MetricValue::StringValue("ab".into())).unwrap(), b"ab\0\0");
         assert!(encode(DataType::OctetString(2), 16, &MetricValue::BytesValue(vec![1, 2, 3])).is_err());
     }
@@ -270,7 +225,7 @@ mod tests {
         assert!(Value::UInt(6).moved_from(&Value::UInt(5), 0.0));
         assert!(!Value::Int(7).moved_from(&Value::Int(5), 2.0));
         assert!(Value::Int(8).moved_from(&Value::Int(5), 2.0));
-        assert!(Value::Double(f64::NAN).moved_from(&Value::Double(1.0), 2.0));
+        assert!(Value::Real(f64::NAN).moved_from(&Value::Real(1.0), 2.0));
         assert!(Value::Text("b".into()).moved_from(&Value::Text("a".into()), 5.0));
         assert!(!Value::Bool(true).moved_from(&Value::Bool(true), 0.0));
     }

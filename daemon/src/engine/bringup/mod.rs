@@ -151,7 +151,7 @@ const FAILED_ON_CHIP: &str = "failed on the chip";
 
 /// Runs a blocking command to its end: refused (bit7) and failed (bit3) are
 /// errors; the bits are cleared for what follows.
-pub fn blocking<'a, L: Link, R: Request<'a>>(
+pub(crate) fn blocking<'a, L: Link, R: Request<'a>>(
     port: &mut Port<L>,
     req: &R,
     timeout: Duration,
@@ -181,8 +181,8 @@ pub fn blocking<'a, L: Link, R: Request<'a>>(
 
 /// Asks every slave for `state` and waits for it; when that fails, reads
 /// each slave's state and AL status code so the error names the slaves
-/// that are not there and why (issue 27: "ECAT_STATE_CHECK: failed on the
-/// chip" named no one).
+/// that are not there and why (the chip's own error bit alone gave
+/// "ECAT_STATE_CHECK: failed on the chip", which named no one).
 fn enter<L: Link>(port: &mut Port<L>, state: EcatState, slaves: usize) -> Result<(), BringUpError> {
     match blocking(port, &StateCheck { target: SlaveSelector::All, state }, STATE_TIMEOUT) {
         Err(BringUpError::Step { detail, .. }) if detail == FAILED_ON_CHIP => {
@@ -196,7 +196,7 @@ fn enter<L: Link>(port: &mut Port<L>, state: EcatState, slaves: usize) -> Result
 
 /// (position, state, AL status code) of the first `slaves` slaves, as they
 /// answer now (command 21); a slave that does not answer is left out.
-pub fn slave_states<L: Link>(port: &mut Port<L>, slaves: usize) -> Vec<(u8, EcatState, u16)> {
+pub(crate) fn slave_states<L: Link>(port: &mut Port<L>, slaves: usize) -> Vec<(u8, EcatState, u16)> {
     let mut out = Vec::new();
     for i in 0..slaves.min(usize::from(u8::MAX)) as u8 {
         let mut read = |item| port.ask(&SlaveInfoGet { slave: i, item }).ok()?.number();
@@ -208,7 +208,7 @@ pub fn slave_states<L: Link>(port: &mut Port<L>, slaves: usize) -> Vec<(u8, Ecat
 }
 
 /// "slave 2 PRE-OP, AL status 0x001d (invalid output configuration); ...".
-pub fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
+pub(crate) fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
     let one = |&(i, state, code): &(u8, EcatState, u16)| match code {
         0 => format!("slave {i} {state}"),
         c => format!("slave {i} {state}, AL status {c:#06x} ({})", ecmxf_wire::al_status_text(c)),
@@ -309,7 +309,7 @@ const SLOW: Duration = Duration::from_secs(5);
 /// at the first bring-up): the RxFIFO is prefilled with them, slave by
 /// slave, so the slaves enter OP with what the lease holders last wrote,
 /// not zeros.
-pub fn bring_up<L: Link>(
+pub(crate) fn bring_up<L: Link>(
     port: &mut Port<L>,
     config: &Config,
     held: &super::held::HeldOutputs,

@@ -24,6 +24,6 @@ pub async fn as_client<F: std::future::Future>(id: u64, work: F) -> F::Output {
 }
 
 /// The client the current task works for; 0 outside [`as_client`].
-pub fn current_client() -> u64 {
+pub(crate) fn current_client() -> u64 {
     CLIENT.try_with(|c| *c).unwrap_or(0)
 }

@@ -16,7 +16,7 @@ use super::request::Job;
 
 /// Per-client lines served round-robin.
 #[derive(Debug, Default)]
-pub struct FairQueue {
+pub(crate) struct FairQueue {
     /// (client, its line). Lines are kept when empty, so a client's next
     /// request does not allocate; there are as many as clients seen.
     lines: Vec<(u64, VecDeque<Job>)>,
@@ -33,7 +33,7 @@ impl FairQueue {
     const KEEP_LINES: usize = 64;
 
     /// Queues a job at the end of its client's line.
-    pub fn push(&mut self, job: Job) {
+    pub(crate) fn push(&mut self, job: Job) {
         let client = job.client;
         self.len += 1;
         if client == DAEMON_CLIENT {
@@ -53,7 +53,7 @@ impl FairQueue {
     }
 
     /// The next job: the head of the next non-empty line in turn.
-    pub fn pop(&mut self) -> Option<Job> {
+    pub(crate) fn pop(&mut self) -> Option<Job> {
         if self.len == 0 {
             return None;
         }
@@ -76,17 +76,17 @@ impl FairQueue {
     }
 
     /// Jobs waiting.
-    pub fn len(&self) -> usize {
+    pub(crate) fn len(&self) -> usize {
         self.len
     }
 
     /// Whether no job waits.
-    pub fn is_empty(&self) -> bool {
+    pub(crate) fn is_empty(&self) -> bool {
         self.len == 0
     }
 
     /// Every waiting job, in no particular order (for failing them all).
-    pub fn drain(&mut self) -> impl Iterator<Item = Job> + '_ {
+    pub(crate) fn drain(&mut self) -> impl Iterator<Item = Job> + '_ {
         self.len = 0;
         self.daemon.drain(..).chain(self.lines.iter_mut().flat_map(|(_, line)| line.drain(..)))
     }

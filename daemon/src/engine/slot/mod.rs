@@ -14,12 +14,17 @@
 //! `Active` transaction, and takes the next job when the slot is free
 //! (see `engine::running`).
 
-pub mod client;
+pub(crate) mod client;
 mod fair;
-pub mod request;
+pub(crate) mod request;
 mod transaction;
 
-pub use client::{DAEMON_CLIENT, as_client, current_client};
+// Re-exported by the master as its own (the one door).
+pub(crate) use client::current_client;
+#[allow(unreachable_pub)]
+pub use client::{DAEMON_CLIENT, as_client};
 pub(super) use fair::FairQueue;
-pub use request::{Immediate, Job, SlotRequest, TransferProgress};
+#[allow(unreachable_pub)]
+pub use request::{Immediate, TransferProgress};
+pub(crate) use request::{Job, SlotRequest};
 pub(super) use transaction::{Active, Progress};

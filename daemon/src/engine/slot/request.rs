@@ -20,7 +20,7 @@ use crate::engine::error::EngineError;
 
 /// What to do.
 #[derive(Clone, Debug, PartialEq, Eq)]
-pub enum SlotRequest {
+pub(crate) enum SlotRequest {
     /// SDO upload.
     SdoRead {
         /// Slave.
@@ -195,7 +195,7 @@ impl std::fmt::Display for SlotRequest {
 
 /// A request in flight.
 #[derive(Debug)]
-pub struct Job {
+pub(crate) struct Job {
     /// What.
     pub request: SlotRequest,
     /// When the caller stops waiting.
@@ -215,7 +215,7 @@ pub struct Job {
 /// The most bytes a reply to `request` can hold: one answer's data section
 /// and the two bytes a raw datagram's working counter adds; an FoE read
 /// holds the whole file, up to its `max_len`.
-pub fn reply_capacity(request: &SlotRequest) -> usize {
+pub(crate) fn reply_capacity(request: &SlotRequest) -> usize {
     match request {
         SlotRequest::FoeRead { max_len, .. } => *max_len as usize,
         _ => ecmxf_wire::DATA_MAX + 2,

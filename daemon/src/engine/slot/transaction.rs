@@ -75,7 +75,7 @@ const GRACE: Duration = Duration::from_secs(2);
 /// SDO timeout given to the chip, us.
 const SDO_TIMEOUT_US: u32 = 1_000_000;
 /// The longest time between two polls of a waiting operation.
-pub const MAX_POLL: Duration = Duration::from_millis(2);
+pub(super) const MAX_POLL: Duration = Duration::from_millis(2);
 
 #[derive(Debug, PartialEq, Eq)]
 enum Step {
@@ -99,7 +99,7 @@ type ReplyTo = tokio::sync::oneshot::Sender<Result<Vec<u8>, EngineError>>;
 
 /// The transaction in the slot.
 #[derive(Debug)]
-pub struct Active {
+pub(crate) struct Active {
     request: SlotRequest,
     deadline: Instant,
     /// Who waits for the result; `None` once they gave up (orphaned).
@@ -172,7 +172,7 @@ impl Fetch {
 
 /// What a step did.
 #[derive(Debug, PartialEq, Eq)]
-pub enum Progress {
+pub(crate) enum Progress {
     /// Sent something; call again.
     Sent,
     /// Nothing to send now: waiting for the chip.
@@ -183,7 +183,7 @@ pub enum Progress {
 
 impl Active {
     /// Takes a job into the slot; a job whose caller already left is dropped.
-    pub fn new(job: Job, now: Instant) -> Option<Self> {
+    pub(crate) fn new(job: Job, now: Instant) -> Option<Self> {
         if job.reply.is_closed() {
             return None;
         }
@@ -207,7 +207,7 @@ impl Active {
     }
 
     /// Ends it with `e` (the engine is leaving the running state).
-    pub fn fail(self, e: EngineError) {
+    pub(crate) fn fail(self, e: EngineError) {
         let _ = self.finish(Err(e));
     }
 
@@ -224,7 +224,11 @@ impl Active {
     }
 
     /// Advances the transaction by at most one guarded call.
-    pub fn step<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
+    pub(crate) fn step<L: Link>(
+        mut self,
+        port: &mut Port<L>,
+        now: Instant,
+    ) -> Result<(Option<Self>, Progress), PortError> {
         let gone = self.reply.as_ref().is_some_and(|r| r.is_closed());
         if gone || (now >= self.deadline && !self.orphaned()) {
             if let Some(reply) = self.reply.take() {
@@ -445,23 +449,23 @@ impl Active {
     /// the transaction has not looked at yet (the next one would replace
     /// it). Answers to GET polls are read by their index, whichever
     /// exchange brings them.
-    pub fn may_lend_an_exchange<L: Link>(&self, port: &Port<L>) -> bool {
+    pub(crate) fn may_lend_an_exchange<L: Link>(&self, port: &Port<L>) -> bool {
         self.sent_read.is_none_or(|(_, _, at)| port.stats().exchanges == at)
     }
 
     /// When this step's blocking command went out.
-    pub fn began_at(&self) -> Instant {
+    pub(crate) fn began_at(&self) -> Instant {
         self.since
     }
 
     /// Whether this step's command has been polled: past its start, where
     /// the rest of its run is no longer known to hold a FIFO exchange.
-    pub fn polled(&self) -> bool {
+    pub(crate) fn polled(&self) -> bool {
         self.polls[0].is_some()
     }
 
     /// Whether its blocking command went out and it waits for the chip.
-    pub fn waiting(&self) -> bool {
+    pub(crate) fn waiting(&self) -> bool {
         self.step != Step::Start
     }
 
@@ -480,7 +484,7 @@ impl Active {
     /// is out (or whether it runs is being decided). The engine fits
     /// cyclic exchanges into a command's run and fetches a result before
     /// them (`running.rs`, `fifo_first`).
-    pub fn on_chip<L: Link>(&self, port: &Port<L>) -> Option<bool> {
+    pub(crate) fn on_chip<L: Link>(&self, port: &Port<L>) -> Option<bool> {
         if !self.waiting() || self.unsure_after.is_some() {
             return None;
         }
@@ -507,7 +511,7 @@ impl Active {
 
     /// When the next poll is due: back to back while the operation is
     /// young, every quarter of its age later, at most every [`MAX_POLL`].
-    pub fn next_poll(&self) -> Instant {
+    pub(crate) fn next_poll(&self) -> Instant {
         match self.polled {
             None => self.since,
             Some((at, _)) => at + (at.saturating_duration_since(self.since) / 4).min(MAX_POLL),

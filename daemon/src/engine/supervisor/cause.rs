@@ -31,7 +31,7 @@ impl fmt::Display for PortFault {
 }
 
 /// (position, state, AL status code) of a slave at fault, as it answered.
-pub type SlaveFault = (u8, EcatState, u16);
+pub(crate) type SlaveFault = (u8, EcatState, u16);
 
 /// Why the engine left the running loop to bring the network up again.
 #[derive(Clone, Debug, PartialEq, Eq)]

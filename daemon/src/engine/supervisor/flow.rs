@@ -10,7 +10,7 @@ use crate::engine::cyclic::MAX_EXCHANGE_INTERVAL;
 /// stall. More than one: after a host stall the first answers carry what
 /// the chip had before (answers are one exchange behind), the next ones the
 /// frames that queued up meanwhile.
-pub const STALL_ANSWERS: u32 = 3;
+pub(super) const STALL_ANSWERS: u32 = 3;
 
 /// The longest an input frame may be missing before the data counts as not
 /// flowing, for a DC cycle `cycle`: the engine exchanges at least every
@@ -18,14 +18,14 @@ pub const STALL_ANSWERS: u32 = 3;
 /// cycles and a margin for a loaded host. About 60 ms at a 1 ms cycle, so
 /// health reports a stop well within 100 ms; long cycles get three of
 /// their own.
-pub fn flow_limit(cycle: Duration) -> Duration {
+pub(crate) fn flow_limit(cycle: Duration) -> Duration {
     const MARGIN: Duration = Duration::from_millis(30);
     (MAX_EXCHANGE_INTERVAL + cycle * 3 + MARGIN).max(cycle * 3)
 }
 
 /// Watches that input frames keep arriving while the chip answers.
 #[derive(Clone, Copy, Debug)]
-pub struct FlowWatch {
+pub(crate) struct FlowWatch {
     limit: Duration,
     newest: Instant,
     flowed: bool,
@@ -35,18 +35,18 @@ pub struct FlowWatch {
 impl FlowWatch {
     /// Starts watching at `now` (the start of a run counts as the newest
     /// frame, so a run that never delivers one is a stall too).
-    pub fn new(limit: Duration, now: Instant) -> Self {
+    pub(crate) fn new(limit: Duration, now: Instant) -> Self {
         Self { limit, newest: now, flowed: false, empty_after_limit: 0 }
     }
 
     /// Whether any frame arrived in this run.
-    pub fn flowed(&self) -> bool {
+    pub(crate) fn flowed(&self) -> bool {
         self.flowed
     }
 
     /// An intact FIFO answer arrived at `now` with `frames` input frames.
     /// Returns the stall, if this answer confirms one.
-    pub fn answer(&mut self, frames: usize, now: Instant) -> Option<RecoverCause> {
+    pub(crate) fn answer(&mut self, frames: usize, now: Instant) -> Option<RecoverCause> {
         if frames > 0 {
             self.newest = now;
             self.flowed = true;
@@ -63,7 +63,7 @@ impl FlowWatch {
 
     /// Forgets the past: a deliberate pause of the exchange (a client held
     /// the network below OP) is not a stall.
-    pub fn excuse(&mut self, now: Instant) {
+    pub(crate) fn excuse(&mut self, now: Instant) {
         self.newest = now;
         self.empty_after_limit = 0;
     }

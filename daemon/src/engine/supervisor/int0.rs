@@ -14,11 +14,11 @@
 
 /// Exchanges without an INT0 edge after which the line is taken as stuck.
 /// Every packet makes two: hundreds without one is no timing accident.
-pub const SILENT_EXCHANGES: u64 = 200;
+pub(crate) const SILENT_EXCHANGES: u64 = 200;
 
 /// What the watch saw at the last census.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct Int0Watch {
+pub(crate) struct Int0Watch {
     last: Option<(u64, u64)>,
     stuck: bool,
 }
@@ -27,7 +27,7 @@ impl Int0Watch {
     /// A census: the link's INT0 edge count (`None`: it cannot see the
     /// line) and the exchanges so far. Returns the new verdict when it
     /// changed (`true`: stuck).
-    pub fn census(&mut self, edges: Option<u64>, exchanges: u64) -> Option<bool> {
+    pub(crate) fn census(&mut self, edges: Option<u64>, exchanges: u64) -> Option<bool> {
         let Some(edges) = edges else {
             self.last = None;
             return self.set(false);
@@ -48,7 +48,7 @@ impl Int0Watch {
     }
 
     /// Whether INT0 is taken as stuck.
-    pub fn stuck(&self) -> bool {
+    pub(crate) fn stuck(&self) -> bool {
         self.stuck
     }
 }

@@ -25,23 +25,26 @@ use std::time::{Duration, Instant};
 use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 use ecmxf_wire::{EcatState, ResponseHeader};
 
-pub use cause::{RecoverCause, SlaveFault};
+// Re-exported by the master as its own (the one door).
+#[allow(unreachable_pub)]
+pub use cause::RecoverCause;
+pub(crate) use cause::SlaveFault;
 #[cfg(test)]
 use flow::STALL_ANSWERS;
-pub use flow::{FlowWatch, flow_limit};
-pub use int0::{Int0Watch, SILENT_EXCHANGES as INT0_SILENT_EXCHANGES};
+pub(crate) use flow::{FlowWatch, flow_limit};
+pub(crate) use int0::{Int0Watch, SILENT_EXCHANGES as INT0_SILENT_EXCHANGES};
 
 /// Working-counter errors this long in a row mean a slave left the
 /// exchange (lost, or dropped to a lower state): recover.
-pub const WKC_STREAK: Duration = Duration::from_millis(50);
+pub(crate) const WKC_STREAK: Duration = Duration::from_millis(50);
 /// A streak ends after this long without a new WKC error.
-pub const WKC_QUIET: Duration = Duration::from_millis(20);
+pub(crate) const WKC_QUIET: Duration = Duration::from_millis(20);
 /// How often the engine counts the slaves while the slot is idle.
-pub const CENSUS: Duration = Duration::from_secs(1);
+pub(crate) const CENSUS: Duration = Duration::from_secs(1);
 
 /// What a header says that is not a fault.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
-pub struct HeaderNews {
+pub(crate) struct HeaderNews {
     /// The RxFIFO just ran dry (the error bit's rising edge, with outputs):
     /// count an alarm.
     pub ran_dry: bool,
@@ -51,7 +54,7 @@ pub struct HeaderNews {
 
 /// What a run of the cyclic exchange looks like, for the rules.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
-pub struct RunShape {
+pub(crate) struct RunShape {
     /// Slaves at bring-up.
     pub slaves: usize,
     /// Whether process data is exchanged (a FIFO plan runs).
@@ -64,14 +67,14 @@ pub struct RunShape {
 
 impl RunShape {
     /// No run: nothing on the ring, nothing exchanged.
-    pub fn idle() -> Self {
+    pub(crate) fn idle() -> Self {
         Self { slaves: 0, cyclic: false, has_outputs: false, flow_limit: Duration::ZERO }
     }
 }
 
 /// The rules of one run, with what they remember between answers.
 #[derive(Clone, Debug)]
-pub struct Supervisor {
+pub(crate) struct Supervisor {
     shape: RunShape,
     flow: FlowWatch,
     /// The chip's raw WKC error counter in the last header.
@@ -91,7 +94,7 @@ impl Supervisor {
     /// A run starting at `now`; `wkc_raw` is the WKC counter in the header
     /// before it. A FIFO error bit left from before the run (a fault, the
     /// bring-up) is cleared, not reported.
-    pub fn new(shape: RunShape, wkc_raw: u8, now: Instant) -> Self {
+    pub(crate) fn new(shape: RunShape, wkc_raw: u8, now: Instant) -> Self {
         Self {
             shape,
             flow: FlowWatch::new(shape.flow_limit, now),
@@ -108,7 +111,7 @@ impl Supervisor {
     /// the slaves below the target state on purpose, so missing working
     /// counters and frames are not faults (a streak counts from when the
     /// hold ends).
-    pub fn header(&mut self, h: &ResponseHeader, held: bool, now: Instant) -> Result<HeaderNews, RecoverCause> {
+    pub(crate) fn header(&mut self, h: &ResponseHeader, held: bool, now: Instant) -> Result<HeaderNews, RecoverCause> {
         if h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) {
             return Err(RecoverCause::ChipReset);
         }
@@ -140,12 +143,12 @@ impl Supervisor {
 
     /// Whether the slaves should be counted now (the caller asks only
     /// while the blocking slot is idle).
-    pub fn census_due(&self, now: Instant) -> bool {
+    pub(crate) fn census_due(&self, now: Instant) -> bool {
         now.saturating_duration_since(self.last_census) >= CENSUS
     }
 
     /// The chip counted `slaves` at `now`.
-    pub fn census(&mut self, slaves: usize, now: Instant) -> Result<(), RecoverCause> {
+    pub(crate) fn census(&mut self, slaves: usize, now: Instant) -> Result<(), RecoverCause> {
         self.last_census = now;
         if slaves != self.shape.slaves {
             return Err(RecoverCause::SlaveCount { from: self.shape.slaves, to: slaves });
@@ -156,7 +159,7 @@ impl Supervisor {
     /// An intact FIFO answer at `now` carried `frames` input frames. A
     /// network without inputs counts the answer itself as the sign of
     /// life. Returns whether it counts as a frame of fresh data.
-    pub fn fifo_answer(&mut self, frames: usize, has_inputs: bool, now: Instant) -> bool {
+    pub(crate) fn fifo_answer(&mut self, frames: usize, has_inputs: bool, now: Instant) -> bool {
         let alive = if has_inputs { frames } else { 1 };
         if let Some(stall) = self.flow.answer(alive, now) {
             self.stall.get_or_insert(stall);
@@ -166,13 +169,13 @@ impl Supervisor {
 
     /// Whether any input frame arrived in this run (the engine is
     /// "running" from the first one).
-    pub fn flowed(&self) -> bool {
+    pub(crate) fn flowed(&self) -> bool {
         self.flow.flowed()
     }
 
     /// The stall an answer confirmed, once; `held`: a deliberate pause of
     /// the exchange is not a stall (the clock starts again at `now`).
-    pub fn take_stall(&mut self, held: bool, now: Instant) -> Option<RecoverCause> {
+    pub(crate) fn take_stall(&mut self, held: bool, now: Instant) -> Option<RecoverCause> {
         if held {
             self.flow.excuse(now);
             self.stall = None;

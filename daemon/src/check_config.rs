@@ -1,0 +1,102 @@
+//! `ecmxfd --check-config FILE`: the configuration read, its files loaded
+//! and checked as a start would, and the link budget of the network it
+//! describes, without touching a chip. Each mistake names its key and
+//! line; the exit status is the one a start would end with.
+
+use std::io::Write;
+use std::path::Path;
+
+use crate::config::{Config, ConfigError, LinkConfig};
+use crate::master::link_budget::{self, BudgetError, LinkBudget};
+
+/// Exit status of a configuration mistake.
+pub const EXIT_CONFIG: u8 = 2;
+
+/// Checks the configuration at `path`, reports to `out` (notes, the
+/// verdict, the link budget) and `err` (the mistake), and returns the exit
+/// status: 0, [`EXIT_CONFIG`] for a mistake,
+/// [`crate::lifecycle::EXIT_REFUSED`] for a network that can never run.
+/// A reader that went away (`| head`) only shortens the report.
+pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8 {
+    let (c, notes, budget) = match load(path) {
+        Ok(v) => v,
+        Err(e) => {
+            let _ = writeln!(err, "{e}");
+            return EXIT_CONFIG;
+        }
+    };
+    for n in &notes {
+        let _ = writeln!(out, "note: {n}");
+    }
+    let link = match &c.link {
+        LinkConfig::Sim { .. } => "in-process simulator".to_string(),
+        LinkConfig::SimSocket { socket } => format!("simulator socket {}", socket.display()),
+        LinkConfig::Spidev { device, .. } => format!("{}", device.display()),
+    };
+    let latency = match c.cycle.output_latency_us {
+        Some(us) => format!(", output latency budget {us} us"),
+        None => String::new(),
+    };
+    if let Some(Err(e)) = &budget {
+        let _ = writeln!(err, "{}: the network cannot run: link budget: {e}", path.display());
+        return crate::lifecycle::EXIT_REFUSED;
+    }
+    let _ = writeln!(
+        out,
+        "{}: ok ({link}, {} expected slaves, {} us cycle{latency})",
+        path.display(),
+        c.slaves.len(),
+        c.cycle.sync0_us
+    );
+    let _ = match budget {
+        Some(Ok(b)) => writeln!(
+            out,
+            "link budget: the process data needs {:.0}% of the SPI link ({} cycle(s) of frames a packet, {:.0} \
+             exchanges/s at least)",
+            b.load() * 100.0,
+            b.frames_per_packet,
+            b.min_exchanges_per_s()
+        ),
+        _ => writeln!(out, "link budget: checked at bring-up (the frame sizes come from the slaves)"),
+    };
+    0
+}
+
+type Checked = (Config, Vec<String>, Option<Result<LinkBudget, BudgetError>>);
+
+/// The configuration, its notes and its offline link budget (`None` where
+/// the frame sizes are known only from the slaves).
+fn load(path: &Path) -> Result<Checked, ConfigError> {
+    let c = Config::load(path)?;
+    let notes = c.check_files(path)?;
+    // The Sparkplug node's certificates and credentials load as at start.
+    if let Some(s) = &c.sparkplug {
+        crate::sparkplug::prepare(s).map_err(|e| ConfigError::Invalid {
+            file: path.into(),
+            key: "sparkplug".into(),
+            message: e.to_string(),
+        })?;
+    }
+    let budget = simulated_budget(&c, path)?;
+    Ok((c, notes, budget))
+}
+
+/// The link budget of a simulator configuration, from its network file
+/// (or the demo network) with each slave's default mapping and the packet
+/// time its SPI clock gives: what bring-up would refuse, said offline. The
+/// `[[axis]]` entries are checked against the same network.
+#[cfg(feature = "sim")]
+fn simulated_budget(c: &Config, path: &Path) -> Result<Option<Result<LinkBudget, BudgetError>>, ConfigError> {
+    let Some((net, chip)) = crate::config::sim_network::load(c, path)? else { return Ok(None) };
+    crate::config::sim_network::check_axes(c, &net, path)?;
+    let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
+    let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();
+    let data_size = c.chip.data_size;
+    let packet_ns = link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
+    Ok(Some(link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
+}
+
+#[cfg(not(feature = "sim"))]
+fn simulated_budget(_: &Config, _: &Path) -> Result<Option<Result<LinkBudget, BudgetError>>, ConfigError> {
+    Ok(None)
+}

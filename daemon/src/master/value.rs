@@ -1,0 +1,310 @@
+//! Typed values: the one encoder every front end writes through, with one
+//! set of range and kind checks, and the decoder of an entry's bits.
+//!
+//! A front end turns its own wire value (a gRPC `Value`, a Sparkplug
+//! metric, an OPC UA variant) into a [`Value`], then [`Value::encode`]s it
+//! as the target's CoE type (CiA 301 data types, little-endian as EtherCAT
+//! carries them) into the target's bits: a process-image entry's bit
+//! length, or an object's size for an SDO. What does not fit is refused
+//! with a [`ValueError`] naming the value and the type; nothing is cut,
+//! padded with sign, or reinterpreted here.
+
+use std::fmt;
+
+pub(crate) use ecmxf_devices::od::DataType;
+
+/// A value as the master writes and reads it.
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) enum Value {
+    /// A boolean: 0 or 1 in any integer type.
+    Bool(bool),
+    /// A signed integer.
+    Int(i64),
+    /// An unsigned integer.
+    UInt(u64),
+    /// A real; REAL32 targets take it rounded to single precision.
+    Real(f64),
+    /// Text: only to string types.
+    Text(String),
+    /// The target's own bytes: exactly its size (a string's at most).
+    Bytes(Vec<u8>),
+}
+
+/// Why a value cannot be written as a type.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub enum ValueError {
+    /// A number outside the type's range (`value` as given).
+    OutOfRange {
+        /// The value.
+        value: String,
+        /// The type's name.
+        target: String,
+    },
+    /// A real given for an integer type.
+    NotAnInteger {
+        /// The value.
+        value: String,
+        /// The type's name.
+        target: String,
+    },
+    /// A number given for a string type.
+    NotAString {
+        /// The value.
+        value: String,
+        /// The type's name.
+        target: String,
+    },
+    /// Text given for a type that is not a string.
+    TextForNumber {
+        /// The type's name.
+        target: String,
+    },
+    /// Raw bytes of another size than the type's.
+    WrongSize {
+        /// Bytes given.
+        given: usize,
+        /// The type's bytes.
+        size: usize,
+        /// The type's name.
+        target: String,
+    },
+    /// A string or bytes longer than the target's room.
+    TooLong {
+        /// Bytes given.
+        given: usize,
+        /// The target's bytes.
+        room: usize,
+    },
+    /// The target's bits cannot hold a number of its type (mapped wider
+    /// than 64 bits, or zero bits).
+    Unholdable {
+        /// The target's bits.
+        bits: u32,
+        /// The type's name.
+        target: String,
+    },
+}
+
+impl fmt::Display for ValueError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::OutOfRange { value, target } => write!(f, "{value} does not fit {target}"),
+            Self::NotAnInteger { value, target } => write!(f, "{value} is a real; {target} wants an integer"),
+            Self::NotAString { value, target } => write!(f, "{value} is not a string or bytes ({target})"),
+            Self::TextForNumber { target } => write!(f, "text given for a {target} object"),
+            Self::WrongSize { given, size, target } => {
+                write!(f, "{given} raw bytes given for a {target} object, which has {size}")
+            }
+            Self::TooLong { given, room } => write!(f, "{given} bytes do not fit the {room}-byte entry"),
+            Self::Unholdable { bits, target } => write!(f, "the entry's {bits} bits do not hold a {target}"),
+        }
+    }
+}
+
+impl std::error::Error for ValueError {}
+
+/// A type's name as users write it (CiA 301): "UNSIGNED16". BITn is
+/// named as the unsigned byte it travels in, as the API's types name it.
+pub(crate) fn type_name(t: DataType) -> &'static str {
+    match t {
+        DataType::Bool => "BOOLEAN",
+        DataType::Int8 => "INTEGER8",
+        DataType::Int16 => "INTEGER16",
+        DataType::Int32 => "INTEGER32",
+        DataType::Int64 => "INTEGER64",
+        DataType::UInt8 | DataType::Bits(_) => "UNSIGNED8",
+        DataType::UInt16 => "UNSIGNED16",
+        DataType::UInt32 => "UNSIGNED32",
+        DataType::UInt64 => "UNSIGNED64",
+        DataType::Real32 => "REAL32",
+        DataType::Real64 => "REAL64",
+        DataType::VisibleString(_) => "VISIBLE_STRING",
+        DataType::OctetString(_) => "OCTET_STRING",
+    }
+}
+
+/// The value bits of an integer type in a target of `bits` bits, and
+/// whether it is signed; `None` for reals and strings.
+fn integer_width(t: DataType, bits: u32) -> Option<(u32, bool)> {
+    let signed = matches!(t, DataType::Int8 | DataType::Int16 | DataType::Int32 | DataType::Int64);
+    match t {
+        DataType::Bool => Some((1, false)),
+        DataType::Bits(n) => Some((u32::from(n).min(bits), false)),
+        DataType::Real32 | DataType::Real64 | DataType::VisibleString(_) | DataType::OctetString(_) => None,
+        _ => Some((t.bits().min(bits), signed)),
+    }
+}
+
+impl Value {
+    /// The value as the bytes of a target of type `t` and `bits` bits
+    /// (little-endian, `bits` rounded up to bytes), or why it is not one.
+    pub(crate) fn encode(&self, t: DataType, bits: u32) -> Result<Vec<u8>, ValueError> {
+        let size = bits.div_ceil(8) as usize;
+        let target = || type_name(t).to_string();
+        if let DataType::VisibleString(_) | DataType::OctetString(_) = t {
+            let data = match self {
+                Self::Text(s) => s.as_bytes(),
+                Self::Bytes(b) => b.as_slice(),
+                _ => return Err(ValueError::NotAString { value: self.shown(), target: target() }),
+            };
+            if data.len() > size {
+                return Err(ValueError::TooLong { given: data.len(), room: size });
+            }
+            let mut out = data.to_vec();
+            out.resize(size, 0);
+            return Ok(out);
+        }
+        if size == 0 || size > 8 {
+            return Err(ValueError::Unholdable { bits, target: target() });
+        }
+        match self {
+            Self::Text(_) => return Err(ValueError::TextForNumber { target: target() }),
+            Self::Bytes(b) if b.len() != size => {
+                return Err(ValueError::WrongSize { given: b.len(), size, target: target() });
+            }
+            Self::Bytes(b) => return Ok(b.clone()),
+            _ => {}
+        }
+        let Some((width, signed)) = integer_width(t, bits) else {
+            // A real type.
+            let f = match self {
+                Self::Real(f) => *f,
+                Self::Int(i) => *i as f64,
+                Self::UInt(u) => *u as f64,
+                Self::Bool(b) => f64::from(u8::from(*b)),
+                Self::Text(_) | Self::Bytes(_) => unreachable!("handled above"),
+            };
+            let mut out = match t {
+                DataType::Real32 => (f as f32).to_le_bytes().to_vec(),
+                _ => f.to_le_bytes().to_vec(),
+            };
+            out.resize(size, 0);
+            return Ok(out);
+        };
+        let wide: i128 = match self {
+            Self::Bool(b) => i128::from(*b),
+            Self::Int(i) => i128::from(*i),
+            Self::UInt(u) => i128::from(*u),
+            Self::Real(f) => return Err(ValueError::NotAnInteger { value: f.to_string(), target: target() }),
+            Self::Text(_) | Self::Bytes(_) => unreachable!("handled above"),
+        };
+        let (low, high) = if signed { (-(1i128 << (width - 1)), 1i128 << (width - 1)) } else { (0, 1i128 << width) };
+        if wide < low || wide >= high {
+            return Err(ValueError::OutOfRange { value: self.shown(), target: target() });
+        }
+        Ok((wide as i64).to_le_bytes()[..size].to_vec())
+    }
+
+    /// The value of a target of type `t` from its bits (`raw`:
+    /// little-endian, its bytes rounded up, as
+    /// [`super::image::read_bits`] gives them). Short data reads as
+    /// zero-extended.
+    pub(crate) fn decode(t: DataType, raw: &[u8]) -> Self {
+        let mut le = [0u8; 8];
+        let n = raw.len().min(8);
+        le[..n].copy_from_slice(&raw[..n]);
+        let u = u64::from_le_bytes(le);
+        match t {
+            DataType::Bool => Self::Bool(u & 1 == 1),
+            DataType::Int8 => Self::Int(i64::from(u as u8 as i8)),
+            DataType::Int16 => Self::Int(i64::from(u as u16 as i16)),
+            DataType::Int32 => Self::Int(i64::from(u as u32 as i32)),
+            DataType::Int64 => Self::Int(u as i64),
+            DataType::UInt8 | DataType::Bits(_) | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => {
+                Self::UInt(u)
+            }
+            DataType::Real32 => Self::Real(f64::from(f32::from_bits(u as u32))),
+            DataType::Real64 => Self::Real(f64::from_bits(u)),
+            DataType::VisibleString(_) => {
+                let end = raw.iter().position(|&b| b == 0).unwrap_or(raw.len());
+                Self::Text(String::from_utf8_lossy(&raw[..end]).into_owned())
+            }
+            DataType::OctetString(_) => Self::Bytes(raw.to_vec()),
+        }
+    }
+
+    /// The value as a signed integer, where it is one (a whole real or a
+    /// boolean counts; an unsigned one above `i64::MAX` does not).
+    pub(crate) fn as_i64(&self) -> Option<i64> {
+        match self {
+            Self::Bool(b) => Some(i64::from(*b)),
+            Self::Int(i) => Some(*i),
+            Self::UInt(u) => i64::try_from(*u).ok(),
+            Self::Real(f) if f.fract() == 0.0 && f.abs() < 9.2e18 => Some(*f as i64),
+            _ => None,
+        }
+    }
+
+    /// The value as a number, for deadbands (`None`: not a number).
+    pub(crate) fn as_f64(&self) -> Option<f64> {
+        match self {
+            Self::Int(v) => Some(*v as f64),
+            Self::UInt(v) => Some(*v as f64),
+            Self::Real(v) => Some(*v),
+            _ => None,
+        }
+    }
+
+    /// The value as messages show it.
+    fn shown(&self) -> String {
+        match self {
+            Self::Bool(b) => b.to_string(),
+            Self::Int(i) => i.to_string(),
+            Self::UInt(u) => u.to_string(),
+            Self::Real(f) => f.to_string(),
+            Self::Text(s) => format!("{s:?}"),
+            Self::Bytes(b) => format!("{} bytes", b.len()),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn integers_are_checked_against_their_type_and_bits() {
+        assert_eq!(Value::Int(-128).encode(DataType::Int8, 8).unwrap(), vec![0x80]);
+        assert_eq!(Value::UInt(65535).encode(DataType::UInt16, 16).unwrap(), vec![0xFF, 0xFF]);
+        assert_eq!(Value::Int(i64::MIN).encode(DataType::Int64, 64).unwrap(), i64::MIN.to_le_bytes());
+        assert_eq!(Value::UInt(u64::MAX).encode(DataType::UInt64, 64).unwrap(), u64::MAX.to_le_bytes());
+        let e = Value::UInt(256).encode(DataType::UInt8, 8).unwrap_err();
+        assert_eq!(e.to_string(), "256 does not fit UNSIGNED8");
+        assert!(Value::Int(-1).encode(DataType::UInt32, 32).is_err());
+        assert!(Value::Int(128).encode(DataType::Int8, 8).is_err());
+        assert!(Value::UInt(1 << 63).encode(DataType::Int64, 64).is_err());
+        assert!(Value::UInt(4).encode(DataType::Bits(2), 2).is_err());
+        assert!(Value::UInt(2).encode(DataType::Bool, 1).is_err());
+        assert_eq!(Value::Bool(true).encode(DataType::UInt16, 16).unwrap(), vec![1, 0]);
+    }
+
+    #[test]
+    fn reals_text_and_bytes_go_only_where_they_fit() {
+        assert_eq!(Value::Real(1.5).encode(DataType::Real32, 32).unwrap(), 1.5f32.to_le_bytes());
+        assert_eq!(Value::Int(2).encode(DataType::Real64, 64).unwrap(), 2.0f64.to_le_bytes());
+        let e = Value::Real(1.0).encode(DataType::UInt32, 32).unwrap_err();
+        assert_eq!(e.to_string(), "1 is a real; UNSIGNED32 wants an integer");
+        let e = Value::Text("ab".into()).encode(DataType::UInt16, 16).unwrap_err();
+        assert_eq!(e.to_string(), "text given for a UNSIGNED16 object");
+        let e = Value::Bytes(vec![1, 2, 3]).encode(DataType::UInt16, 16).unwrap_err();
+        assert_eq!(e.to_string(), "3 raw bytes given for a UNSIGNED16 object, which has 2");
+        assert_eq!(Value::Text("ab".into()).encode(DataType::VisibleString(4), 32).unwrap(), b"ab\0\0");
+        assert!(Value::Bytes(vec![1, 2, 3]).encode(DataType::OctetString(2), 16).is_err());
+        assert!(Value::Int(1).encode(DataType::UInt32, 72).is_err());
+    }
+
+    #[test]
+    fn decoded_values_encode_back_to_their_bytes() {
+        for (t, raw) in [
+            (DataType::Int8, vec![0xFF]),
+            (DataType::Int16, vec![0xD4, 0xFE]),
+            (DataType::UInt32, vec![1, 2, 3, 4]),
+            (DataType::Real32, 1.5f32.to_le_bytes().to_vec()),
+            (DataType::Bool, vec![1]),
+        ] {
+            let v = Value::decode(t, &raw);
+            assert_eq!(v.encode(t, t.bits()).unwrap(), raw, "{t:?}");
+        }
+        assert_eq!(Value::decode(DataType::VisibleString(4), b"ab\0\0"), Value::Text("ab".into()));
+    }
+}
