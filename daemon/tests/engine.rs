@@ -165,13 +165,12 @@ fn sdo_read_write_abort_and_slave_info() {
 /// An SDO read costs its start, the polls of the slave's time and the
 /// exchange that brings the last poll's answer, which is the result: 5
 /// exchanges from the caller's call to its answer, each one link time that
-/// an SDO-heavy client waits. It once took 7
-/// here: an immediate poll, an emergency question in the gap between two
-/// reads, a guarded GET. At a 1 ms cycle the FIFO exchange takes a tenth
-/// of the link, so the count is the transaction's own (at 125 us it is
-/// fitted into the slave's time: `ecmxfd-bench` measures that). The
-/// median of 40 reads one after another, so a stall of the host now and
-/// then does not decide it.
+/// an SDO-heavy client waits. It once took 7 here: an immediate poll, an
+/// emergency question in the gap between two reads, a guarded GET. At a
+/// 1 ms cycle the FIFO exchange takes a tenth of the link, so the count is
+/// the transaction's own (at 125 us it is fitted into the slave's time:
+/// `ecmxfd-bench` measures that). The median of 40 reads one after
+/// another, so a stall of the host now and then does not decide it.
 #[test]
 fn an_sdo_read_takes_its_start_its_polls_and_one_exchange_for_the_answer() {
     let guard = SERIAL.lock().unwrap_or_else(|e| e.into_inner());

@@ -6,7 +6,7 @@
 //! CRC-8 poly 0x07 init 0xFF over bytes 0..14), 0x08 vendor id, 0x0A product
 //! code, 0x0C revision, 0x0E serial, 0x14 bootstrap mailbox, 0x18 standard
 //! mailbox (receive offset, size, send offset, size), 0x1C mailbox protocols,
-//! 0x3E size in Kbit - 1 (PROTOCOL-NOTES says KiB; the real dumps say Kbit:
+//! 0x3E size in Kbit - 1 (docs/protocol.md §19; not KiB, the real dumps say Kbit:
 //! SOES's 256-byte image has 1, the EK1100's 2048-byte one 15), 0x3F
 //! version, 0x40 onward categories (type u16,
 //! length in words u16, data), ended by type 0xFFFF.

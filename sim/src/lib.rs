@@ -1,5 +1,5 @@
 //! `ecmxf-sim`: a simulator of the NEXTW ECM-XF EtherCAT master chip and the
-//! EtherCAT network behind it, written from the manuals (PROTOCOL-NOTES.md
+//! EtherCAT network behind it, written from the manuals (docs/protocol.md
 //! is the map), never from what a host happens to send.
 //!
 //! # Map

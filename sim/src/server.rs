@@ -132,8 +132,8 @@ fn write_msg(w: &mut impl Write, kind: u8, flags: u8, payload: &[u8]) -> io::Res
 /// simulator spends its own CPU on that, never the host's: the client side
 /// ([`SocketClient`]) blocks in `read`, as a host blocks in the spidev
 /// ioctl while the kernel clocks the bytes, so the daemon's CPU time
-/// measured against the socket simulator is its own work (issue 26: the
-/// client's spinning was most of the daemon's idle CPU).
+/// measured against the socket simulator is its own work (when the client
+/// spun instead, that was most of the daemon's idle CPU).
 const SERVER_SPIN: Duration = Duration::from_millis(2);
 
 /// Fills `buf` from the stream, polling (non-blocking, yielding) for up to

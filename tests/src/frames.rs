@@ -1,5 +1,6 @@
 //! A counter streamed through `ProcessData.StreamFrames` to the demo IO
-//! slave, one value per DC cycle, and the checks of what played (issue 15):
+//! slave, one value per DC cycle, and the checks that each value reached
+//! the slave exactly once, in order:
 //! the daemon's own pairing of each frame with its cycle's input frame
 //! (the IO slave loops its outputs back to its inputs in the same cycle),
 //! and the simulator's record of the frames the slave consumed. Shared by

@@ -1,4 +1,4 @@
-//! `ecmxfctl config` (issue 32, item 4): the network a daemon runs, written
+//! `ecmxfctl config` (docs/eni.md): the network a daemon runs, written
 //! as a configuration (`--format toml`) or an ENI (`--format eni`), is
 //! taken unchanged by ecmxfd, and running it gives the same process image:
 //! every entry with the same name, object, direction, offset, size and type,

@@ -1,4 +1,5 @@
-//! Exact at the edges (issue 29): a value that does not fit its target is
+//! Exact at the edges (a client must never get a half-written value or an
+//! error it cannot read): a value that does not fit its target is
 //! refused whole, naming target, given and expected size, and nothing is
 //! written (checked by reading the target back); a request larger than any
 //! legitimate one gets the documented code; server streams end with

@@ -1,4 +1,4 @@
-//! An ENI file as the network description (`eni = "FILE"`, issue 32): the
+//! An ENI file as the network description (`eni = "FILE"`, docs/eni.md): the
 //! demo network's ENI (config/demo-network.eni.xml, TwinCAT's conventions)
 //! brings the simulated network to OP with the slaves' names from the file
 //! and the drive's CoE init commands written at their transitions in the
@@ -188,7 +188,7 @@ fn an_esi_devices_init_commands_are_written_before_the_entrys_own_sdos() {
     });
 }
 
-/// The TwinCAT export (issue 32, "done when"): the network it describes
+/// The TwinCAT export, the file an ENI user actually has: the network it describes
 /// comes up in OP; each drive's 12 init commands ran in the file's order
 /// (the assignment 0x1C12 = {0x1601} can only be written count-0 first,
 /// entry, count: the simulated drive refuses any other order, as a real

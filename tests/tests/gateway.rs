@@ -1,4 +1,4 @@
-//! Issue 33: the ETG.8200 mailbox gateway, with a client written here that
+//! The ETG.8200 mailbox gateway (docs/mailbox.md), with a client written here that
 //! speaks it over UDP as an engineering tool does (an EtherCAT header of
 //! type 5 and one mailbox message addressed by station address): SDO
 //! upload and download to a slave while the engine runs its 1 ms cycle

@@ -224,7 +224,7 @@ async fn reflection_list(ch: tonic::transport::Channel, path: &'static str) -> V
 /// `states preop` then `states op`, and `states init` then `states op`,
 /// walk the state machine one step at a time (PRE-OP -> SAFE-OP -> OP):
 /// each succeeds, no recovery starts, and process data flows afterwards
-/// (issue 27: OP was asked for directly, every slave refused with AL status
+/// (OP asked for directly once made every slave refuse with AL status
 /// 0x0011, and the engine recovered on its own while the call failed).
 #[test]
 fn op_from_preop_or_init_walks_the_state_machine_without_a_recovery() {

@@ -154,7 +154,7 @@ fn an_output_only_network_without_coe_runs_answers_and_its_outputs_reach_the_sla
 /// EasyCAT board: about a hundred EEPROM reads each), asked for by callers
 /// that give up after 100 ms, again and again: the daemon builds the
 /// layout once, on its own, and the callers get it as soon as it exists
-/// (issue 26: built inside a caller's deadline, it never finished).
+/// (when it was built inside a caller's deadline, it never finished).
 #[test]
 fn a_48_slave_layout_is_built_once_by_the_daemon_whatever_callers_give_up() {
     let (Some(el2889), Some(easycat)) =
@@ -212,7 +212,8 @@ fn a_48_slave_layout_is_built_once_by_the_daemon_whatever_callers_give_up() {
 /// A network the SPI link can never carry is refused once, with exit
 /// status 78 (EX_CONFIG, in the unit's RestartPreventExitStatus=), and a
 /// line naming the sizes and what to change, instead of a bring-up retried
-/// every few seconds forever (issue 26).
+/// every few seconds forever for a network that could only ever run its
+/// RxFIFO dry.
 #[test]
 fn a_network_the_link_cannot_carry_exits_once_with_status_78() {
     let Some(easycat) = ecmxf_e2e::fixture("sii_abt_easycat_32x32.bin") else { return };
@@ -260,7 +261,8 @@ fn a_network_the_link_cannot_carry_exits_once_with_status_78() {
 /// A slave that refuses SAFE-OP at bring-up is named, with its state and
 /// AL status, where a user looks: `ecmxfctl master` (the last error) and
 /// `ecmxfctl slaves`, which says the network is not running and why
-/// instead of "MISSING" for a slave that answers (issue 27).
+/// instead of "MISSING" for a slave that answers (which sent users
+/// looking for a cable fault where the slave had refused).
 #[test]
 fn a_slave_refusing_safe_op_is_named_by_master_and_slaves() {
     run(async {
@@ -293,7 +295,8 @@ fn a_slave_refusing_safe_op_is_named_by_master_and_slaves() {
 /// An SDO to a slave whose SII lists no CoE (a Beckhoff EL2889: no
 /// mailbox at all) is answered at once with FAILED_PRECONDITION naming the
 /// slave, not sent to time out in the chip as "SDO protocol timeout"; its
-/// PDOs still come from its SII (issue 27).
+/// PDOs still come from its SII (the timeout, a second later, named
+/// neither the slave nor the cause).
 #[test]
 fn an_sdo_to_a_slave_without_coe_is_refused_at_once_naming_it() {
     let Some(el2889) = ecmxf_e2e::fixture("sii_beckhoff_el2889.bin") else { return };

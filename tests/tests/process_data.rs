@@ -485,7 +485,7 @@ fn streamed_frames_reach_the_slave_once_each_in_order() {
         let frame = |seq: u64| pb::OutputFrame { seq, data: ecmxf_e2e::frames::counter_frame(seq) };
         let image = pd.get_layout(pb::GetLayoutRequest {}).await.unwrap().into_inner();
         let (_, in_at) = ecmxf_e2e::io_slave_bytes(&image);
-        // 10 s by default; ECMXF_FRAMES_SOAK_SECS=60 for the issue's minute.
+        // 10 s by default; ECMXF_FRAMES_SOAK_SECS=60 for a one-minute soak.
         let secs: u64 = std::env::var("ECMXF_FRAMES_SOAK_SECS").ok().and_then(|s| s.parse().ok()).unwrap_or(10);
         let total = secs * 8000;
         assert!(sim.ctl(&format!("record 2 {}", total + 100_000)).starts_with("ok recording"));
@@ -729,7 +729,7 @@ fn within<T>(request: T, deadline: Duration) -> tonic::Request<T> {
 
 /// The daemon lays out the process image itself once the network runs, as
 /// its own client taking every other turn of the blocking slot, and keeps
-/// it across a re-init that finds the same network (issue 26: built inside
+/// it across a re-init that finds the same network (when it was built inside
 /// the first caller's deadline, it was thrown away call after call while
 /// SDO clients kept the slot busy, and writes by name failed for seconds).
 #[test]

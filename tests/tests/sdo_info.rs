@@ -1,4 +1,5 @@
-//! Issue 33 end to end, through the `ecmxfd` binary on a simulator in its
+//! A slave's dictionary over SDO Information (docs/mailbox.md) end to end,
+//! through the `ecmxfd` binary on a simulator in its
 //! own process and `ecmxfctl`: a slave that answers CoE SDO Information is
 //! listed from the device (no ESI configured for it); one whose ESI says it
 //! has none is listed from its ESI, saying why; asking a source a slave has

@@ -2,11 +2,11 @@
 //! CRC-16, which v049 marks "undefined" but older firmware implements).
 //!
 //! The check word covers bytes `[0, 24 + D)`: the header and the WHOLE data
-//! section, not just its valid length (PROTOCOL-NOTES, "Packet framing"). It
-//! travels little-endian like every other field; the 8- and 16-bit CRCs sit in
-//! the low bits of that 32-bit word with the upper bits zero (our decision: the
-//! manuals name the algorithms but not the placement, and the vendor driver
-//! stores the result in a `uint32_t`).
+//! section, not just its valid length (v049 ECM_CMD_CRC_TYPE_SET;
+//! docs/protocol.md §4). It travels little-endian like every other field;
+//! the 8- and 16-bit CRCs sit in the low bits of that 32-bit word with the
+//! upper bits zero (our decision: the manuals name the algorithms but not
+//! the placement, and the vendor driver stores the result in a `uint32_t`).
 
 use core::fmt;
 

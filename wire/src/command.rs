@@ -6,7 +6,7 @@
 //! ECAT_INIT_DC. We follow v049.
 //!
 //! Blocking commands (v049 表三 plus the ones the vendor driver waits on as
-//! such, PROTOCOL-NOTES "Blocking vs non-blocking"): only one may run at a
+//! such, docs/protocol.md §8): only one may run at a
 //! time; a second one while busy sets error bit7 and is not executed. Their
 //! results are fetched with the matching GET command. Any packet whose control
 //! byte has bit1 set is blocking as well (see [`crate::ControlFlags`]).

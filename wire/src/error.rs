@@ -62,8 +62,9 @@ pub enum DecodeError {
         len: usize,
     },
     /// The check word was 0x87654321: the chip was clocked before it was ready
-    /// and the command sent in the same transfer was not taken (v049, SPI
-    /// timing; PROTOCOL-NOTES "Packet framing"). Not corruption: resend.
+    /// and the command sent in the same transfer was not taken (the vendor
+    /// driver's reading, not in the manuals; docs/protocol.md §4). Not
+    /// corruption: resend.
     ChipNotReady,
     /// Bytes 0..4 are not 0xA1A2A3A4.
     StartWord {

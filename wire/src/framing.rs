@@ -79,7 +79,7 @@ impl PacketLayout {
 
 /// Finds the end of a packet in a byte stream clocked from a chip in an
 /// unknown state: the position just after an end word that is directly
-/// followed by a start word (PROTOCOL-NOTES "Resizing"; the vendor driver
+/// followed by a start word (docs/protocol.md §3; the vendor driver
 /// clocks single bytes until it sees this). Returns the index where the next
 /// packet starts.
 pub fn find_packet_start(stream: &[u8]) -> Option<usize> {

@@ -5,7 +5,7 @@
 //! that makes sense, and a wrong size is an error, not a guess.
 //!
 //! Encoding zeroes the unused part of the data section, because the check word
-//! covers the whole section (PROTOCOL-NOTES "Packet framing").
+//! covers the whole section (v049 ECM_CMD_CRC_TYPE_SET; docs/protocol.md §4).
 
 use crate::check::{CHECK_NOT_READY, CheckType};
 use crate::error::{DecodeError, EncodeError, PayloadError};
@@ -173,7 +173,8 @@ impl<'a> CommandPacket<'a> {
     /// Parses the payload by its code, reading a fixed layout's fields from
     /// their places whatever length the header declares, as the chip does
     /// with the vendor's driver: DCSYNC declared with 0 bytes and a filled
-    /// 16-byte layout (issue 28). Returns the request and, when the declared
+    /// 16-byte layout (a chip that refused it would never have worked with
+    /// that driver; docs/protocol.md §11). Returns the request and, when the declared
     /// length differs from the layout's, the [`PayloadError::DataLength`]
     /// passed over, for the caller to count or refuse.
     pub fn parse_declared_len_aside(&self) -> Result<(AnyRequest<'a>, Option<PayloadError>), PayloadError> {

@@ -1,6 +1,6 @@
-//! Per-cycle output frames a client streams (the chip plays one
-//! RxFIFO frame per DC cycle, docs/protocol.md §12, so a host that queues distinct frames gives
-//! the slaves a distinct setpoint every cycle). A stream covers one byte
+//! Per-cycle output frames a client streams (the chip plays one RxFIFO
+//! frame per DC cycle, docs/protocol.md §12, so a host that queues distinct
+//! frames gives the slaves a distinct setpoint every cycle). A stream covers one byte
 //! range of the output image (its slaves' share); each frame pushed into
 //! the RxFIFO takes the next queued frame into that range, so frames reach
 //! the slaves in order, exactly one per cycle, none repeated or dropped

@@ -1,7 +1,7 @@
 //! The engine's one door (the rest of the daemon reaches the engine only
-//! through it): [`spawn`] starts the real-time thread
-//! over a link, and the input distributor beside it, and returns the
-//! [`EngineHandle`] the rest of the daemon uses. In: one command channel
+//! through it): [`spawn`] starts the real-time thread over a link, and the
+//! input distributor beside it, and returns the [`EngineHandle`] the rest
+//! of the daemon uses. In: one command channel
 //! for every request (jobs, reconfigure, network actions, frame streams,
 //! stop) and the output writes, the hot path, on their own channel. Out:
 //! the telemetry, the layout, input frames and events, each published by

@@ -1,5 +1,5 @@
-//! The single blocking slot (v049 表三 notes; PROTOCOL-NOTES "Blocking vs
-//! non-blocking"): one operation at a time, busy flag while it runs, effects
+//! The single blocking slot (v049 表三 notes; docs/protocol.md §8): one
+//! operation at a time, busy flag while it runs, effects
 //! applied when it completes, error bit3 when it fails. A modelled duration
 //! per operation stands in for the EtherCAT traffic it needs.
 
@@ -80,8 +80,8 @@ fn within(op: BlockingOp, duration: u64, timeout_us: u32, sdo: bool) -> (Blockin
 /// RAW_ECAT_FUNC_GET and FOE_FUNC_GET answer the same way here). v049 lists
 /// no values; the model's are: 0 done, [`RESULT_FAILED`], [`RESULT_TIMED_OUT`],
 /// [`RESULT_NOT_DONE`]. A GET never hands back an earlier request's data as
-/// the answer to a later one that failed (issue 28: after a timed-out
-/// EEPROM_REQ the host read the previous word with error code 0).
+/// the answer to a later one that failed (after a timed-out EEPROM_REQ a
+/// host once read the previous word with error code 0).
 pub mod result_code {
     /// The operation failed: no answer from the slave, or it refused.
     pub const RESULT_FAILED: u8 = 1;

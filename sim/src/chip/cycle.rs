@@ -1,5 +1,5 @@
 //! One DC cycle of process data (v049 PDO_DATA_FIFO_OP, FIFO and WKC
-//! commands; PROTOCOL-NOTES "Payload facts"): take one output frame from the
+//! commands; docs/protocol.md §12): take one output frame from the
 //! RxFIFO (or repeat the last one and flag a FIFO error when it is empty),
 //! let the chip's CiA402 helper write its controlword bits, exchange with
 //! every slave, check the working counter, store one input frame in the

@@ -1,5 +1,5 @@
 //! The chip's SPI side as a byte stream (v049 SPI 命令傳送與回應接收說明;
-//! PROTOCOL-NOTES "Pipelining", "Resizing").
+//! docs/protocol.md §6 and §3).
 //!
 //! A transfer may have any length. Incoming bytes collect until a whole
 //! packet (of the size in force) has arrived; only then is the command taken.

@@ -1,5 +1,5 @@
-//! The EtherCAT state machine of one slave (ETG.1000.6 6.4; PROTOCOL-NOTES
-//! "EtherCAT facts"): up one step at a time, down by any jump, BOOT only from
+//! The EtherCAT state machine of one slave (ETG.1000.6 6.4; docs/protocol.md
+//! §19): up one step at a time, down by any jump, BOOT only from
 //! and back to INIT, refusals with the AL status code a real slave gives.
 
 use std::fmt;

@@ -6,13 +6,15 @@
 //!
 //! Those rules are for a host that remaps. A device's own mapping (what its
 //! description gives) is taken as it stands, the way the device runs it
-//! (issue 27): entries shorter or longer than their object (Beckhoff's
-//! "compact" PDOs map 16 bits of UDINT objects; a BOOL mapped as 16 bits)
-//! carry the object's low bits; an entry flagged for the other direction
-//! carries its object all the same; an entry naming an object the
-//! dictionary lacks, or a PDO-communication object itself (an open-source
-//! board mapping 0x1600:01..05 as USINT), is a placeholder: its bits are in
-//! the image and move no object.
+//! (real devices' files break the remapping rules, and a simulator that
+//! refused them could not bring those devices up): entries shorter or
+//! longer than their object (Beckhoff's "compact" PDOs map 16 bits of
+//! UDINT objects; a BOOL mapped as 16 bits) carry the object's low bits;
+//! an entry flagged for the other direction carries its object all the
+//! same; an entry naming an object the dictionary lacks, or a
+//! PDO-communication object itself (an open-source board mapping
+//! 0x1600:01..05 as USINT), is a placeholder: its bits are in the image and
+//! move no object.
 
 use ecmxf_wire::payload::pdo::PdoEntry;
 use ecmxf_wire::payload::sdo::SdoAbortCode;

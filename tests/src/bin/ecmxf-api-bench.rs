@@ -20,7 +20,8 @@
 //! input frame plus 16 SDO clients each writing a value of its own and
 //! reading it back (clients that share an object take turns on it), and
 //! reports wrong values, FIFO alarms per minute, lost samples and the
-//! daemon's CPU (issue 26's five-minute run: `--soak 300`).
+//! daemon's CPU (a five-minute soak, the length that once showed slow
+//! drifts: `--soak 300`).
 #![forbid(unsafe_code)]
 
 use std::time::{Duration, Instant};

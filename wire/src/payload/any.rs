@@ -277,8 +277,9 @@ mod tests {
 
     /// Commands with a data layout of a fixed length (v049 "資料長度"): a
     /// packet declaring any other length is refused whole, so the chip never
-    /// reads its fields from the wrong offsets (issue 13: the vendor
-    /// driver's PDO_CONFIG_REQ with 156 bytes).
+    /// reads its fields from the wrong offsets (as it would the vendor
+    /// driver's PDO_CONFIG_REQ, which declares 156 bytes where v049's layout
+    /// has 4).
     #[test]
     fn a_declared_length_that_does_not_fit_the_layout_is_refused() {
         use CommandCode as C;

@@ -63,7 +63,7 @@ impl PdoMapping {
 /// the vendor's own host driver declares and fills two others, and a chip
 /// that refused them would break the vendor's PDO-configuration calls, so
 /// the chip is taken to tell them apart by the declared data length
-/// (issue 28; the vendor header's `PDO_CONFIG_HEAD`, whose size the driver
+/// (docs/protocol.md §11; the vendor header's `PDO_CONFIG_HEAD`, whose size the driver
 /// puts in the length field of SET and REQ alike):
 ///
 /// | form | length | layout |
