@@ -7,7 +7,7 @@ use std::io::Write;
 use std::path::Path;
 
 use crate::config::{Config, ConfigError, LinkConfig};
-use crate::master::link_budget::{self, BudgetError, LinkBudget};
+use crate::master::link_budget::{BudgetError, LinkBudget};
 
 /// Exit status of a configuration mistake.
 pub const EXIT_CONFIG: u8 = 2;
@@ -62,12 +62,34 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
     0
 }
 
-type Checked = (Config, Vec<String>, Option<Result<LinkBudget, BudgetError>>);
+/// The offline link budget: `None` where the frame sizes are known only
+/// from the slaves.
+type Budget = Option<Result<LinkBudget, BudgetError>>;
+
+type Checked = (Config, Vec<String>, Budget);
 
 /// The configuration, its notes and its offline link budget (`None` where
 /// the frame sizes are known only from the slaves).
 fn load(path: &Path) -> Result<Checked, ConfigError> {
     let c = Config::load(path)?;
+    let (notes, budget) = checked(&c, path)?;
+    Ok((c, notes, budget))
+}
+
+/// What a start checks before it touches the chip: the mistakes
+/// `--check-config` exits [`EXIT_CONFIG`] for (the configuration, the
+/// files it names, the simulator's network and the axes on it), so a start
+/// fails the same way, with the key named, and systemd does not restart a
+/// configuration that can never load. `path` is the configuration file
+/// (`--sim` for the built-in one). A link budget the network can never
+/// meet is left to bring-up, which refuses it once with
+/// [`crate::lifecycle::EXIT_REFUSED`], the status the check gives it.
+pub fn preflight(c: &Config, path: &Path) -> Result<(), (u8, String)> {
+    checked(c, path).map(|_| ()).map_err(|e| (EXIT_CONFIG, e.to_string()))
+}
+
+/// The notes and the offline link budget of a loaded configuration.
+fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError> {
     let notes = c.check_files(path)?;
     // The Sparkplug node's certificates and credentials load as at start.
     if let Some(s) = &c.sparkplug {
@@ -77,8 +99,8 @@ fn load(path: &Path) -> Result<Checked, ConfigError> {
             message: e.to_string(),
         })?;
     }
-    let budget = simulated_budget(&c, path)?;
-    Ok((c, notes, budget))
+    let budget = simulated_budget(c, path)?;
+    Ok((notes, budget))
 }
 
 /// The link budget of a simulator configuration, from its network file
@@ -86,17 +108,17 @@ fn load(path: &Path) -> Result<Checked, ConfigError> {
 /// time its SPI clock gives: what bring-up would refuse, said offline. The
 /// `[[axis]]` entries are checked against the same network.
 #[cfg(feature = "sim")]
-fn simulated_budget(c: &Config, path: &Path) -> Result<Option<Result<LinkBudget, BudgetError>>, ConfigError> {
+fn simulated_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
     let Some((net, chip)) = crate::config::sim_network::load(c, path)? else { return Ok(None) };
     crate::config::sim_network::check_axes(c, &net, path)?;
     let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
     let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();
     let data_size = c.chip.data_size;
-    let packet_ns = link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
-    Ok(Some(link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
+    let packet_ns = crate::master::link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
+    Ok(Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
 }
 
 #[cfg(not(feature = "sim"))]
-fn simulated_budget(_: &Config, _: &Path) -> Result<Option<Result<LinkBudget, BudgetError>>, ConfigError> {
+fn simulated_budget(_: &Config, _: &Path) -> Result<Budget, ConfigError> {
     Ok(None)
 }

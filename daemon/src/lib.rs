@@ -50,7 +50,7 @@ mod signals;
 pub mod sparkplug;
 
 pub use api::status::debug_looking_messages;
-pub use check_config::{EXIT_CONFIG, check_config};
+pub use check_config::{EXIT_CONFIG, check_config, preflight};
 pub use lifecycle::{DaemonError, EXIT_REFUSED, Options, run, run_with};
 pub use service::{Logging, Notifier, init_logging};
 pub use signals::run_until_signalled;

@@ -64,11 +64,16 @@ pub enum DaemonError {
 pub const EXIT_REFUSED: u8 = 78;
 
 impl DaemonError {
-    /// The process exit status for this error: [`EXIT_REFUSED`] for a
-    /// refused network, 1 otherwise.
+    /// The process exit status for this error, as `--check-config` gives
+    /// it for the same finding: [`EXIT_REFUSED`] for a refused network,
+    /// [`crate::EXIT_CONFIG`] for a file the configuration names that does
+    /// not load (the simulator's network file, a TLS file), 1 otherwise.
     pub fn exit_status(&self) -> u8 {
+        use crate::api::server::ServeError;
         match self {
             Self::NetworkRefused(_) => EXIT_REFUSED,
+            Self::Start(StartError::Network(_)) | Self::Sparkplug(_) => crate::EXIT_CONFIG,
+            Self::Api(ServeError::TlsNotSet(_) | ServeError::TlsFile { .. }) => crate::EXIT_CONFIG,
             _ => 1,
         }
     }

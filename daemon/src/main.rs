@@ -83,6 +83,14 @@ fn main() -> ExitCode {
         eprintln!("ecmxfd: give --config FILE, or --sim to run on the simulator");
         return ExitCode::from(2);
     };
+    // A start refuses what --check-config refuses, with the same status.
+    let source = cli.config.clone().unwrap_or_else(|| PathBuf::from("--sim"));
+    if cli.command.is_none()
+        && let Err((status, why)) = ecmxfd::preflight(&config, &source)
+    {
+        eprintln!("{why}");
+        return ExitCode::from(status);
+    }
     if let Some(socket) = cli.socket {
         config.api.socket = Some(socket);
     }

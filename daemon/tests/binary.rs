@@ -94,7 +94,22 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
         let err = String::from_utf8_lossy(&out.stderr);
         assert_eq!(out.status.code(), Some(2), "{text}: {err}");
         assert!(err.contains(key), "{text}: wanted {key} in {err}");
+        // A start refuses it the same way: the same status (which the
+        // unit's RestartPreventExitStatus= lists), the same key, at once.
+        let socket = dir.join("s.sock");
+        let started = Instant::now();
+        let out = Command::new(BIN)
+            .args(["--config", file.to_str().unwrap(), "--socket", socket.to_str().unwrap()])
+            .output()
+            .unwrap();
+        let err = String::from_utf8_lossy(&out.stderr);
+        assert_eq!(out.status.code(), Some(2), "start with {text}: {err}");
+        assert!(err.contains(key), "start with {text}: wanted {key} in {err}");
+        assert!(started.elapsed() < Duration::from_secs(5), "start with {text}: took {:?}", started.elapsed());
     }
+    // The unit does not restart what can never start.
+    let unit = std::fs::read_to_string(repo("systemd/ecmxfd.service")).unwrap();
+    assert!(unit.lines().any(|l| l == "RestartPreventExitStatus=2 78"), "the unit lists 2 and 78");
     // The TI drive (slave 1) maps both at byte 0: the check passes.
     let file = dir.join("ecmxfd.toml");
     std::fs::write(&file, format!("{sim}[[axis]]\nslave = 1\n")).unwrap();

@@ -49,7 +49,7 @@ pub(crate) struct Context {
     /// Roles (replaced whole on SIGHUP, see [`Context::reload_roles`]).
     pub auth: std::sync::RwLock<Authenticator>,
     /// SDO transfer durations, for the metrics endpoint.
-    pub sdo_latency: Arc<crate::metrics::Histogram>,
+    pub sdo_latency: Arc<crate::master::histogram::Histogram>,
     /// The oldest a streamed input sample may be (`api.stream_max_age_ms`).
     pub stream_max_age: Duration,
     /// Set when the daemon stops: every open server stream ends with

@@ -37,6 +37,7 @@ pub(crate) mod diagnostics;
 pub mod entry_writes;
 pub(crate) mod esi;
 pub(crate) mod frame_claims;
+pub(crate) mod histogram;
 pub(crate) mod image;
 mod leases;
 pub(crate) mod mailbox;

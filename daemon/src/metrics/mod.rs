@@ -8,7 +8,7 @@
 //! status are read from the chip at each scrape (two SLV_INFO_GET
 //! transactions per slave, queued with the other blocking commands).
 //! Exchanges per second is `rate(ecmxf_exchanges_total[1m])`. Nothing
-//! here depends on the gRPC API: the API records into a [`Histogram`] it
+//! here depends on the gRPC API: the API records into the master's [`Histogram`] it
 //! shares with the endpoint.
 
 use std::fmt::Write as _;
@@ -25,8 +25,7 @@ use tokio::sync::watch;
 use crate::master::Master;
 use crate::master::Phase;
 
-mod histogram;
-pub(crate) use histogram::Histogram;
+pub(crate) use crate::master::histogram::Histogram;
 
 /// What the endpoint reads: the engine, and the API's SDO durations.
 #[derive(Debug, Clone)]
