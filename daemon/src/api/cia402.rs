@@ -115,7 +115,7 @@ impl Cia402Api for Cia402Service {
         let mode =
             i8::try_from(r.mode).map_err(|_| bad_argument("mode", format!("{} is outside -128..=127", r.mode)))?;
         let t = caller.deadline;
-        let status = bounded(&caller, self.0.master.set_axis_mode(&axis, mode, &r.lease_id, t)).await?;
+        let status = bounded(&caller, self.0.master.set_axis_mode(&axis, mode, &r.lease_id, &caller.who, t)).await?;
         Ok(Response::new(status_pb(status)))
     }
 
@@ -133,7 +133,8 @@ impl Cia402Api for Cia402Service {
             None => return Err(bad_argument("target", "give a position, velocity or torque")),
         };
         let t = caller.deadline;
-        let via_process_image = bounded(&caller, self.0.master.set_axis_target(&axis, target, &r.lease_id, t)).await?;
+        let via_process_image =
+            bounded(&caller, self.0.master.set_axis_target(&axis, target, &r.lease_id, &caller.who, t)).await?;
         Ok(Response::new(pb::SetTargetResponse { via_process_image }))
     }
 }

@@ -40,7 +40,7 @@ const TELL_GRACE: Duration = Duration::from_secs(1);
 
 /// The first message's checks: the lease owns the slaves, their output
 /// bytes are contiguous and not empty. Returns (image offset, frame bytes).
-fn frame_range(ctx: &Context, first: &pb::FrameBatch) -> Result<(usize, usize), Status> {
+fn frame_range(ctx: &Context, who: &str, first: &pb::FrameBatch) -> Result<(usize, usize), Status> {
     if first.slaves.is_empty() {
         return Err(bad_argument("slaves", "name the slaves whose outputs make a frame, e.g. [2]"));
     }
@@ -51,7 +51,7 @@ fn frame_range(ctx: &Context, first: &pb::FrameBatch) -> Result<(usize, usize), 
     let mut range: Option<(usize, usize)> = None;
     for s in slaves {
         let slave = ctx.slave(s)?;
-        if !ctx.master.leases().owns(&first.lease_id, slave) {
+        if !ctx.master.leases().owns(&first.lease_id, who, slave) {
             return Err(Status::permission_denied(format!(
                 "streaming frames to slave {s} needs a lease on it: {:?} does not own it (see AcquireLease)",
                 first.lease_id
@@ -185,11 +185,12 @@ async fn next_input(inputs: &mut Option<tokio::sync::broadcast::Receiver<Arc<Inp
 /// Serves one `StreamFrames` call.
 pub(crate) async fn serve(
     ctx: Arc<Context>,
+    who: String,
     mut input: Streaming<pb::FrameBatch>,
 ) -> Result<BoxStream<pb::FrameReport>, Status> {
     let first =
         input.message().await?.ok_or_else(|| bad_argument("lease_id", "the stream ended before its first message"))?;
-    let (start, len) = frame_range(&ctx, &first)?;
+    let (start, len) = frame_range(&ctx, &who, &first)?;
     let capacity = match first.queue_frames {
         0 => DEFAULT_QUEUE,
         n if n <= MAX_QUEUE => n,
@@ -234,7 +235,7 @@ pub(crate) async fn serve(
             tokio::select! {
                 msg = input.message(), if draining.is_none() => match msg {
                     Ok(Some(m)) => {
-                        if ctx.master.leases().keep_alive(&lease).is_err() {
+                        if ctx.master.leases().keep_alive(&lease, &who).is_err() {
                             let e = Status::permission_denied(format!("lease {lease:?} is gone: the stream ends"));
                             let _ = tx.send(Err(e)).await;
                             return;

@@ -24,8 +24,9 @@ pub(crate) fn status(e: LeaseError) -> Status {
         LeaseError::Write(e) => super::status::to_status(e),
         LeaseError::NoSlave(_) => super::status::bad_argument("offset", e.to_string()),
         LeaseError::Unknown(_) => Status::not_found(e.to_string()),
-        LeaseError::Held { .. } | LeaseError::NotALease(_) | LeaseError::NotOwned { .. } => {
-            Status::permission_denied(e.to_string())
-        }
+        LeaseError::Held { .. }
+        | LeaseError::NotALease(_)
+        | LeaseError::NotOwned { .. }
+        | LeaseError::NotHolder { .. } => Status::permission_denied(e.to_string()),
     }
 }

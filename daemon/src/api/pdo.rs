@@ -91,6 +91,7 @@ pub(crate) fn apply_writes(
     ctx: &Context,
     image: &Image,
     lease_id: &str,
+    who: &str,
     writes: &[pb::OutputWrite],
 ) -> Result<(), Status> {
     if writes.is_empty() {
@@ -115,7 +116,7 @@ pub(crate) fn apply_writes(
             None => return Err(bad_argument("writes.target", "give an entry name or an offset")),
         }
     }
-    staging.commit(ctx.master.leases(), lease_id).map_err(write_status)
+    staging.commit(ctx.master.leases(), lease_id, who).map_err(write_status)
 }
 
 /// The status of a refused write: the caller's field INVALID_ARGUMENT, a
@@ -356,8 +357,9 @@ impl ProcessDataApi for ProcessDataService {
     }
 
     async fn keep_alive(&self, request: Request<pb::KeepAliveRequest>) -> Result<Response<pb::Lease>, Status> {
-        self.0.authorize(&request, Role::Operator)?;
-        let lease = self.0.master.leases().keep_alive(&request.get_ref().lease_id).map_err(leases::status)?;
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let lease =
+            self.0.master.leases().keep_alive(&request.get_ref().lease_id, &caller.who).map_err(leases::status)?;
         Ok(Response::new(leases::to_pb(&lease)))
     }
 
@@ -365,8 +367,10 @@ impl ProcessDataApi for ProcessDataService {
         &self,
         request: Request<pb::ReleaseLeaseRequest>,
     ) -> Result<Response<pb::ReleaseLeaseResponse>, Status> {
-        self.0.authorize(&request, Role::Operator)?;
-        self.0.master.leases().release(&request.get_ref().lease_id).map_err(leases::status)?;
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        // An admin may break another identity's lease (logged with both).
+        let may_break = caller.role >= Role::Admin;
+        self.0.master.leases().release(&request.get_ref().lease_id, &caller.who, may_break).map_err(leases::status)?;
         Ok(Response::new(pb::ReleaseLeaseResponse {}))
     }
 
@@ -377,7 +381,7 @@ impl ProcessDataApi for ProcessDataService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let image = bounded(&caller, self.0.master.image()).await?;
         let r = request.get_ref();
-        apply_writes(&self.0, &image, &r.lease_id, &r.writes)?;
+        apply_writes(&self.0, &image, &r.lease_id, &caller.who, &r.writes)?;
         Ok(Response::new(pb::WriteOutputsResponse { applied: 1 }))
     }
 
@@ -387,8 +391,9 @@ impl ProcessDataApi for ProcessDataService {
         &self,
         request: Request<Streaming<pb::FrameBatch>>,
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
-        self.0.authorize(&request, Role::Operator)?;
-        Ok(Response::new(self.0.until_stopping(super::frames::serve(Arc::clone(&self.0), request.into_inner()).await?)))
+        let caller = self.0.authorize(&request, Role::Operator)?;
+        let frames = super::frames::serve(Arc::clone(&self.0), caller.who, request.into_inner()).await?;
+        Ok(Response::new(self.0.until_stopping(frames)))
     }
 
     async fn stream_outputs(
@@ -401,7 +406,7 @@ impl ProcessDataApi for ProcessDataService {
         let mut applied = 0;
         while let Some(msg) = stream.next().await {
             let msg = msg?;
-            apply_writes(&self.0, &image, &msg.lease_id, &msg.writes)?;
+            apply_writes(&self.0, &image, &msg.lease_id, &caller.who, &msg.writes)?;
             applied += 1;
         }
         Ok(Response::new(pb::WriteOutputsResponse { applied }))

@@ -116,7 +116,7 @@ fn main() -> Result<(), String> {
                 for &i in &outputs {
                     let _ = staging.entry(&image.entries[i], &[(n % 255) as u8 + 1]);
                 }
-                if let Err(e) = staging.commit(master.leases(), &lease.id) {
+                if let Err(e) = staging.commit(master.leases(), &lease.id, "bench") {
                     eprintln!("writer: {e}");
                 }
             }

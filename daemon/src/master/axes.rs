@@ -362,7 +362,7 @@ impl Master {
         Ok(self.axis_status(axis, t).await?)
     }
 
-    /// Sets the axis' mode of operation (0x6060) under `lease_id` and
+    /// Sets the axis' mode of operation (0x6060) under `lease_id` (`who`'s) and
     /// waits, within `t`, until the drive shows it (0x6061); then the
     /// axis' status.
     pub(crate) async fn set_axis_mode(
@@ -370,9 +370,10 @@ impl Master {
         axis: &Axis,
         mode: i8,
         lease_id: &str,
+        who: &str,
         t: Option<Duration>,
     ) -> Result<AxisStatus, AxisError> {
-        self.write_axis_object(axis, MODES_OF_OPERATION, mode.into(), lease_id, t).await?;
+        self.write_axis_object(axis, MODES_OF_OPERATION, mode.into(), lease_id, who, t).await?;
         let end = Instant::now() + t.unwrap_or(MODE_WAIT);
         loop {
             let s = self.axis_status(axis, t).await?;
@@ -393,10 +394,11 @@ impl Master {
         axis: &Axis,
         target: AxisTarget,
         lease_id: &str,
+        who: &str,
         t: Option<Duration>,
     ) -> Result<bool, AxisError> {
         let (base, value) = target.object();
-        self.write_axis_object(axis, base, value, lease_id, t).await
+        self.write_axis_object(axis, base, value, lease_id, who, t).await
     }
 
     /// Writes CiA 402 object `base` (axis 0's index) of the axis: into the
@@ -408,13 +410,14 @@ impl Master {
         base: u16,
         value: i64,
         lease_id: &str,
+        who: &str,
         t: Option<Duration>,
     ) -> Result<bool, AxisError> {
         let image = self.image().await?;
         let a = &axis.config;
         let index = axis_index(base, slave_axis(&image, &self.layout(), a));
         if let Some(e) = image.find(a.slave, index, true) {
-            self.write_axis_entry(&image, e, value, lease_id)?;
+            self.write_axis_entry(&image, e, value, lease_id, who)?;
             return Ok(true);
         }
         let ty = object_type(index);
@@ -426,13 +429,20 @@ impl Master {
     /// Writes `value` into output entry `e` as one client write does: on
     /// the shadow image, sent under `lease_id` (the staging holds the
     /// shadow image's lock, so this stays apart from any await).
-    fn write_axis_entry(&self, image: &Image, e: &Entry, value: i64, lease_id: &str) -> Result<(), AxisError> {
+    fn write_axis_entry(
+        &self,
+        image: &Image,
+        e: &Entry,
+        value: i64,
+        lease_id: &str,
+        who: &str,
+    ) -> Result<(), AxisError> {
         let bytes = Value::Int(value)
             .encode(e.data_type, e.bit_length)
             .map_err(|error| AxisError::Value { entry: Some(e.name.clone()), error })?;
         let mut staging = Staging::new(self, image);
         staging.entry(e, &bytes)?;
-        staging.commit(self.leases(), lease_id)?;
+        staging.commit(self.leases(), lease_id, who)?;
         Ok(())
     }
 

@@ -196,8 +196,9 @@ impl<'m> Staging<'m> {
     }
 
     /// Sends the touched span as one write under lease `lease_id` (which
-    /// must own every slave it touches) and keeps it as the new shadow.
-    pub fn commit(mut self, leases: &Leases, lease_id: &str) -> Result<(), WriteError> {
+    /// must be `who`'s and own every slave it touches) and keeps it as the
+    /// new shadow.
+    pub fn commit(mut self, leases: &Leases, lease_id: &str, who: &str) -> Result<(), WriteError> {
         if self.lo >= self.hi {
             return Ok(());
         }
@@ -206,7 +207,7 @@ impl<'m> Staging<'m> {
         let slaves = &self.layout.slaves;
         let slave_of =
             |b: usize| slaves.iter().position(|s| b >= s.rx_offset && b < s.rx_offset + s.rx_bytes).map(|p| p as u8);
-        leases.write(lease_id, lo, &self.staged[lo..hi], slave_of).map_err(WriteError::Lease)?;
+        leases.write(lease_id, who, lo, &self.staged[lo..hi], slave_of).map_err(WriteError::Lease)?;
         *self.shadow = std::mem::take(&mut self.staged);
         Ok(())
     }

@@ -38,6 +38,16 @@ pub enum LeaseError {
     },
     /// No lease has this id (released, expired, or never taken).
     Unknown(String),
+    /// The lease is another identity's: only the identity that took it
+    /// writes under it, renews or releases it (an admin may break it).
+    NotHolder {
+        /// The lease.
+        id: String,
+        /// Who took it.
+        holder: String,
+        /// Who asked.
+        who: String,
+    },
     /// A write under an id that is no lease.
     NotALease(String),
     /// A written byte belongs to a slave the lease does not own.
@@ -64,6 +74,11 @@ impl fmt::Display for LeaseError {
                 "the outputs of slave {slave} are leased by {who} (lease {id}); wait for it to be released or expire"
             ),
             Self::Unknown(id) => write!(f, "no lease {id:?} (released, expired, or never taken)"),
+            Self::NotHolder { id, holder, who } => write!(
+                f,
+                "lease {id} is held by {holder}, not {who}: only the identity that took a lease writes under it, \
+                 renews or releases it"
+            ),
             Self::NotALease(id) => write!(
                 f,
                 "writing outputs needs a lease: {id:?} is not one (released, expired, or never taken; see AcquireLease)"
@@ -141,28 +156,41 @@ impl Leases {
         Ok(out)
     }
 
-    /// Extends a lease by its time-to-live.
-    pub(crate) fn keep_alive(&self, id: &str) -> Result<Lease, LeaseError> {
+    /// Extends lease `id` by its time-to-live, for its holder `who`.
+    pub(crate) fn keep_alive(&self, id: &str, who: &str) -> Result<Lease, LeaseError> {
         let mut held = self.lock();
         self.expire(&mut held, Instant::now());
         let h = held.get_mut(id).ok_or_else(|| LeaseError::Unknown(id.to_owned()))?;
+        holder_is(id, h, who)?;
         h.expires = Instant::now() + h.ttl;
         Ok(lease(id, h))
     }
 
-    /// Gives a lease up.
-    pub(crate) fn release(&self, id: &str) -> Result<(), LeaseError> {
-        let gone = self.lock().remove(id).ok_or_else(|| LeaseError::Unknown(id.to_owned()))?;
+    /// Gives lease `id` up, for its holder `who`; `may_break`: `who` may
+    /// release another identity's lease (an admin), which is logged with
+    /// both identities.
+    pub(crate) fn release(&self, id: &str, who: &str, may_break: bool) -> Result<(), LeaseError> {
+        let mut held = self.lock();
+        let h = held.get(id).ok_or_else(|| LeaseError::Unknown(id.to_owned()))?;
+        if h.who != who {
+            if !may_break {
+                return Err(LeaseError::NotHolder { id: id.to_owned(), holder: h.who.clone(), who: who.to_owned() });
+            }
+            tracing::warn!(lease = %id, holder = %h.who, by = who, "output lease broken by an admin");
+        }
+        let gone = held.remove(id).ok_or_else(|| LeaseError::Unknown(id.to_owned()))?;
         tracing::info!(lease = %id, who = %gone.who, "output lease released");
         Ok(())
     }
 
     /// Writes `bytes` at `offset` of the output image under lease `id`,
-    /// which must own every slave the bytes touch (`slave_of` maps a byte
-    /// offset to its slave). Also keeps the lease alive.
+    /// which must be `who`'s and own every slave the bytes touch
+    /// (`slave_of` maps a byte offset to its slave). Also keeps the lease
+    /// alive.
     pub fn write(
         &self,
         id: &str,
+        who: &str,
         offset: usize,
         bytes: &[u8],
         slave_of: impl Fn(usize) -> Option<u8>,
@@ -170,6 +198,7 @@ impl Leases {
         let mut held = self.lock();
         self.expire(&mut held, Instant::now());
         let h = held.get_mut(id).ok_or_else(|| LeaseError::NotALease(id.to_owned()))?;
+        holder_is(id, h, who)?;
         for at in offset..offset + bytes.len() {
             match slave_of(at) {
                 Some(s) if h.slaves.contains(&s) => {}
@@ -181,9 +210,9 @@ impl Leases {
         h.writer.write(offset, bytes).map_err(LeaseError::Write)
     }
 
-    /// Whether lease `id` exists and owns `slave`.
-    pub(crate) fn owns(&self, id: &str, slave: u8) -> bool {
-        self.lock().get(id).is_some_and(|h| h.slaves.contains(&slave))
+    /// Whether lease `id` exists, is `who`'s and owns `slave`.
+    pub(crate) fn owns(&self, id: &str, who: &str, slave: u8) -> bool {
+        self.lock().get(id).is_some_and(|h| h.who == who && h.slaves.contains(&slave))
     }
 
     /// Drops expired leases (their writers go with them).
@@ -201,6 +230,15 @@ impl Leases {
             alive
         });
     }
+}
+
+/// Refuses `who` for lease `id` unless it took it: a lease id alone (which
+/// a refusal to another client names) gives no right to its outputs.
+fn holder_is(id: &str, h: &Held, who: &str) -> Result<(), LeaseError> {
+    if h.who == who {
+        return Ok(());
+    }
+    Err(LeaseError::NotHolder { id: id.to_owned(), holder: h.who.clone(), who: who.to_owned() })
 }
 
 /// A word that makes lease ids hard to guess (not secret: roles decide

@@ -117,7 +117,7 @@ pub(super) fn device_command(
         for (index, _, bytes) in &targets {
             staging.entry(&image.entries[*index], bytes).map_err(|e| refuse(e.to_string()))?;
         }
-        match staging.commit(master.leases(), &lease) {
+        match staging.commit(master.leases(), &lease, "sparkplug") {
             Ok(()) => return Ok(targets.len()),
             // The lease lapsed between commands: take a new one, once.
             Err(WriteError::Lease(LeaseError::NotALease(_))) if attempt == 0 => {
