@@ -7,13 +7,15 @@
 //! decide when to go back to bring-up are the [`Supervisor`]'s: they take
 //! the time as a parameter and are unit-tested there. A step that ends the
 //! run returns the [`Exit`] as its error, so the turn reads top to bottom.
+//! Why a run ended is said better by `explain`, what happens when clients'
+//! outputs stop coming by `outputs_gone`.
 
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::EcatState;
-use ecmxf_wire::flags::{ControlFlags, StatusFlags};
+use ecmxf_wire::flags::ControlFlags;
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
 use ecmxf_wire::payload::fifo::FifoEnable;
@@ -28,15 +30,16 @@ use super::core::Core;
 use super::cyclic::{self, Cyclic};
 use super::emergencies;
 use super::events::EventKind;
+use super::explain;
 use super::layout::NetworkLayout;
 use super::link_turn::{Fifo, PULL_FORWARD, Slot, fifo_goes_first};
 use super::network_action::NetworkAction;
 use super::next::Next;
+use super::outputs_gone;
 use super::recovering;
 use super::slot::{Active, Progress, SlotRequest};
-use super::supervisor::{INT0_SILENT_EXCHANGES, RecoverCause, RunShape, SlaveFault, Supervisor, flow_limit};
+use super::supervisor::{INT0_SILENT_EXCHANGES, RecoverCause, RunShape, Supervisor, flow_limit};
 use super::telemetry::Phase;
-use crate::config::WriterGoneAction;
 use crate::link::Link;
 use crate::port::PortError;
 
@@ -135,63 +138,6 @@ struct Clocks {
 }
 
 impl<'a, L: Link> Running<'a, L> {
-    /// Reads every slave's state and AL status code (a fault is being
-    /// handled: the time is not the cycle's), reports the codes as events,
-    /// and returns them as text, e.g. "slave 2 SAFE-OP, AL status 0x001a
-    /// (...)". Read failures are left out.
-    fn al_report(&mut self, slaves: usize) -> Vec<SlaveFault> {
-        let faulty: Vec<_> =
-            bringup::slave_states(&mut self.core.port, slaves).into_iter().filter(|&(_, _, code)| code != 0).collect();
-        for &(slave, state, code) in &faulty {
-            self.core.events.emit(EventKind::AlStatus { slave, state, code });
-        }
-        faulty
-    }
-
-    /// The cause, with the slaves' AL status codes read and reported where
-    /// a slave is at fault. A slave that reports an AL status code is the cause of missing
-    /// working counters or a stopped exchange, not their symptom: the
-    /// cause is then `slave_error` naming it and its code. A chip that
-    /// stopped answering intact is asked what it is now: one back at its
-    /// power-up values was reset (`chip_reset`), not merely garbled.
-    fn explained(&mut self, why: RecoverCause, slaves: usize) -> RecoverCause {
-        match why {
-            RecoverCause::SlaveError(_) | RecoverCause::WkcStreak(_) | RecoverCause::ExchangeStopped => {
-                let report = self.al_report(slaves);
-                match why {
-                    RecoverCause::SlaveError(_) if report.is_empty() => RecoverCause::SlaveError(Vec::new()),
-                    _ if !report.is_empty() => {
-                        let slaves = bringup::describe_states(&report);
-                        warn!(symptom = %why, slaves = %slaves, "AL status");
-                        RecoverCause::SlaveError(report)
-                    }
-                    other => other,
-                }
-            }
-            RecoverCause::Chip(e) if self.chip_was_reset() => {
-                info!(symptom = %e, "the chip answers again with its power-up status: it was reset");
-                RecoverCause::ChipReset
-            }
-            other => other,
-        }
-    }
-
-    /// After a failed exchange: finds the chip's packet boundary again and
-    /// reads its status. True when it is back at its power-up values (a
-    /// NOP answer, ETHERNET_READY gone, or its packet size reset): a
-    /// reset, whose first symptom is answers the host cannot decode. One
-    /// try, within the ready timeout (a reset takes tens of ms); a chip
-    /// that does not answer leaves the cause as it was. Costs nothing
-    /// while the bus runs: only a failed exchange asks.
-    fn chip_was_reset(&mut self) -> bool {
-        let size = self.core.port.data_size();
-        if self.core.port.synchronize().is_err() {
-            return false;
-        }
-        let h = self.core.port.status();
-        h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) || self.core.port.data_size() != size
-    }
-
     /// A run starts at `now`: the rules start over, and a FIFO error bit
     /// left from before (a fault, the bring-up) is cleared.
     fn start(core: &'a mut Core<L>, cyclic: Option<&Cyclic>) -> Self {
@@ -223,7 +169,7 @@ impl<'a, L: Link> Running<'a, L> {
             }
         };
         match exit {
-            Exit::Recover(why) => Exit::Recover(self.explained(why, self.slaves)),
+            Exit::Recover(why) => Exit::Recover(explain::explained(self.core, why, self.slaves)),
             stop => stop,
         }
     }
@@ -273,7 +219,7 @@ impl<'a, L: Link> Running<'a, L> {
         }
         self.core.frames.retain(|f| !f.finished());
         if self.core.writers.take_gone() {
-            self.last_writer_gone(cyclic.as_deref_mut());
+            outputs_gone::last_writer_gone(self.core, cyclic.as_deref_mut());
         }
         if self.core.take_new_config() {
             return Err(Exit::Recover(RecoverCause::NewConfig));
@@ -551,7 +497,7 @@ impl<'a, L: Link> Running<'a, L> {
         c.answered(now, n, count, waiting, read);
         self.core.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
         if !self.core.frames.is_empty() {
-            self.frames_played(c.tx_size > 0, read, waiting, count);
+            outputs_gone::frames_played(self.core, c.tx_size > 0, read, waiting, count);
         }
         if n > 0 {
             if let Some(written) = self.core.unplayed_write.take() {
@@ -634,73 +580,6 @@ impl<'a, L: Link> Running<'a, L> {
         }
         let sent = self.core.port.stats().exchanges != exchanges;
         Ok(sent && progress != Progress::Waiting)
-    }
-
-    /// The answer to a push came: when each stream frame in it plays, and
-    /// which streams ran dry. The answer's counts are the chip's at the
-    /// packet before the call (two exchanges late, see `fifo_exchange`),
-    /// when every frame pushed and read before the call was in: `waiting`
-    /// input frames were queued after the last one read before this call
-    /// (this call then read `read`), so the newest DC cycle then was that
-    /// frame's plus `waiting`; `ahead` output frames were queued then, so
-    /// this push's first frame plays `ahead + 1` cycles after it (the
-    /// cycles between that packet and this one took frames off both FIFOs
-    /// alike). Exact unless the RxFIFO ran dry in between (the frames then
-    /// play later: an underrun the record shows). Without inputs there is
-    /// no cycle to number.
-    fn frames_played(&mut self, inputs: bool, read: usize, waiting: u8, ahead: u8) {
-        let before = self.core.intake.inputs.seq().saturating_sub(read as u64);
-        let first = before + u64::from(waiting) + u64::from(ahead) + 1;
-        for i in 0..self.core.frames.len() {
-            let f = &mut self.core.frames[i];
-            if inputs {
-                f.played(first);
-            }
-            if f.take_dry_start() {
-                let pushed = f.pushed();
-                self.frames_ran_dry(pushed);
-            }
-        }
-    }
-
-    /// A client's frame queue ran dry after `pushed` frames: said once per
-    /// spell; the range already holds or is zeroed (see `frames`), a
-    /// quick-stop policy stops the axes.
-    fn frames_ran_dry(&mut self, pushed: u64) {
-        let action = self.core.config.outputs.on_last_writer_gone;
-        self.core.events.emit(EventKind::FramesDry { pushed, action });
-        if action == WriterGoneAction::QuickStop {
-            self.quick_stop_axes();
-        }
-    }
-
-    /// Every `[[axis]]` to QUICK STOP ACTIVE through the chip's CiA402
-    /// helper (the `quick-stop` outputs policy); failures are logged.
-    fn quick_stop_axes(&mut self) {
-        for n in 0..self.core.config.axes.len() {
-            let r = self.core.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
-            if let Err(e) = r {
-                warn!("quick stop of axis {n}: {e}");
-            }
-        }
-    }
-
-    /// The last output writer went away: `outputs.on_last_writer_gone`.
-    fn last_writer_gone(&mut self, cyclic: Option<&mut Cyclic>) {
-        self.core.events.emit(EventKind::LastWriterGone(self.core.config.outputs.on_last_writer_gone));
-        match self.core.config.outputs.on_last_writer_gone {
-            WriterGoneAction::HoldLast => info!("last output writer gone: holding the last outputs"),
-            WriterGoneAction::Zero => {
-                if let Some(c) = cyclic {
-                    c.outputs.fill(0);
-                }
-                warn!("last output writer gone: outputs zeroed");
-            }
-            WriterGoneAction::QuickStop => {
-                self.quick_stop_axes();
-                warn!("last output writer gone: {} axes quick-stopped", self.core.config.axes.len());
-            }
-        }
     }
 
     /// Takes new requests; false when told to stop.
