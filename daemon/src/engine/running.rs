@@ -94,8 +94,9 @@ pub(super) fn run<L: Link>(core: &mut Core<L>, layout: NetworkLayout) -> Next {
         core.set_phase(Phase::Running);
         recovering::recovered(core);
     }
-    let running = Running::start(core, cyclic.as_ref());
-    let exit = running.run(cyclic.as_mut());
+    let now = Instant::now();
+    let running = Running::start(core, cyclic.as_ref(), now);
+    let exit = running.run(cyclic.as_mut(), now);
     if let Some(c) = cyclic {
         let layout = core.layout.lock().unwrap_or_else(|e| e.into_inner());
         core.held.keep(&layout.slaves, &c.outputs);
@@ -116,8 +117,10 @@ struct Running<'a, L> {
     /// A client asked for a state below the configured target: the slaves
     /// that left OP on purpose do not count working counters, and that is
     /// not a fault to recover from. Cleared by a request for the target
-    /// state (or above) and by every bring-up.
+    /// state (or above); a run starts without it (bring-up reached the
+    /// target).
     held_below_target: bool,
+    /// The slaves bring-up found.
     slaves: usize,
 }
 
@@ -140,9 +143,8 @@ struct Clocks {
 impl<'a, L: Link> Running<'a, L> {
     /// A run starts at `now`: the rules start over, and a FIFO error bit
     /// left from before (a fault, the bring-up) is cleared.
-    fn start(core: &'a mut Core<L>, cyclic: Option<&Cyclic>) -> Self {
+    fn start(core: &'a mut Core<L>, cyclic: Option<&Cyclic>, now: Instant) -> Self {
         let slaves = core.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
-        let now = Instant::now();
         let shape = RunShape {
             slaves,
             cyclic: cyclic.is_some(),
@@ -159,9 +161,8 @@ impl<'a, L: Link> Running<'a, L> {
     }
 
     /// Runs the network until a fault, a client's action or a stop.
-    fn run(mut self, cyclic: Option<&mut Cyclic>) -> Exit {
+    fn run(mut self, cyclic: Option<&mut Cyclic>, now: Instant) -> Exit {
         let mut cyclic = cyclic;
-        let now = Instant::now();
         let mut clocks = Clocks { emergency_poll: now, slot_waited: false, slot_skipped: 0, slot_freed: None };
         let exit = loop {
             if let Err(exit) = self.turn(&mut cyclic, &mut clocks) {
