@@ -372,7 +372,7 @@ fn first_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String
 /// owners: here their other files are still checked with `mod.rs` left
 /// out, and an entry that no longer has such a circle fails the test, so
 /// the list only shrinks.
-const MOD_CIRCLES_LEFT: [&str; 8] = [
+const MOD_CIRCLES_LEFT: [&str; 7] = [
     "daemon/src/master",
     "daemon/src/api",
     "daemon/src/link",
@@ -380,7 +380,6 @@ const MOD_CIRCLES_LEFT: [&str; 8] = [
     "wire/src/payload",
     "devices/src/eni",
     "sim/src/chip",
-    "client/src",
 ];
 
 /// No circle between the files of any folder of the workspace's crates
