@@ -1,5 +1,6 @@
-//! When clients' outputs stop coming: a frame stream that ran dry, the
-//! last output writer gone. What happens then is the
+//! When clients' outputs stop coming: a frame stream that ran dry (seen
+//! as a FIFO answer tells each stream when its frames play), the last
+//! output writer gone. What happens then is the
 //! `outputs.on_last_writer_gone` policy: hold, zeros, or the axes
 //! quick-stopped through the chip's CiA402 helper.
 
