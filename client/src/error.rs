@@ -3,6 +3,8 @@
 
 use std::path::PathBuf;
 
+use schemars::JsonSchema;
+use serde::Serialize;
 use tonic::Code;
 
 /// Exit codes. Stable: scripts depend on them.
@@ -177,6 +179,54 @@ impl std::error::Error for CliError {}
 impl From<std::io::Error> for CliError {
     fn from(e: std::io::Error) -> Self {
         Self::Output(e)
+    }
+}
+
+/// What `--json` prints on standard error when a command fails.
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct ErrorReport {
+    pub error: ErrorBody,
+}
+
+#[derive(Debug, Serialize, JsonSchema)]
+pub struct ErrorBody {
+    /// gRPC code name (PERMISSION_DENIED, ABORTED, ...) or a local kind:
+    /// UNREACHABLE, USAGE, FILE, OUTPUT, UNHEALTHY.
+    pub kind: String,
+    /// The message ecmxfctl prints without --json.
+    pub message: String,
+    /// The process's exit code.
+    pub exit_code: u8,
+    /// The daemon's error details (e.g. abort_code, meaning, field).
+    pub details: std::collections::BTreeMap<String, String>,
+    /// What to try next, if there is an obvious step.
+    pub hint: Option<String>,
+}
+
+impl ErrorReport {
+    /// The report for `e`.
+    pub fn of(e: &CliError) -> Self {
+        Self {
+            error: ErrorBody {
+                kind: e.kind(),
+                message: e.to_string(),
+                exit_code: e.exit_code(),
+                details: e.details().into_iter().collect(),
+                hint: e.hint().map(str::to_owned),
+            },
+        }
+    }
+
+    /// The report for a command line clap refused: `message` (what was
+    /// wrong) and the usage line as the hint.
+    pub fn usage(message: String, usage: Option<&str>) -> Self {
+        let e = CliError::Usage(message);
+        let mut r = Self::of(&e);
+        r.error.hint = Some(match usage {
+            Some(u) => format!("{u} (more: --help)"),
+            None => "see --help".into(),
+        });
+        r
     }
 }
 

@@ -58,7 +58,7 @@ pub fn all() -> Vec<(&'static str, Schema)> {
         ("events", s::<diag::EventLine>()),
         ("diag", s::<diag::DiagReport>()),
         ("top", s::<crate::top::TopSnapshot>()),
-        ("error", s::<crate::ErrorReport>()),
+        ("error", s::<crate::error::ErrorReport>()),
     ]
 }
 

@@ -178,10 +178,97 @@ fn the_api_context_holds_no_domain_state() {
     }
 }
 
+/// The items a `mod.rs` / `lib.rs` defines itself (struct, enum, fn,
+/// const, static, type, trait, union; `pub` or not): the lines that start
+/// one at the file's top level. `mod` and `use` lines define nothing here.
+fn items_defined(text: &str) -> BTreeSet<String> {
+    let ident = |t: &str| t.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect::<String>();
+    let mut out = BTreeSet::new();
+    for line in text.lines().filter(|l| !l.starts_with(char::is_whitespace) && !l.starts_with("//")) {
+        let mut words = line.split_whitespace().peekable();
+        while let Some(w) = words.next() {
+            match w {
+                _ if w == "pub" || w.starts_with("pub(") => {}
+                "unsafe" | "async" | "extern" | "default" | "\"C\"" => {}
+                // `const fn f`: the item is the fn.
+                "const" if words.peek() == Some(&"fn") => {}
+                "static" if words.peek() == Some(&"mut") => {
+                    words.next();
+                    out.extend(words.next().map(ident).filter(|n| !n.is_empty()));
+                    break;
+                }
+                "struct" | "enum" | "fn" | "const" | "static" | "type" | "trait" | "union" => {
+                    out.extend(words.next().map(ident).filter(|n| !n.is_empty()));
+                    break;
+                }
+                _ => break,
+            }
+        }
+    }
+    out
+}
+
+/// Whether `code` names one of `items` through one of `prefixes`
+/// (`super::Item`, `super::{Item, ..}`, `crate::engine::Item::Variant`).
+fn names_an_item(code: &str, prefixes: &[&str], items: &BTreeSet<String>) -> bool {
+    let ident = |t: &str| t.chars().take_while(|c| c.is_ascii_alphanumeric() || *c == '_').collect::<String>();
+    for prefix in prefixes {
+        for (i, _) in code.match_indices(prefix) {
+            // `crate::super::` is no path; `x::super::` is not this folder's.
+            if code[..i].ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_' || c == ':') {
+                continue;
+            }
+            let rest = &code[i + prefix.len()..];
+            let first_segments: Vec<String> = if let Some(group) = rest.strip_prefix('{') {
+                // The group's elements at its own depth: `A`, `B as C`, `x::D`.
+                let (mut depth, mut start, mut elements) = (0usize, 0usize, Vec::new());
+                for (j, c) in group.char_indices() {
+                    match c {
+                        '{' => depth += 1,
+                        '}' if depth == 0 => {
+                            elements.push(&group[start..j]);
+                            break;
+                        }
+                        '}' => depth -= 1,
+                        ',' if depth == 0 => {
+                            elements.push(&group[start..j]);
+                            start = j + 1;
+                        }
+                        _ => {}
+                    }
+                }
+                elements.iter().map(|e| ident(e.trim())).collect()
+            } else {
+                vec![ident(rest)]
+            };
+            if first_segments.iter().any(|n| items.contains(n)) {
+                return true;
+            }
+        }
+    }
+    false
+}
+
+/// Whether a `mod.rs` / `lib.rs` names its child `child`: `child::x`
+/// (a path or a `use child::x` re-export), `self::child::x`, or the
+/// folder's prefix. `mod child;` declares it and is no use.
+fn names_child(code: &str, child: &str, prefix: &str) -> bool {
+    let path = format!("{child}::");
+    code.match_indices(&path).any(|(i, _)| {
+        let before = &code[..i];
+        before.ends_with("self::")
+            || before.ends_with(prefix)
+            || !before.ends_with(|c: char| c.is_ascii_alphanumeric() || c == '_' || c == ':')
+    })
+}
+
 /// The file-level modules of one folder (`engine/`, the wire crate) and
 /// which of them each names: `super::x` from a file directly in it,
 /// `prefix x` (`crate::engine::x`) from anywhere in it. A subfolder is one
-/// module; `mod.rs` / `lib.rs` only declare the others and are left out.
+/// module. The folder's `mod.rs` (`lib.rs` at a crate root) is a module
+/// too: a file that names an item it defines (`super::Item`, `prefix
+/// Item`) uses it, and it uses the files it names (`child::x`, `use
+/// child::x` re-exports), so a circle through it is found like any other.
 fn file_graph(dir: &Path, prefix: &str) -> BTreeMap<String, BTreeSet<String>> {
     let mut nodes: BTreeMap<String, String> = BTreeMap::new();
     for e in std::fs::read_dir(dir).unwrap().flatten() {
@@ -232,6 +319,21 @@ fn file_graph(dir: &Path, prefix: &str) -> BTreeMap<String, BTreeSet<String>> {
             .collect();
         graph.insert(name.clone(), deps);
     }
+    let parent = ["mod", "lib"].into_iter().find(|p| dir.join(format!("{p}.rs")).is_file());
+    if let Some(parent) = parent {
+        let text = std::fs::read_to_string(dir.join(format!("{parent}.rs"))).unwrap();
+        let items = items_defined(&text);
+        for (name, text) in &nodes {
+            let code: String =
+                text.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n");
+            if names_an_item(&code, &["super::", prefix], &items) {
+                graph.get_mut(name).unwrap().insert(parent.to_string());
+            }
+        }
+        let code: String = text.lines().filter(|l| !l.trim_start().starts_with("//")).collect::<Vec<_>>().join("\n");
+        let deps = nodes.keys().filter(|child| names_child(&code, child, prefix)).cloned().collect();
+        graph.insert(parent.to_string(), deps);
+    }
     graph
 }
 
@@ -265,14 +367,31 @@ fn first_circle(graph: &BTreeMap<String, BTreeSet<String>>) -> Option<Vec<String
     graph.keys().find_map(|m| visit(m, graph, &mut Vec::new(), &mut done))
 }
 
+/// Folders whose `mod.rs` / `lib.rs` and one of their files still use
+/// each other (found once `mod.rs` counted as a module), left to their
+/// owners: here their other files are still checked with `mod.rs` left
+/// out, and an entry that no longer has such a circle fails the test, so
+/// the list only shrinks.
+const MOD_CIRCLES_LEFT: [&str; 7] = [
+    "daemon/src/master",
+    "daemon/src/api",
+    "daemon/src/link",
+    "daemon/src/sparkplug",
+    "wire/src/payload",
+    "devices/src/eni",
+    "sim/src/chip",
+];
+
 /// No circle between the files of any folder of the workspace's crates
 /// (bring-up and the held outputs once used each other in the engine;
-/// framing and header in the wire crate). Each folder is checked
-/// on its own: its files, and its subfolders as one module each.
+/// framing and header in the wire crate; the engine's running loop and
+/// its `mod.rs`). Each folder is checked on its own: its files, its
+/// subfolders as one module each, and its `mod.rs` (see [`file_graph`]).
 #[test]
 fn no_import_circle_between_the_files_of_any_folder() {
     let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("..");
     let mut checked = Vec::new();
+    let mut circles = Vec::new();
     for krate in ["daemon", "wire", "devices", "sim", "client"] {
         let src = root.join(krate).join("src");
         let mut dirs = vec![src.clone()];
@@ -290,13 +409,25 @@ fn no_import_circle_between_the_files_of_any_folder() {
             // `crate::x`, checked for the daemon by the test above.
             let rel = dir.strip_prefix(&src).unwrap();
             let prefix: String = rel.components().map(|c| format!("{}::", c.as_os_str().to_string_lossy())).collect();
-            let graph = file_graph(&dir, &format!("crate::{prefix}"));
+            let mut graph = file_graph(&dir, &format!("crate::{prefix}"));
+            let folder = format!("{krate}/src/{}", rel.display());
+            let folder = folder.trim_end_matches('/');
+            if MOD_CIRCLES_LEFT.contains(&folder) {
+                assert!(first_circle(&graph).is_some(), "{folder}: no circle left; take it off MOD_CIRCLES_LEFT");
+                for parent in ["mod", "lib"] {
+                    graph.remove(parent);
+                    for deps in graph.values_mut() {
+                        deps.remove(parent);
+                    }
+                }
+            }
             if let Some(c) = first_circle(&graph) {
-                panic!("{}: import circle: {}\n{graph:#?}", dir.display(), c.join(" -> "));
+                circles.push(format!("{folder}: {}", c.join(" -> ")));
             }
             checked.push(dir);
         }
     }
+    assert!(circles.is_empty(), "import circles: {circles:#?}");
     let engine = checked.iter().any(|d| d.ends_with("daemon/src/engine"));
     assert!(checked.len() >= 15 && engine, "folders not found: {checked:?}");
 }
@@ -334,5 +465,35 @@ fn a_circle_between_two_files_is_found() {
     let graph = file_graph(&dir, "crate::x::");
     let circle = first_circle(&graph).expect("a -> b -> sub -> a");
     assert_eq!(circle.len(), 4, "{circle:?}");
+    std::fs::remove_dir_all(&dir).unwrap();
+}
+
+/// A folder's `mod.rs` counts too: a file that names an item `mod.rs`
+/// defines, while `mod.rs` names that file, closes a circle; naming a
+/// sibling's item of the same name does not.
+#[test]
+fn a_circle_through_mod_rs_is_found() {
+    let dir = std::env::temp_dir().join(format!("ecmxf-layers-mod-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    std::fs::write(
+        dir.join("mod.rs"),
+        "//! pub struct InAComment;\nmod a;\nmod b;\npub(crate) use a::Thing;\n\n#[derive(Debug)]\n\
+         pub(crate) struct Shared;\nconst fn helper() {}\nstatic mut COUNT: u8 = 0;\nimpl Shared {\n    fn method() {}\n}\n",
+    )
+    .unwrap();
+    let items: Vec<String> = items_defined(&std::fs::read_to_string(dir.join("mod.rs")).unwrap()).into_iter().collect();
+    assert_eq!(items, ["COUNT", "Shared", "helper"]);
+    std::fs::write(dir.join("a.rs"), "pub(crate) struct Thing;\nuse super::b::Shared;\n").unwrap();
+    std::fs::write(dir.join("b.rs"), "// use super::Shared (a comment is no import)\npub(crate) struct Shared;\n")
+        .unwrap();
+    let graph = file_graph(&dir, "crate::x::");
+    assert_eq!(first_circle(&graph), None, "{graph:?}");
+    assert!(graph["mod"].contains("a") && !graph["a"].contains("mod"), "{graph:?}");
+    for planted in ["use super::Shared;\n", "use super::{b, Shared as S};\n", "fn f() { crate::x::helper() }\n"] {
+        std::fs::write(dir.join("a.rs"), planted).unwrap();
+        let graph = file_graph(&dir, "crate::x::");
+        let circle = first_circle(&graph).unwrap_or_else(|| panic!("a -> mod -> a from {planted:?}: {graph:?}"));
+        assert_eq!(circle.len(), 3, "{circle:?}");
+    }
     std::fs::remove_dir_all(&dir).unwrap();
 }

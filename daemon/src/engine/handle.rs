@@ -20,13 +20,15 @@ use std::time::Duration;
 
 use tokio::sync::{broadcast, watch};
 
+use super::command::Command;
+use super::core::{Inbound, Outbound, Shared};
 use super::error::{EngineError, NotRunning};
 use super::events::{Event, RING as EVENT_RING};
 use super::inputs::{InputFrame, read_record};
 use super::layout::NetworkLayout;
 use super::output_writes::{OutputWrite, Writers};
 use super::telemetry::Telemetry;
-use super::{Command, Engine, Inbound, Outbound};
+use super::thread::Engine;
 use crate::config::Config;
 use crate::link::Link;
 
@@ -123,7 +125,13 @@ pub(crate) fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle 
     let inbound = Inbound { commands: command_rx, outputs: output_rx };
     let outbound = Outbound { ring: producer, events: event_producer, distributor: distributor.thread().clone() };
     let rt = config.realtime.clone();
-    let engine = Engine::new(link, config, inbound, outbound, &handle);
+    let shared = Shared {
+        telemetry: Arc::clone(&handle.telemetry),
+        layout: Arc::clone(&handle.layout),
+        writers: Arc::clone(&handle.writers),
+        stop: Arc::clone(&handle.stop_engine),
+    };
+    let engine = Engine::new(link, config, inbound, outbound, shared);
     let engine = std::thread::Builder::new()
         .name("ecmxf-rt".into())
         .spawn(move || {

@@ -1,5 +1,5 @@
 //! Whole-network actions a client asks for (re-init, warm reset), sent as
-//! [`Command::Network`](super::Command::Network) and done by the engine at
+//! [`Command::Network`](super::command::Command::Network) and done by the engine at
 //! its next loop turn.
 
 /// A whole-network action a client asked for, done by the engine at its

@@ -1,41 +1,57 @@
-//! The running loop: once the network is up, each turn is a fixed
-//! sequence of named steps ([`Engine::turn`]): take what clients sent
-//! (requests, output writes, actions), count the slaves now and then, keep
-//! the emergency question going, exchange (a FIFO exchange when one is due,
-//! else one step of the blocking-slot transaction), then judge what the
-//! answers said, and idle until the next thing is due. The rules that
+//! The running phase: once the network is up, each turn of the loop is a
+//! fixed sequence of named steps ([`Running::turn`]): take what clients
+//! sent (requests, output writes, actions), count the slaves now and then,
+//! keep the emergency question going, exchange (a FIFO exchange when one is
+//! due, else one step of the blocking-slot transaction), then judge what
+//! the answers said, and idle until the next thing is due. The rules that
 //! decide when to go back to bring-up are the [`Supervisor`]'s: they take
 //! the time as a parameter and are unit-tested there. A step that ends the
 //! run returns the [`Exit`] as its error, so the turn reads top to bottom.
+//! Why a run ended is said better by `explain`, what happens when clients'
+//! outputs stop coming by `outputs_gone`.
 
 use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::flags::{ControlFlags, StatusFlags};
+use ecmxf_wire::EcatState;
+use ecmxf_wire::flags::ControlFlags;
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
+use ecmxf_wire::payload::fifo::FifoEnable;
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
 use ecmxf_wire::payload::slave_info::SlaveCountGet;
+use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
 use tracing::{info, warn};
 
-use super::cyclic::Cyclic;
+use super::bringup;
+use super::command::{Command, Taken};
+use super::core::Core;
+use super::cyclic::{self, Cyclic};
 use super::emergencies;
 use super::events::EventKind;
-use super::inputs::InputPublisher;
+use super::explain;
+use super::layout::NetworkLayout;
 use super::link_turn::{Fifo, PULL_FORWARD, Slot, fifo_goes_first};
 use super::network_action::NetworkAction;
+use super::next::Next;
+use super::outputs_gone;
+use super::recovering;
 use super::slot::{Active, Progress, SlotRequest};
-use super::supervisor::{RecoverCause, RunShape, SlaveFault, Supervisor, flow_limit};
-use super::telemetry::{Phase, Telemetry};
-use super::{Command, Engine, Exit, Taken};
-use crate::config::WriterGoneAction;
+use super::supervisor::{INT0_SILENT_EXCHANGES, RecoverCause, RunShape, Supervisor, flow_limit};
+use super::telemetry::Phase;
 use crate::link::Link;
 use crate::port::PortError;
 
 /// How long the loop idles at most when nothing is due (no cyclic
 /// exchange, no transaction).
 const IDLE: Duration = Duration::from_millis(50);
+
+/// Why the running loop left.
+enum Exit {
+    Stop,
+    Recover(RecoverCause),
+}
 
 impl From<PortError> for Exit {
     fn from(e: PortError) -> Self {
@@ -49,30 +65,63 @@ impl From<RecoverCause> for Exit {
     }
 }
 
-/// Where FIFO answers' input frames go: to subscribers through the ring,
-/// with their freshness published.
-#[derive(Debug)]
-pub(super) struct Intake {
-    /// The input ring.
-    pub inputs: InputPublisher,
-    epoch: Instant,
+/// The network is up as `layout` says: publishes it, runs it until a
+/// fault, a client's action or a stop, and keeps the outputs the run
+/// ended with for the next one.
+pub(super) fn run<L: Link>(core: &mut Core<L>, layout: NetworkLayout) -> Next {
+    info!(slaves = layout.slaves.len(), state = %layout.state, rx = layout.rx_size, tx = layout.tx_size, "network up");
+    let slaves = layout.slaves.len() as u64;
+    core.telemetry.slaves.store(slaves, Relaxed);
+    core.telemetry.slaves_seen.fetch_max(slaves, Relaxed);
+    let mut cyclic = (layout.state == EcatState::Op && (layout.rx_size > 0 || layout.tx_size > 0)).then(|| {
+        let cycle = core.config.cycle.dc_cycle();
+        let plan = cyclic::Plan {
+            rx_size: layout.rx_size,
+            tx_size: layout.tx_size,
+            cycle,
+            low: layout.fifo_low,
+            high: layout.fifo_high,
+            tx_depth: layout.fifo_tx_depth,
+            budget: core.config.cycle.output_latency(),
+        };
+        Cyclic::new(plan, core.port.data_size(), core.held.image_for(&layout.slaves, layout.rx_size))
+    });
+    *core.layout.lock().unwrap_or_else(|e| e.into_inner()) = layout;
+    // With cyclic data, "running" waits for the first input frame
+    // (the running loop says it): a network that reached OP but
+    // delivers nothing is not running.
+    if cyclic.is_none() {
+        core.set_phase(Phase::Running);
+        recovering::recovered(core);
+    }
+    let now = Instant::now();
+    let running = Running::start(core, cyclic.as_ref(), now);
+    let exit = running.run(cyclic.as_mut(), now);
+    if let Some(c) = cyclic {
+        let layout = core.layout.lock().unwrap_or_else(|e| e.into_inner());
+        core.held.keep(&layout.slaves, &c.outputs);
+    }
+    match exit {
+        Exit::Stop => Next::Stop,
+        Exit::Recover(why) => Next::Recover(why),
+    }
 }
 
-impl Intake {
-    pub(super) fn new(inputs: InputPublisher, epoch: Instant) -> Self {
-        Self { inputs, epoch }
-    }
-
-    /// A run of the cyclic exchange starts at `now`.
-    fn start(&mut self, c: &Cyclic, telemetry: &Telemetry, now: Instant) {
-        self.inputs.resume(now, c.cycle());
-        telemetry.newest_input_ns.store(self.ns(now), Relaxed);
-        telemetry.flow_limit_ns.store(flow_limit(c.cycle()).as_nanos() as u64, Relaxed);
-    }
-
-    fn ns(&self, t: Instant) -> u64 {
-        t.saturating_duration_since(self.epoch).as_nanos() as u64
-    }
+/// One run of the network: what every phase shares, and what only a run
+/// has (its rules, a client's hold below the target state, the slaves it
+/// started with).
+struct Running<'a, L> {
+    core: &'a mut Core<L>,
+    /// The running loop's rules, started over with every run.
+    supervisor: Supervisor,
+    /// A client asked for a state below the configured target: the slaves
+    /// that left OP on purpose do not count working counters, and that is
+    /// not a fault to recover from. Cleared by a request for the target
+    /// state (or above); a run starts without it (bring-up reached the
+    /// target).
+    held_below_target: bool,
+    /// The slaves bring-up found.
+    slaves: usize,
 }
 
 /// When the loop last did its periodic things.
@@ -91,72 +140,29 @@ struct Clocks {
     slot_freed: Option<Instant>,
 }
 
-impl<L: Link> Engine<L> {
-    /// Reads every slave's state and AL status code (a fault is being
-    /// handled: the time is not the cycle's), reports the codes as events,
-    /// and returns them as text, e.g. "slave 2 SAFE-OP, AL status 0x001a
-    /// (...)". Read failures are left out.
-    fn al_report(&mut self, slaves: usize) -> Vec<SlaveFault> {
-        let faulty: Vec<_> = super::bringup::slave_states(&mut self.port, slaves)
-            .into_iter()
-            .filter(|&(_, _, code)| code != 0)
-            .collect();
-        for &(slave, state, code) in &faulty {
-            self.events.emit(EventKind::AlStatus { slave, state, code });
+impl<'a, L: Link> Running<'a, L> {
+    /// A run starts at `now`: the rules start over, and a FIFO error bit
+    /// left from before (a fault, the bring-up) is cleared.
+    fn start(core: &'a mut Core<L>, cyclic: Option<&Cyclic>, now: Instant) -> Self {
+        let slaves = core.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
+        let shape = RunShape {
+            slaves,
+            cyclic: cyclic.is_some(),
+            has_outputs: cyclic.is_some_and(|c| c.rx_size > 0),
+            flow_limit: cyclic.map_or(Duration::ZERO, |c| flow_limit(c.cycle())),
+        };
+        let supervisor = Supervisor::new(shape, core.port.status().wkc_errors, now);
+        core.telemetry.int0_stuck.store(false, Relaxed);
+        core.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
+        if let Some(c) = cyclic {
+            core.intake.start(c, &core.telemetry, now);
         }
-        faulty
-    }
-
-    /// The cause, with the slaves' AL status codes read and reported where
-    /// a slave is at fault. A slave that reports an AL status code is the cause of missing
-    /// working counters or a stopped exchange, not their symptom: the
-    /// cause is then `slave_error` naming it and its code. A chip that
-    /// stopped answering intact is asked what it is now: one back at its
-    /// power-up values was reset (`chip_reset`), not merely garbled.
-    fn explained(&mut self, why: RecoverCause, slaves: usize) -> RecoverCause {
-        match why {
-            RecoverCause::SlaveError(_) | RecoverCause::WkcStreak(_) | RecoverCause::ExchangeStopped => {
-                let report = self.al_report(slaves);
-                match why {
-                    RecoverCause::SlaveError(_) if report.is_empty() => RecoverCause::SlaveError(Vec::new()),
-                    _ if !report.is_empty() => {
-                        let slaves = super::bringup::describe_states(&report);
-                        warn!(symptom = %why, slaves = %slaves, "AL status");
-                        RecoverCause::SlaveError(report)
-                    }
-                    other => other,
-                }
-            }
-            RecoverCause::Chip(e) if self.chip_was_reset() => {
-                info!(symptom = %e, "the chip answers again with its power-up status: it was reset");
-                RecoverCause::ChipReset
-            }
-            other => other,
-        }
-    }
-
-    /// After a failed exchange: finds the chip's packet boundary again and
-    /// reads its status. True when it is back at its power-up values (a
-    /// NOP answer, ETHERNET_READY gone, or its packet size reset): a
-    /// reset, whose first symptom is answers the host cannot decode. One
-    /// try, within the ready timeout (a reset takes tens of ms); a chip
-    /// that does not answer leaves the cause as it was. Costs nothing
-    /// while the bus runs: only a failed exchange asks.
-    fn chip_was_reset(&mut self) -> bool {
-        let size = self.port.data_size();
-        if self.port.synchronize().is_err() {
-            return false;
-        }
-        let h = self.port.status();
-        h.is_nop() || !h.status.flags.contains(StatusFlags::ETHERNET_READY) || self.port.data_size() != size
+        Self { core, supervisor, held_below_target: false, slaves }
     }
 
     /// Runs the network until a fault, a client's action or a stop.
-    pub(super) fn running(&mut self, cyclic: Option<&mut Cyclic>) -> Exit {
-        let slaves = self.layout.lock().unwrap_or_else(|e| e.into_inner()).slaves.len();
+    fn run(mut self, cyclic: Option<&mut Cyclic>, now: Instant) -> Exit {
         let mut cyclic = cyclic;
-        let now = Instant::now();
-        self.start_run(cyclic.as_deref(), slaves, now);
         let mut clocks = Clocks { emergency_poll: now, slot_waited: false, slot_skipped: 0, slot_freed: None };
         let exit = loop {
             if let Err(exit) = self.turn(&mut cyclic, &mut clocks) {
@@ -164,25 +170,8 @@ impl<L: Link> Engine<L> {
             }
         };
         match exit {
-            Exit::Recover(why) => Exit::Recover(self.explained(why, slaves)),
+            Exit::Recover(why) => Exit::Recover(explain::explained(self.core, why, self.slaves)),
             stop => stop,
-        }
-    }
-
-    /// A run starts at `now`: the rules start over, and a FIFO error bit
-    /// left from before (a fault, the bring-up) is cleared.
-    fn start_run(&mut self, cyclic: Option<&Cyclic>, slaves: usize, now: Instant) {
-        let shape = RunShape {
-            slaves,
-            cyclic: cyclic.is_some(),
-            has_outputs: cyclic.is_some_and(|c| c.rx_size > 0),
-            flow_limit: cyclic.map_or(Duration::ZERO, |c| flow_limit(c.cycle())),
-        };
-        self.supervisor = Supervisor::new(shape, self.port.status().wkc_errors, now);
-        self.telemetry.int0_stuck.store(false, Relaxed);
-        self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
-        if let Some(c) = cyclic {
-            self.intake.start(c, &self.telemetry, now);
         }
     }
 
@@ -222,24 +211,25 @@ impl<L: Link> Engine<L> {
         if !self.take_commands() {
             return Err(self.safe_stop(cyclic.as_deref_mut()));
         }
-        while let Ok(w) = self.outputs.try_recv() {
-            if let Some(written) = self.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice())) {
+        while let Ok(w) = self.core.outputs.try_recv() {
+            if let Some(written) = self.core.assembler.push(w, cyclic.as_deref_mut().map(|c| c.outputs.as_mut_slice()))
+            {
                 // The oldest write not yet on its way to the wire.
-                self.unplayed_write.get_or_insert(written);
+                self.core.unplayed_write.get_or_insert(written);
             }
         }
-        self.frames.retain(|f| !f.finished());
-        if self.writers.take_gone() {
-            self.last_writer_gone(cyclic.as_deref_mut());
+        self.core.frames.retain(|f| !f.finished());
+        if self.core.writers.take_gone() {
+            outputs_gone::last_writer_gone(self.core, cyclic.as_deref_mut());
         }
-        if self.take_new_config() {
+        if self.core.take_new_config() {
             return Err(Exit::Recover(RecoverCause::NewConfig));
         }
-        match self.action.take() {
+        match self.core.action.take() {
             Some(NetworkAction::Reinit) => Err(Exit::Recover(RecoverCause::ReinitRequested)),
             Some(NetworkAction::WarmReset) => {
                 // The chip resets at once; its answer may never come.
-                let _ = self.port.call(&WarmReset);
+                let _ = self.core.port.call(&WarmReset);
                 Err(Exit::Recover(RecoverCause::WarmResetRequested))
             }
             None => Ok(()),
@@ -251,8 +241,8 @@ impl<L: Link> Engine<L> {
     fn count_slaves(&mut self, now: Instant) -> Result<(), Exit> {
         // Between transactions, queued ones or not: a busy slot (16 SDO
         // clients) must not keep a replugged slave unseen.
-        if self.active.is_none() && self.supervisor.census_due(now) {
-            let count = self.port.call(&SlaveCountGet)?.header.return_value;
+        if self.core.active.is_none() && self.supervisor.census_due(now) {
+            let count = self.core.port.call(&SlaveCountGet)?.header.return_value;
             self.supervisor.census(usize::from(count), now)?;
             self.watch_int0();
         }
@@ -265,25 +255,25 @@ impl<L: Link> Engine<L> {
     /// poll and a read a second); a link that cannot count them is not
     /// judged.
     fn watch_int0(&mut self) {
-        let edges = match self.port.link_mut().int0_edges() {
+        let edges = match self.core.port.link_mut().int0_edges() {
             Ok(e) => e,
             Err(e) => {
                 tracing::debug!(error = %e, "INT0 edges not readable");
                 None
             }
         };
-        let exchanges = self.port.stats().exchanges;
+        let exchanges = self.core.port.stats().exchanges;
         match self.supervisor.int0.census(edges, exchanges) {
             Some(true) => warn!(
                 exchanges,
                 "INT0 has not moved across {} exchanges: it stays at its ready level, so the chip's busy time is \
                  not seen (check link.int0_line, its wiring and chip.int0_active_high; `ecmxfd probe`, step 2)",
-                super::supervisor::INT0_SILENT_EXCHANGES
+                INT0_SILENT_EXCHANGES
             ),
             Some(false) => info!("INT0 moves again"),
             None => {}
         }
-        self.telemetry.int0_stuck.store(self.supervisor.int0.stuck(), Relaxed);
+        self.core.telemetry.int0_stuck.store(self.supervisor.int0.stuck(), Relaxed);
     }
 
     /// Keeps the emergency question going: an answer no exchange has
@@ -293,8 +283,8 @@ impl<L: Link> Engine<L> {
     /// `transaction_step`).
     fn ask_emergencies(&mut self, cyclic: Option<&Cyclic>, clocks: &mut Clocks, now: Instant) -> Result<(), Exit> {
         let since = now.saturating_duration_since(clocks.emergency_poll);
-        if self.emergencies.asked() && self.active.is_none() && since >= emergencies::ANSWER_WAIT {
-            self.port.send_once(&InfoUpdate)?;
+        if self.core.emergencies.asked() && self.core.active.is_none() && since >= emergencies::ANSWER_WAIT {
+            self.core.port.send_once(&InfoUpdate)?;
             self.check_emergencies()?;
         }
         // With cyclic data the question goes out just before a FIFO
@@ -305,7 +295,8 @@ impl<L: Link> Engine<L> {
         // Not while a client's next transaction is likely on its way (see
         // `Clocks::slot_freed`): it would wait for the question.
         let lingering = self.lingering(clocks, now);
-        if self.active.is_none() && self.queue.is_empty() && since >= emergencies::POLL && rides && !lingering {
+        if self.core.active.is_none() && self.core.queue.is_empty() && since >= emergencies::POLL && rides && !lingering
+        {
             self.poll_emergencies(&mut clocks.emergency_poll, now)?;
         }
         Ok(())
@@ -317,15 +308,15 @@ impl<L: Link> Engine<L> {
         if let Some(stall) = self.supervisor.take_stall(self.held_below_target, now) {
             if let RecoverCause::InputStall { age, .. } = &stall {
                 let age_us = age.as_micros() as u64;
-                self.events.emit(EventKind::ProcessData { flowing: false, age_us });
+                self.core.events.emit(EventKind::ProcessData { flowing: false, age_us });
             }
             return Err(stall.into());
         }
-        if cyclic && self.telemetry.phase() != Phase::Running && self.supervisor.flowed() {
+        if cyclic && self.core.telemetry.phase() != Phase::Running && self.supervisor.flowed() {
             // Running means process data flows: said at the first frame,
             // and so is the end of a recovery.
-            self.set_phase(Phase::Running);
-            self.recovered();
+            self.core.set_phase(Phase::Running);
+            recovering::recovered(self.core);
         }
         Ok(())
     }
@@ -333,16 +324,16 @@ impl<L: Link> Engine<L> {
     /// Publishes the last answer's header and judges it (see
     /// [`Supervisor::header`]); a RxFIFO that ran dry is an alarm.
     fn watch_header(&mut self, now: Instant) -> Result<(), Exit> {
-        let h = *self.port.status();
-        self.publish_status(now);
+        let h = *self.core.port.status();
+        self.core.publish_status(now);
         let news = self.supervisor.header(&h, self.held_below_target, now)?;
         if news.ran_dry {
             // Logged with the event (one line, not two).
-            self.telemetry.fifo_alarms.fetch_add(1, Relaxed);
-            self.events.emit(EventKind::FifoUnderrun);
+            self.core.telemetry.fifo_alarms.fetch_add(1, Relaxed);
+            self.core.events.emit(EventKind::FifoUnderrun);
         }
         if news.clear_fifo_error {
-            self.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
+            self.core.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
         }
         Ok(())
     }
@@ -353,7 +344,7 @@ impl<L: Link> Engine<L> {
         let now = Instant::now();
         let wake = match cyclic.as_deref() {
             Some(c) if self.lingering(clocks, now) => {
-                let linger_end = clocks.slot_freed.map_or(now, |t| t + self.port.exchange_time());
+                let linger_end = clocks.slot_freed.map_or(now, |t| t + self.core.port.exchange_time());
                 c.next_exchange(now, self.rx_room(c), self.tx_room(c)).max(linger_end)
             }
             Some(c) => c.next_exchange(now, self.rx_room(c), self.tx_room(c)),
@@ -363,14 +354,14 @@ impl<L: Link> Engine<L> {
         // `ask_emergencies`): the FIFO's wake time covers it.
         let ask_every = if cyclic.is_some() { emergencies::POLL_LONGEST } else { emergencies::POLL };
         let emergency =
-            clocks.emergency_poll + if self.emergencies.asked() { emergencies::ANSWER_WAIT } else { ask_every };
-        let until = match &self.active {
+            clocks.emergency_poll + if self.core.emergencies.asked() { emergencies::ANSWER_WAIT } else { ask_every };
+        let until = match &self.core.active {
             Some(a) => wake.min(a.next_poll()),
             None => wake.min(emergency),
         };
         if let Some(c) = self.idle_until(until) {
-            match self.take(c) {
-                Taken::Job(j) => self.queue.push(j),
+            match self.core.take(c) {
+                Taken::Job(j) => self.core.queue.push(j),
                 Taken::Stop => return Err(self.safe_stop(cyclic.as_deref_mut())),
                 Taken::Kept => {}
             }
@@ -383,18 +374,18 @@ impl<L: Link> Engine<L> {
     ///
     /// [`RealtimeConfig`]: crate::config::RealtimeConfig
     fn idle_until(&mut self, until: Instant) -> Option<Command> {
-        let spin = Duration::from_micros(self.config.realtime.spin_us.into());
+        let spin = Duration::from_micros(self.core.config.realtime.spin_us.into());
         loop {
             let now = Instant::now();
             let left = until.checked_duration_since(now).filter(|d| !d.is_zero())?;
             if left > spin {
-                match self.commands.recv_timeout(left - spin) {
+                match self.core.commands.recv_timeout(left - spin) {
                     Ok(c) => return Some(c),
                     Err(RecvTimeoutError::Disconnected) => return Some(Command::Stop),
                     Err(RecvTimeoutError::Timeout) => {}
                 }
             } else {
-                match self.commands.try_recv() {
+                match self.core.commands.try_recv() {
                     Ok(c) => return Some(c),
                     Err(TryRecvError::Disconnected) => return Some(Command::Stop),
                     Err(TryRecvError::Empty) => std::thread::yield_now(),
@@ -404,32 +395,32 @@ impl<L: Link> Engine<L> {
     }
 
     fn rx_room(&self, c: &Cyclic) -> usize {
-        self.port.data_size().checked_div(c.rx_size).unwrap_or(0)
+        self.core.port.data_size().checked_div(c.rx_size).unwrap_or(0)
     }
 
     /// Input frames one exchange should read: a packet's worth, and at most
     /// half the TxFIFO, so small input frames (many to a packet) are read
     /// before the chip has to drop any.
     fn tx_room(&self, c: &Cyclic) -> usize {
-        let per_packet = self.port.data_size() / c.tx_size.max(1);
+        let per_packet = self.core.port.data_size() / c.tx_size.max(1);
         per_packet.min(usize::from(c.tx_depth / 2).max(1))
     }
 
     /// Whether a transaction is in the slot or queued for it.
     fn slot_waits(&self) -> bool {
-        self.active.is_some() || !self.queue.is_empty()
+        self.core.active.is_some() || !self.core.queue.is_empty()
     }
 
     /// Whether this turn is the FIFO's (the rules: `link_turn`).
     fn fifo_first(&self, c: &Cyclic, clocks: &Clocks, now: Instant) -> bool {
-        let exchange = self.port.exchange_time();
-        let slot = match (&self.active, self.slot_on_chip()) {
+        let exchange = self.core.port.exchange_time();
+        let slot = match (&self.core.active, self.slot_on_chip()) {
             (Some(a), Some(true)) => {
                 Slot::Runs { pulled: a.polled() || c.last_exchange().is_some_and(|t| t >= a.began_at()) }
             }
             (Some(_), Some(false)) => Slot::WantsLink,
             (Some(_), None) => Slot::Other { had_turn: clocks.slot_waited },
-            (None, _) if !self.queue.is_empty() => Slot::Queued,
+            (None, _) if !self.core.queue.is_empty() => Slot::Queued,
             (None, _) => Slot::Empty { just_freed: self.lingering(clocks, now) },
         };
         let fifo = Fifo {
@@ -447,13 +438,13 @@ impl<L: Link> Engine<L> {
     /// Whether a transaction ended less than an exchange ago (see
     /// `Clocks::slot_freed`).
     fn lingering(&self, clocks: &Clocks, now: Instant) -> bool {
-        clocks.slot_freed.is_some_and(|t| now < t + self.port.exchange_time())
+        clocks.slot_freed.is_some_and(|t| now < t + self.core.port.exchange_time())
     }
 
     /// What the newest header says of the slot's blocking command (see
     /// `Active::on_chip`).
     fn slot_on_chip(&self) -> Option<bool> {
-        self.active.as_ref()?.on_chip(&self.port)
+        self.core.active.as_ref()?.on_chip(&self.core.port)
     }
 
     fn fifo_due(&self, c: &Cyclic, now: Instant) -> bool {
@@ -469,12 +460,12 @@ impl<L: Link> Engine<L> {
     /// answer is the RxFIFO level just before this push (v049: an answer
     /// reports the level of the packet before, see the simulator's
     /// `note_fifo_levels`).
-    pub(super) fn fifo_exchange(&mut self, c: &mut Cyclic, now: Instant) -> Result<(), PortError> {
+    fn fifo_exchange(&mut self, c: &mut Cyclic, now: Instant) -> Result<(), PortError> {
         if let Some(last) = c.last_exchange() {
             let gap = now.saturating_duration_since(last).as_micros() as u64;
-            self.telemetry.max_fifo_gap_us.fetch_max(gap, Relaxed);
+            self.core.telemetry.max_fifo_gap_us.fetch_max(gap, Relaxed);
         }
-        let room = self.port.data_size().checked_div(c.rx_size).unwrap_or(0);
+        let room = self.core.port.data_size().checked_div(c.rx_size).unwrap_or(0);
         let n = if c.rx_size > 0 { c.frames_to_push(now, room) } else { 0 };
         // Borrowed, not copied: this runs thousands of times a second.
         let mut op = FifoOpFlags::empty();
@@ -482,9 +473,9 @@ impl<L: Link> Engine<L> {
         op.set(FifoOpFlags::READ, c.tx_size > 0);
         // The first frame pushed now plays after the ones queued before it.
         let ahead = c.estimate(now).max(0) as u32;
-        let outputs = c.push_frames(n, &mut self.frames);
+        let outputs = c.push_frames(n, &mut self.core.frames);
         let req = PdoFifoOp { op, frames: n, outputs };
-        let a = self.port.call(&req)?;
+        let a = self.core.port.call(&req)?;
         let count = a.header.rx_fifo_count;
         let waiting = a.header.tx_fifo_count;
         // Inputs out, their freshness noted and judged (a network without
@@ -495,27 +486,27 @@ impl<L: Link> Engine<L> {
         if let Ok(reply) = a.answer_to(&req) {
             let lost = if c.tx_size > 0 { c.inputs_lost(count, waiting) } else { 0 };
             if lost > 0 {
-                self.intake.inputs.lost(lost);
-                self.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
+                self.core.intake.inputs.lost(lost);
+                self.core.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
             }
-            read = self.intake.inputs.publish(reply.inputs, c.tx_size, now);
-            self.telemetry.input_frames.fetch_add(read as u64, Relaxed);
+            read = self.core.intake.inputs.publish(reply.inputs, c.tx_size, now);
+            self.core.telemetry.input_frames.fetch_add(read as u64, Relaxed);
             if self.supervisor.fifo_answer(read, c.tx_size > 0, now) {
-                self.telemetry.newest_input_ns.store(self.intake.ns(now), Relaxed);
+                self.core.telemetry.newest_input_ns.store(self.core.intake.ns(now), Relaxed);
             }
         }
         c.answered(now, n, count, waiting, read);
-        self.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
-        if !self.frames.is_empty() {
-            self.frames_played(c.tx_size > 0, read, waiting, count);
+        self.core.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
+        if !self.core.frames.is_empty() {
+            outputs_gone::frames_played(self.core, c.tx_size > 0, read, waiting, count);
         }
         if n > 0 {
-            if let Some(written) = self.unplayed_write.take() {
+            if let Some(written) = self.core.unplayed_write.take() {
                 let on_wire = now + c.cycle() * ahead;
                 self.output_latency(on_wire.saturating_duration_since(written), now);
             }
         }
-        if let Some(t) = &self.distributor {
+        if let Some(t) = &self.core.distributor {
             t.unpark();
         }
         Ok(())
@@ -525,11 +516,11 @@ impl<L: Link> Engine<L> {
     /// daemon: into the window the API reads, and against the budget.
     fn output_latency(&mut self, latency: Duration, now: Instant) {
         let us = latency.as_micros().min(u128::from(u32::MAX)) as u32;
-        self.telemetry.output_latency.record(us);
-        if let Some(budget) = self.config.cycle.output_latency_us {
+        self.core.telemetry.output_latency.record(us);
+        if let Some(budget) = self.core.config.cycle.output_latency_us {
             if us > budget {
-                self.telemetry.output_latency_misses.fetch_add(1, Relaxed);
-                self.events.output_late(budget, us, now);
+                self.core.telemetry.output_latency_misses.fetch_add(1, Relaxed);
+                self.core.events.output_late(budget, us, now);
             }
         }
     }
@@ -537,39 +528,39 @@ impl<L: Link> Engine<L> {
     /// Looks at the answer to an emergency question, once an exchange has
     /// brought it, and emits what is new.
     fn check_emergencies(&mut self) -> Result<(), PortError> {
-        let events = &mut self.events;
-        self.emergencies.check(&mut self.port, |r| events.emit(EventKind::Emergency(r)))
+        let events = &mut self.core.events;
+        self.core.emergencies.check(&mut self.core.port, |r| events.emit(EventKind::Emergency(r)))
     }
 
     /// Asks for the newest CoE emergency (see `emergencies`); the answer is
     /// looked at after the next exchange.
     fn poll_emergencies(&mut self, last: &mut Instant, now: Instant) -> Result<(), PortError> {
         *last = now;
-        self.emergencies.ask(&mut self.port)
+        self.core.emergencies.ask(&mut self.core.port)
     }
 
     /// One step of the transaction on the blocking slot (taking the next
     /// job when the slot is free). True when it sent something worth not
     /// idling for.
     fn transaction_step(&mut self, clocks: &mut Clocks, now: Instant) -> Result<bool, PortError> {
-        if self.active.is_none() {
-            while let Some(j) = self.queue.pop() {
+        if self.core.active.is_none() {
+            while let Some(j) = self.core.queue.pop() {
                 if let SlotRequest::SetState { state, .. } = &j.request {
-                    self.held_below_target = state.to_u8() < self.config.cycle.target().to_u8();
+                    self.held_below_target = state.to_u8() < self.core.config.cycle.target().to_u8();
                 }
                 if let Some(a) = Active::new(j, now) {
-                    self.active = Some(a);
+                    self.core.active = Some(a);
                     break;
                 }
             }
         }
-        let Some(active) = self.active.take() else {
+        let Some(active) = self.core.active.take() else {
             return Ok(false);
         };
-        let exchanges = self.port.stats().exchanges;
+        let exchanges = self.core.port.stats().exchanges;
         let since = now.saturating_duration_since(clocks.emergency_poll);
-        let poll_due = active.on_chip(&self.port) == Some(true) && active.next_poll() <= now;
-        if active.may_lend_an_exchange(&self.port)
+        let poll_due = active.on_chip(&self.core.port) == Some(true) && active.next_poll() <= now;
+        if active.may_lend_an_exchange(&self.core.port)
             && ((poll_due && since >= emergencies::POLL) || since >= emergencies::POLL_LONGEST)
         {
             // A poll is due and so is the emergency question: it is the
@@ -578,84 +569,64 @@ impl<L: Link> Engine<L> {
             // whatever answer the transaction waits for, which it reads
             // by index), so emergencies are seen under a steady load of
             // transactions however short their polls (EEPROM reads).
-            self.active = Some(active);
+            self.core.active = Some(active);
             self.poll_emergencies(&mut clocks.emergency_poll, now)?;
             return Ok(true);
         }
-        let (rest, progress) = active.step(&mut self.port, now)?;
-        self.active = rest;
+        let (rest, progress) = active.step(&mut self.core.port, now)?;
+        self.core.active = rest;
         if progress == Progress::Done {
-            self.telemetry.transactions.fetch_add(1, Relaxed);
+            self.core.telemetry.transactions.fetch_add(1, Relaxed);
             clocks.slot_freed = Some(Instant::now());
         }
-        let sent = self.port.stats().exchanges != exchanges;
+        let sent = self.core.port.stats().exchanges != exchanges;
         Ok(sent && progress != Progress::Waiting)
     }
 
-    /// The answer to a push came: when each stream frame in it plays, and
-    /// which streams ran dry. The answer's counts are the chip's at the
-    /// packet before the call (two exchanges late, see `fifo_exchange`),
-    /// when every frame pushed and read before the call was in: `waiting`
-    /// input frames were queued after the last one read before this call
-    /// (this call then read `read`), so the newest DC cycle then was that
-    /// frame's plus `waiting`; `ahead` output frames were queued then, so
-    /// this push's first frame plays `ahead + 1` cycles after it (the
-    /// cycles between that packet and this one took frames off both FIFOs
-    /// alike). Exact unless the RxFIFO ran dry in between (the frames then
-    /// play later: an underrun the record shows). Without inputs there is
-    /// no cycle to number.
-    fn frames_played(&mut self, inputs: bool, read: usize, waiting: u8, ahead: u8) {
-        let before = self.intake.inputs.seq().saturating_sub(read as u64);
-        let first = before + u64::from(waiting) + u64::from(ahead) + 1;
-        for i in 0..self.frames.len() {
-            let f = &mut self.frames[i];
-            if inputs {
-                f.played(first);
-            }
-            if f.take_dry_start() {
-                let pushed = f.pushed();
-                self.frames_ran_dry(pushed);
+    /// Takes new requests; false when told to stop.
+    fn take_commands(&mut self) -> bool {
+        loop {
+            match self.core.commands.try_recv().map(|c| self.core.take(c)) {
+                Ok(Taken::Job(j)) => self.core.queue.push(j),
+                Ok(Taken::Kept) => {}
+                Ok(Taken::Stop) | Err(TryRecvError::Disconnected) => return false,
+                Err(TryRecvError::Empty) => return true,
             }
         }
     }
 
-    /// A client's frame queue ran dry after `pushed` frames: said once per
-    /// spell; the range already holds or is zeroed (see `frames`), a
-    /// quick-stop policy stops the axes.
-    fn frames_ran_dry(&mut self, pushed: u64) {
-        let action = self.config.outputs.on_last_writer_gone;
-        self.events.emit(EventKind::FramesDry { pushed, action });
-        if action == WriterGoneAction::QuickStop {
-            self.quick_stop_axes();
+    /// Safe stop: CiA402 axes disabled through the helper, slaves to SAFE-OP
+    /// then INIT.
+    fn safe_stop(&mut self, cyclic: Option<&mut Cyclic>) -> Exit {
+        // A safe stop must not outlast the daemon's one-second promise:
+        // each wait for the chip is short.
+        self.core.port.set_ready_timeout(self.core.config.ready_timeout().min(Duration::from_millis(200)));
+        self.core.set_phase(Phase::Stopping);
+        info!("safe stop");
+        for n in 0..self.core.config.axes.len() {
+            let _ = self.core.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::SwitchOnDisabled });
         }
-    }
-
-    /// Every `[[axis]]` to QUICK STOP ACTIVE through the chip's CiA402
-    /// helper (the `quick-stop` outputs policy); failures are logged.
-    fn quick_stop_axes(&mut self) {
-        for n in 0..self.config.axes.len() {
-            let r = self.port.call(&Cia402StateSet { axis: n as u8, state: Cia402State::QuickStopActive });
-            if let Err(e) = r {
-                warn!("quick stop of axis {n}: {e}");
-            }
-        }
-    }
-
-    /// The last output writer went away: `outputs.on_last_writer_gone`.
-    fn last_writer_gone(&mut self, cyclic: Option<&mut Cyclic>) {
-        self.events.emit(EventKind::LastWriterGone(self.config.outputs.on_last_writer_gone));
-        match self.config.outputs.on_last_writer_gone {
-            WriterGoneAction::HoldLast => info!("last output writer gone: holding the last outputs"),
-            WriterGoneAction::Zero => {
-                if let Some(c) = cyclic {
-                    c.outputs.fill(0);
+        if let Some(c) = cyclic {
+            // Let the helper walk the axes down while outputs keep flowing.
+            let until = Instant::now() + Duration::from_millis(50);
+            while Instant::now() < until {
+                if self.fifo_exchange(c, Instant::now()).is_err() {
+                    break;
                 }
-                warn!("last output writer gone: outputs zeroed");
+                std::thread::sleep(Duration::from_micros(500));
             }
-            WriterGoneAction::QuickStop => {
-                self.quick_stop_axes();
-                warn!("last output writer gone: {} axes quick-stopped", self.config.axes.len());
+            let _ = self.core.port.call(&FifoEnable(false));
+        }
+        for state in [EcatState::SafeOp, EcatState::Init] {
+            if let Err(e) = bringup::blocking(
+                &mut self.core.port,
+                &StateCheck { target: SlaveSelector::All, state },
+                Duration::from_millis(400),
+            ) {
+                warn!(error = %e, %state, "safe stop");
             }
         }
+        self.core.publish_status(Instant::now());
+        Exit::Stop
     }
 }

@@ -6,7 +6,6 @@
 //! SAFE-OP, a prefilled RxFIFO, OP, FIFO on (18). Each failure names the
 //! step, and the slave when one is at fault.
 
-use std::fmt;
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::flags::{ControlFlags, ErrorFlags};
@@ -17,97 +16,15 @@ use ecmxf_wire::payload::fifo::{FifoEnable, FifoInit, FifoPackSizeGet, FifoSetRx
 use ecmxf_wire::payload::interrupt::{IntConfig, IntPolarity, IntSetEnable};
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoDirection, PdoFifoOp};
 use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RawGet, RawRequest};
-use ecmxf_wire::payload::sdo::{SdoAbortCode, SdoAbortCodeGet, SdoAccess, SdoGet, SdoRequest};
 use ecmxf_wire::payload::slave_info::{SlaveCountGet, SlaveInfo, SlaveInfoCode, SlaveInfoGet};
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
-use ecmxf_wire::{CheckType, EcatState, Request};
+use ecmxf_wire::{CheckType, EcatState};
 
 use tracing::warn;
 
 use crate::config::{Config, InitTransition, TargetState};
 use crate::link::Link;
 use crate::port::{Port, PortError};
-
-/// Why bring-up stopped.
-#[derive(Debug)]
-pub enum BringUpError {
-    /// The link or the exchange failed.
-    Port(PortError),
-    /// A step failed.
-    Step {
-        /// The step.
-        step: &'static str,
-        /// What happened.
-        detail: String,
-    },
-    /// The network has another number of slaves than the `[[slave]]`
-    /// entries.
-    Count {
-        /// Slaves found.
-        found: usize,
-        /// Entries configured.
-        expected: usize,
-    },
-    /// The network differs from the configured one.
-    Identity {
-        /// Slave position.
-        position: usize,
-        /// What was expected.
-        expected: String,
-        /// What was found.
-        found: String,
-    },
-    /// The SPI link can never carry this network's process data at this
-    /// cycle (see `link_budget`): no retry can change that, only the
-    /// configuration can.
-    Refused(super::link_budget::BudgetError),
-    /// An `[[axis]]` names a slave whose process data cannot hold its
-    /// controlword or statusword where the configuration says: the chip's
-    /// CiA 402 helper would drive other bytes. Only the configuration can
-    /// change that.
-    AxisUnmapped(String),
-    /// Slaves did not reach the state asked for (STATE_CHECK failed): each
-    /// one not there, with its state and AL status code.
-    StateRefused {
-        /// The state asked for.
-        asked: EcatState,
-        /// (position, state, AL status code) of each slave not in `asked`
-        /// or reporting a code; empty when none could be read.
-        slaves: Vec<(u8, EcatState, u16)>,
-    },
-}
-
-impl BringUpError {
-    /// Whether trying again can never help (the configuration must change).
-    pub fn is_permanent(&self) -> bool {
-        matches!(self, Self::Refused(_) | Self::AxisUnmapped(_))
-    }
-}
-
-impl fmt::Display for BringUpError {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        match self {
-            Self::Port(e) => write!(f, "{e}"),
-            Self::Step { step, detail } => write!(f, "{step}: {detail}"),
-            Self::Count { found, expected } => {
-                write!(f, "{found} slaves answer, the configuration lists {expected} ([[slave]] entries)")
-            }
-            Self::Identity { position, expected, found } => {
-                write!(f, "slave {position} is {found}, the configuration expects {expected}")
-            }
-            Self::Refused(e) => write!(f, "link budget: {e}"),
-            Self::AxisUnmapped(why) => f.write_str(why),
-            Self::StateRefused { asked, slaves } if slaves.is_empty() => {
-                write!(f, "the slaves did not reach {asked} (STATE_CHECK failed; their states could not be read)")
-            }
-            Self::StateRefused { asked, slaves } => {
-                write!(f, "the slaves did not reach {asked}: {}", describe_states(slaves))
-            }
-        }
-    }
-}
-
-impl std::error::Error for BringUpError {}
 
 /// Each `[[axis]]`'s controlword (2 bytes at its offset in the slave's
 /// outputs) and statusword (in its inputs) lie within that slave's process
@@ -128,56 +45,20 @@ fn axes_fit(axes: &[crate::config::AxisConfig], slaves: &[SlaveSummary]) -> Resu
     Ok(())
 }
 
-impl From<PortError> for BringUpError {
-    fn from(e: PortError) -> Self {
-        Self::Port(e)
-    }
-}
-
 use super::layout::{NetworkLayout, SlaveSummary};
 
+mod calls;
+mod error;
 mod pdos;
+pub(crate) use calls::blocking;
+use calls::{FAILED_ON_CHIP, SLOW, sdo_download};
+pub use error::BringUpError;
+pub(crate) use error::describe_states;
+use error::step;
 use pdos::map_pdos;
-
-fn step(step: &'static str, detail: impl Into<String>) -> BringUpError {
-    BringUpError::Step { step, detail: detail.into() }
-}
 
 /// How long all slaves get to reach a state.
 const STATE_TIMEOUT: Duration = Duration::from_secs(5);
-
-/// What [`blocking`] says of a command the chip ran and that failed (bit3).
-const FAILED_ON_CHIP: &str = "failed on the chip";
-
-/// Runs a blocking command to its end: refused (bit7) and failed (bit3) are
-/// errors; the bits are cleared for what follows.
-pub(crate) fn blocking<'a, L: Link, R: Request<'a>>(
-    port: &mut Port<L>,
-    req: &R,
-    timeout: Duration,
-) -> Result<(), BringUpError> {
-    let name = R::CODE.name();
-    let a = port.call(req)?;
-    if a.header.errors.contains(ErrorFlags::COMMAND_ERROR) {
-        port.pending_control |= ControlFlags::CLEAR_COMMAND_ERROR;
-        return Err(step(name, "refused by the chip (bad parameter or slot busy)"));
-    }
-    let deadline = Instant::now() + timeout;
-    loop {
-        let h = port.call(&InfoUpdate)?.header;
-        if !h.blocking_busy() {
-            if h.errors.contains(ErrorFlags::BLOCKING_FAILED) {
-                port.pending_control |= ControlFlags::CLEAR_BLOCKING_ERROR;
-                return Err(step(name, FAILED_ON_CHIP));
-            }
-            return Ok(());
-        }
-        if Instant::now() >= deadline {
-            return Err(step(name, format!("still busy after {timeout:?}")));
-        }
-        std::thread::sleep(Duration::from_micros(200));
-    }
-}
 
 /// Asks every slave for `state` and waits for it; when that fails, reads
 /// each slave's state and AL status code so the error names the slaves
@@ -207,15 +88,6 @@ pub(crate) fn slave_states<L: Link>(port: &mut Port<L>, slaves: usize) -> Vec<(u
     out
 }
 
-/// "slave 2 PRE-OP, AL status 0x001d (invalid output configuration); ...".
-pub(crate) fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
-    let one = |&(i, state, code): &(u8, EcatState, u16)| match code {
-        0 => format!("slave {i} {state}"),
-        c => format!("slave {i} {state}, AL status {c:#06x} ({})", ecmxf_wire::al_status_text(c)),
-    };
-    slaves.iter().map(one).collect::<Vec<_>>().join("; ")
-}
-
 /// One numeric item of a slave (command 21; [`SlaveInfo::number`]); 0 when
 /// the answer does not decode.
 pub fn number<L: Link>(port: &mut Port<L>, slave: u8, item: SlaveInfoCode) -> Result<u32, PortError> {
@@ -236,7 +108,6 @@ fn name<L: Link>(port: &mut Port<L>, slave: u8) -> Result<String, PortError> {
 /// configured DC timing (command 1, ECAT_INIT: slaves to PRE-OP) and returns
 /// how many slaves answered.
 pub fn init_network<L: Link>(port: &mut Port<L>, config: &Config) -> Result<u8, BringUpError> {
-    const SLOW: Duration = Duration::from_secs(5);
     // Errors latched by whatever ran before (a failed command of an earlier
     // run) would read as this command's.
     port.pending_control |= ControlFlags::CLEAR_ALL_ERRORS;
@@ -300,9 +171,6 @@ pub fn check_identity(config: &Config, slaves: &[SlaveSummary]) -> Result<(), Br
     }
     Ok(())
 }
-
-/// Blocking commands get this long to finish.
-const SLOW: Duration = Duration::from_secs(5);
 
 /// Brings the network up as `config` says, phase by phase (the manual's
 /// figure 7). `held` are the outputs clients wrote before a recovery (none
@@ -405,45 +273,6 @@ fn slave_dc<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpE
 /// (0x1600-0x17FF, 0x1A00-0x1BFF): writing one changes the frames.
 fn is_pdo_object(index: u16) -> bool {
     matches!(index, 0x1C12 | 0x1C13 | 0x1600..=0x17FF | 0x1A00..=0x1BFF)
-}
-
-/// One SDO download, waited for (up to `timeout` on the slave's side):
-/// `Ok(Err(code))` when the slave refuses it.
-fn sdo_download<L: Link>(
-    port: &mut Port<L>,
-    slave: u8,
-    (index, subindex, complete_access): (u16, u8, bool),
-    data: &[u8],
-    timeout: Duration,
-) -> Result<Result<(), SdoAbortCode>, BringUpError> {
-    let req = SdoRequest {
-        slave,
-        index,
-        subindex,
-        complete_access,
-        timeout_us: u32::try_from(timeout.as_micros()).unwrap_or(u32::MAX),
-        access: SdoAccess::Write(data),
-    };
-    match blocking(port, &req, SLOW.max(timeout + Duration::from_secs(1))) {
-        Ok(()) => Ok(Ok(())),
-        Err(_) => Ok(Err(abort_code(port)?)),
-    }
-}
-
-/// One SDO upload of at most 8 bytes (an assignment or mapping entry),
-/// waited for: `None` when the slave refuses it.
-fn sdo_upload<L: Link>(port: &mut Port<L>, slave: u8, index: u16, subindex: u8) -> Result<Option<u32>, BringUpError> {
-    let access = SdoAccess::Read { max_len: 8 };
-    let req = SdoRequest { slave, index, subindex, complete_access: false, timeout_us: 1_000_000, access };
-    if blocking(port, &req, SLOW).is_err() {
-        abort_code(port)?;
-        return Ok(None);
-    }
-    let reply = port.ask(&SdoGet)?;
-    if reply.status != 0 {
-        return Ok(None);
-    }
-    Ok(Some(reply.data.iter().take(4).enumerate().fold(0u32, |v, (i, b)| v | u32::from(*b) << (8 * i))))
 }
 
 /// The register writes of one transition (an ENI's watchdog settings,
@@ -668,8 +497,4 @@ fn packet_time<L: Link>(port: &mut Port<L>) -> Result<Duration, PortError> {
     }
     times.sort();
     Ok(times[2])
-}
-
-fn abort_code<L: Link>(port: &mut Port<L>) -> Result<SdoAbortCode, PortError> {
-    Ok(port.call(&SdoAbortCodeGet)?.answer_to(&SdoAbortCodeGet).map_or(SdoAbortCode::GENERAL, |r| r.0))
 }

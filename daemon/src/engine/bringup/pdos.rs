@@ -26,7 +26,8 @@ use ecmxf_wire::payload::pdo::{
     PdoConfig, PdoConfigForm, PdoConfigGet, PdoConfigReply, PdoConfigReq, PdoEntry, RX_PDO_ASSIGN, TX_PDO_ASSIGN,
 };
 
-use super::{BringUpError, SLOW, abort_code, blocking, sdo_download, sdo_upload, step};
+use super::calls::{SLOW, abort_code, blocking, sdo_download, sdo_upload};
+use super::error::{BringUpError, step};
 use crate::config::Config;
 use crate::link::Link;
 use crate::port::Port;

@@ -65,13 +65,6 @@ pub(crate) struct RunShape {
     pub flow_limit: Duration,
 }
 
-impl RunShape {
-    /// No run: nothing on the ring, nothing exchanged.
-    pub(crate) fn idle() -> Self {
-        Self { slaves: 0, cyclic: false, has_outputs: false, flow_limit: Duration::ZERO }
-    }
-}
-
 /// The rules of one run, with what they remember between answers.
 #[derive(Clone, Debug)]
 pub(crate) struct Supervisor {

@@ -1,0 +1,109 @@
+//! Why bring-up stopped, each failure naming its step and the slaves at
+//! fault.
+
+use std::fmt;
+
+use ecmxf_wire::EcatState;
+
+use crate::port::PortError;
+
+/// Why bring-up stopped.
+#[derive(Debug)]
+pub enum BringUpError {
+    /// The link or the exchange failed.
+    Port(PortError),
+    /// A step failed.
+    Step {
+        /// The step.
+        step: &'static str,
+        /// What happened.
+        detail: String,
+    },
+    /// The network has another number of slaves than the `[[slave]]`
+    /// entries.
+    Count {
+        /// Slaves found.
+        found: usize,
+        /// Entries configured.
+        expected: usize,
+    },
+    /// The network differs from the configured one.
+    Identity {
+        /// Slave position.
+        position: usize,
+        /// What was expected.
+        expected: String,
+        /// What was found.
+        found: String,
+    },
+    /// The SPI link can never carry this network's process data at this
+    /// cycle (see `link_budget`): no retry can change that, only the
+    /// configuration can.
+    Refused(super::super::link_budget::BudgetError),
+    /// An `[[axis]]` names a slave whose process data cannot hold its
+    /// controlword or statusword where the configuration says: the chip's
+    /// CiA 402 helper would drive other bytes. Only the configuration can
+    /// change that.
+    AxisUnmapped(String),
+    /// Slaves did not reach the state asked for (STATE_CHECK failed): each
+    /// one not there, with its state and AL status code.
+    StateRefused {
+        /// The state asked for.
+        asked: EcatState,
+        /// (position, state, AL status code) of each slave not in `asked`
+        /// or reporting a code; empty when none could be read.
+        slaves: Vec<(u8, EcatState, u16)>,
+    },
+}
+
+impl BringUpError {
+    /// Whether trying again can never help (the configuration must change).
+    pub fn is_permanent(&self) -> bool {
+        matches!(self, Self::Refused(_) | Self::AxisUnmapped(_))
+    }
+}
+
+impl fmt::Display for BringUpError {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Self::Port(e) => write!(f, "{e}"),
+            Self::Step { step, detail } => write!(f, "{step}: {detail}"),
+            Self::Count { found, expected } => {
+                write!(f, "{found} slaves answer, the configuration lists {expected} ([[slave]] entries)")
+            }
+            Self::Identity { position, expected, found } => {
+                write!(f, "slave {position} is {found}, the configuration expects {expected}")
+            }
+            Self::Refused(e) => write!(f, "link budget: {e}"),
+            Self::AxisUnmapped(why) => f.write_str(why),
+            Self::StateRefused { asked, slaves } if slaves.is_empty() => {
+                write!(f, "the slaves did not reach {asked} (STATE_CHECK failed; their states could not be read)")
+            }
+            Self::StateRefused { asked, slaves } => {
+                write!(f, "the slaves did not reach {asked}: {}", describe_states(slaves))
+            }
+        }
+    }
+}
+
+impl std::error::Error for BringUpError {}
+
+impl From<PortError> for BringUpError {
+    fn from(e: PortError) -> Self {
+        Self::Port(e)
+    }
+}
+
+/// A failure of `step`, said as `detail`.
+pub(super) fn step(step: &'static str, detail: impl Into<String>) -> BringUpError {
+    BringUpError::Step { step, detail: detail.into() }
+}
+
+/// "slave 2 PRE-OP, AL status 0x001d (invalid output configuration); ...".
+pub(crate) fn describe_states(slaves: &[(u8, EcatState, u16)]) -> String {
+    let one = |&(i, state, code): &(u8, EcatState, u16)| match code {
+        0 => format!("slave {i} {state}"),
+        c => format!("slave {i} {state}, AL status {c:#06x} ({})", ecmxf_wire::al_status_text(c)),
+    };
+    slaves.iter().map(one).collect::<Vec<_>>().join("; ")
+}
