@@ -491,6 +491,13 @@ impl SocketClient {
         Ok(Self { stream: UnixStream::connect(path)? })
     }
 
+    /// How long a read of an answer may block (`None`: for ever); a read
+    /// past it fails with `WouldBlock` or `TimedOut`, and the connection is
+    /// then out of step (the late answer is still to come).
+    pub fn set_answer_timeout(&self, timeout: Option<Duration>) -> io::Result<()> {
+        self.stream.set_read_timeout(timeout)
+    }
+
     fn request(&mut self, kind: u8, payload: &[u8]) -> io::Result<(u8, Vec<u8>)> {
         write_msg(&mut self.stream, kind, 0, payload)?;
         let (k, flags, p) = read_msg(&mut self.stream, Duration::ZERO)?;

@@ -199,8 +199,25 @@ impl Simulator {
 
     /// Kills the simulator (SIGKILL: no goodbye to its clients).
     pub fn kill(&mut self) {
+        // A frozen process dies of SIGKILL too; thawed first, it is reaped
+        // at once.
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        let _ = nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT);
         let _ = self.child.kill();
         let _ = self.child.wait();
+    }
+
+    /// Freezes the simulator (SIGSTOP): the chip stops answering, as a
+    /// hung link does, its socket still open.
+    pub fn freeze(&self) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGSTOP).expect("SIGSTOP ecmxf-sim");
+    }
+
+    /// Lets a frozen simulator go on (SIGCONT).
+    pub fn thaw(&self) {
+        let pid = nix::unistd::Pid::from_raw(self.child.id() as i32);
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGCONT).expect("SIGCONT ecmxf-sim");
     }
 
     /// Starts a fresh simulator (a chip at power-up) on the same socket.

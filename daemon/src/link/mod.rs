@@ -41,6 +41,15 @@ pub enum LinkError {
     /// socket), and INT0 did not say ready in the time it was given; nothing
     /// was clocked. The port gives it the rest of its ready timeout.
     NotReady,
+    /// The far end took an exchange and gave no answer in `waited`: the
+    /// chip (or the process standing for it) is not answering. The link is
+    /// out of step until reopened.
+    Stalled {
+        /// Where, e.g. "simulator socket /run/sim.sock".
+        what: String,
+        /// How long the answer was waited for.
+        waited: Duration,
+    },
 }
 
 impl fmt::Display for LinkError {
@@ -49,6 +58,9 @@ impl fmt::Display for LinkError {
             Self::Io { what, source } => write!(f, "{what}: {source}"),
             Self::Closed => f.write_str("link closed"),
             Self::NotReady => f.write_str("chip not ready (INT0)"),
+            Self::Stalled { what, waited } => {
+                write!(f, "link stalled: {what} gave no answer in {} ms (chip not answering)", waited.as_millis())
+            }
         }
     }
 }
@@ -57,7 +69,7 @@ impl std::error::Error for LinkError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             Self::Io { source, .. } => Some(source),
-            Self::Closed | Self::NotReady => None,
+            Self::Closed | Self::NotReady | Self::Stalled { .. } => None,
         }
     }
 }

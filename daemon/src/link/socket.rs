@@ -17,10 +17,23 @@ pub struct SocketLink {
     path: PathBuf,
     /// The INT0 wait to do before the next transfer.
     pending_wait: Option<Duration>,
+    /// The answer timeout the socket has now (set only when it changes).
+    answer_timeout: Option<Duration>,
+    /// An answer did not come in time: the stream is out of step until
+    /// [`Link::reopen`].
+    stalled: bool,
     /// INT0's active level (command 58; high after power-up).
     int0_active_high: bool,
     int0: super::LevelChanges,
 }
+
+/// How long an answer may take beyond the server's own INT0 wait: the
+/// simulator answers in microseconds, so a silence this long is a frozen or
+/// hung far end (a stopped process, a link that accepts but never
+/// answers), not load: the host's own stalls here are tens of ms. Without
+/// it, the engine would block in a read for ever, its phase saying RUNNING
+/// while nothing flows, and a stop would never be taken.
+const ANSWER_LIMIT: Duration = Duration::from_millis(200);
 
 impl SocketLink {
     /// Connects to a serving simulator.
@@ -31,6 +44,8 @@ impl SocketLink {
             client,
             path: path.into(),
             pending_wait: None,
+            answer_timeout: None,
+            stalled: false,
             int0_active_high: true,
             int0: super::LevelChanges::default(),
         })
@@ -45,8 +60,29 @@ impl SocketLink {
     }
 }
 
+impl SocketLink {
+    /// Bounds the next answer's wait to `wait` (what the server may spend
+    /// waiting for INT0) plus [`ANSWER_LIMIT`]; the socket option is set
+    /// only when that bound changes (one system call, not one per
+    /// exchange).
+    fn bound_answer(&mut self, wait: Duration) -> Result<Duration, LinkError> {
+        let limit = wait + ANSWER_LIMIT;
+        if self.answer_timeout != Some(limit) {
+            self.client.set_answer_timeout(Some(limit)).map_err(|e| self.err("set the answer timeout", e))?;
+            self.answer_timeout = Some(limit);
+        }
+        Ok(limit)
+    }
+}
+
 impl Link for SocketLink {
     fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
+        // An answer that never came leaves the stream out of step: nothing
+        // more goes through it until it is reopened.
+        if self.stalled {
+            return Err(LinkError::Stalled { what: self.describe(), waited: Duration::ZERO });
+        }
+        let limit = self.bound_answer(self.pending_wait.unwrap_or_default())?;
         let result = match self.pending_wait.take() {
             Some(timeout) => match self.client.transfer_when_ready(timeout, tx, rx) {
                 Ok(Some(lines)) => {
@@ -59,7 +95,15 @@ impl Link for SocketLink {
             },
             None => self.client.transfer(tx, rx),
         };
-        let lines = result.map_err(|e| self.err("transfer", e))?;
+        let lines = result.map_err(|e| {
+            if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) {
+                self.stalled = true;
+                tracing::warn!(link = %self.describe(), waited_ms = limit.as_millis() as u64, "link stalled: no answer");
+                LinkError::Stalled { what: self.describe(), waited: limit }
+            } else {
+                self.err("transfer", e)
+            }
+        })?;
         let high = lines & ecmxf_sim::server::LINE_INT0 != 0;
         self.int0.saw(high == self.int0_active_high);
         Ok(())
@@ -93,6 +137,8 @@ impl Link for SocketLink {
         self.client = SocketClient::connect(&self.path)
             .map_err(|e| LinkError::io(format!("reconnect to simulator at {}", self.path.display()), e))?;
         self.pending_wait = None;
+        self.answer_timeout = None;
+        self.stalled = false;
         self.int0 = super::LevelChanges::default();
         Ok(())
     }
