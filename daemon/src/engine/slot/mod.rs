@@ -8,8 +8,9 @@
 //! - `fair`: the queue in front of the slot, round-robin between clients.
 //! - `transaction`: the one job on the slot (`Active`), advanced a step
 //!   at a time between FIFO exchanges. What every kind of request shares
-//!   lives there: a read started once, the polls (a GET that is the poll,
-//!   the answer one exchange behind), deadlines, the reply.
+//!   lives there: a read started once, deadlines, the reply; the polls (a
+//!   GET that is the poll, the answer one exchange behind) and what the
+//!   transaction wants of the link in `transaction/polls.rs`.
 //! - `handler`: what one kind of request does on the slot (`Handler`:
 //!   start, the GET that polls it, what to do when the chip ends a
 //!   command). `kind`: the one place a request picks its handler
