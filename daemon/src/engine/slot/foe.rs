@@ -164,6 +164,7 @@ impl Handler for Foe {
                 self.report(cx);
                 self.fetch_next(cx)
             }
+            // Never: `ended` follows a started step.
             Phase::Start => Ok(Next::Done(Ok(Vec::new()))),
         }
     }
