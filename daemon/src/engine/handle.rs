@@ -24,7 +24,7 @@ use super::command::Command;
 use super::core::{Inbound, Outbound, Shared};
 use super::error::{EngineError, NotRunning};
 use super::events::{Event, RING as EVENT_RING};
-use super::inputs::{InputFrame, read_record};
+use super::inputs::{InputFrame, read_frame};
 use super::layout::NetworkLayout;
 use super::output_writes::{OutputWrite, Writers};
 use super::telemetry::Telemetry;
@@ -92,9 +92,9 @@ pub(crate) fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle 
         .spawn(move || {
             while !stop.load(Ordering::Relaxed) {
                 let mut newest = None;
-                while let Some(r) = read_record(&mut consumer) {
+                while let Some(frame) = read_frame(&mut consumer) {
                     // No subscribers is fine: the frame is dropped.
-                    let frame = Arc::new(InputFrame { seq: r.seq, time_ns: r.time_ns, gap: r.gap, data: r.data });
+                    let frame = Arc::new(frame);
                     let _ = tx.send(Arc::clone(&frame));
                     newest = Some(frame);
                 }

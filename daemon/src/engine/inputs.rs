@@ -12,6 +12,10 @@
 //! last frame and the cycle time (the chip restarts its cycle counting at
 //! bring-up, so there is nothing better to count).
 //!
+//! The distributor reads each record straight back into the
+//! [`InputFrame`] subscribers get ([`read_frame`]): one copy out of the
+//! ring, no intermediate type.
+//!
 //! Nothing here allocates or locks.
 
 use std::time::{Duration, Instant};
@@ -103,19 +107,6 @@ impl InputPublisher {
     }
 }
 
-/// One input frame as read back from the ring.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub(crate) struct InputRecord {
-    /// DC-cycle sequence number.
-    pub seq: u64,
-    /// When the engine received it, ns since the engine started.
-    pub time_ns: u64,
-    /// Cycles before this frame that the engine never received.
-    pub gap: u64,
-    /// The frame.
-    pub data: Vec<u8>,
-}
-
 /// One input frame (one DC cycle's inputs).
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct InputFrame {
@@ -130,8 +121,9 @@ pub struct InputFrame {
     pub data: Vec<u8>,
 }
 
-/// Reads the next record from the ring's consumer side, if whole.
-pub(crate) fn read_record(c: &mut rtrb::Consumer<u8>) -> Option<InputRecord> {
+/// Reads the next frame from the ring's consumer side, if its record is
+/// whole: the frame subscribers get, its bytes copied once, out of the ring.
+pub(crate) fn read_frame(c: &mut rtrb::Consumer<u8>) -> Option<InputFrame> {
     // Records are committed whole, so a header means its frame is there too;
     // the check below only guards against a foreign writer.
     let available = c.slots();
@@ -151,10 +143,12 @@ pub(crate) fn read_record(c: &mut rtrb::Consumer<u8>) -> Option<InputRecord> {
     head.commit_all();
     let body = c.read_chunk(len).ok()?;
     let (a, b) = body.as_slices();
-    let data: Vec<u8> = a.iter().chain(b.iter()).copied().collect();
+    let mut data = Vec::with_capacity(len);
+    data.extend_from_slice(a);
+    data.extend_from_slice(b);
     body.commit_all();
     let word = |r: std::ops::Range<usize>| u64::from_le_bytes(h[r].try_into().unwrap_or([0; 8]));
-    Some(InputRecord { seq: word(4..12), time_ns: word(12..20), gap: word(20..28), data })
+    Some(InputFrame { seq: word(4..12), time_ns: word(12..20), gap: word(20..28), data })
 }
 
 #[cfg(test)]
@@ -167,14 +161,14 @@ mod tests {
     }
 
     #[test]
-    fn records_round_trip_through_the_ring() {
+    fn frames_round_trip_through_the_ring() {
         let (mut p, mut c) = publisher(1024);
         assert_eq!(p.publish(&[1, 2, 3, 4, 5, 6, 7], 3, Instant::now()), 2, "whole frames only");
-        let r1 = read_record(&mut c).unwrap();
-        let r2 = read_record(&mut c).unwrap();
+        let r1 = read_frame(&mut c).unwrap();
+        let r2 = read_frame(&mut c).unwrap();
         assert_eq!((r1.seq, r1.gap, r1.data.as_slice()), (1, 0, &[1, 2, 3][..]));
         assert_eq!((r2.seq, r2.gap, r2.data.as_slice()), (2, 0, &[4, 5, 6][..]));
-        assert!(read_record(&mut c).is_none());
+        assert!(read_frame(&mut c).is_none());
     }
 
     #[test]
@@ -195,7 +189,7 @@ mod tests {
         // Down for 10 ms at 1 ms cycles: 10 frames never came.
         p.resume(t0 + Duration::from_millis(10), Duration::from_millis(1));
         p.publish(&[2, 3], 1, t0 + Duration::from_millis(11));
-        let seqs: Vec<(u64, u64)> = std::iter::from_fn(|| read_record(&mut c)).map(|r| (r.seq, r.gap)).collect();
+        let seqs: Vec<(u64, u64)> = std::iter::from_fn(|| read_frame(&mut c)).map(|r| (r.seq, r.gap)).collect();
         assert_eq!(seqs, [(1, 0), (12, 10), (13, 0)]);
     }
 
@@ -204,7 +198,7 @@ mod tests {
         let (mut p, mut c) = publisher(1024);
         p.resume(Instant::now(), Duration::from_micros(125));
         p.publish(&[9], 1, Instant::now());
-        let r = read_record(&mut c).unwrap();
+        let r = read_frame(&mut c).unwrap();
         assert_eq!((r.seq, r.gap), (1, 0));
     }
 }

@@ -154,6 +154,25 @@ pub enum Immediate {
     Emergencies(u8),
 }
 
+impl SlotRequest {
+    /// The bytes the request carries to the chip: an SDO download's, a raw
+    /// datagram's, an FoE file; empty for the others.
+    pub(super) fn payload(&self) -> &[u8] {
+        match self {
+            Self::SdoWrite { data, .. } | Self::Raw { data, .. } | Self::FoeWrite { data, .. } => data,
+            _ => &[],
+        }
+    }
+
+    /// An FoE transfer's file name; empty for the others.
+    pub(super) fn file_name(&self) -> &str {
+        match self {
+            Self::FoeWrite { name, .. } | Self::FoeRead { name, .. } => name,
+            _ => "",
+        }
+    }
+}
+
 /// The request in words, for errors a client reads.
 impl std::fmt::Display for SlotRequest {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
