@@ -18,6 +18,7 @@
 use crate::master::SlaveInfoCode;
 use crate::master::mailbox_channel::framing::{SdoAbortCode, SdoRequest, SdoResponse};
 
+use super::GATEWAY;
 use crate::master::Master;
 
 fn u16_(v: u16) -> Vec<u8> {
@@ -48,14 +49,14 @@ async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, Sdo
         (0xF000, 2) => Ok(u16_(slaves as u16)),
         (0xF020, 0) => Ok(vec![slaves.min(255) as u8]),
         (0xF020, s) if usize::from(s) <= slaves => {
-            master.station_address(s - 1).await.map(u16_).ok_or(SdoAbortCode::GENERAL)
+            master.station_address(s - 1, GATEWAY).await.map(u16_).ok_or(SdoAbortCode::GENERAL)
         }
         (0x8000..=0x8FFF, _) => {
             let n = slave_of(0x8000)?;
             let s = &layout.slaves[usize::from(n)];
             match subindex {
                 0 => Ok(vec![7]),
-                1 => master.station_address(n).await.map(u16_).ok_or(SdoAbortCode::GENERAL),
+                1 => master.station_address(n, GATEWAY).await.map(u16_).ok_or(SdoAbortCode::GENERAL),
                 3 => Ok(s.name.as_bytes().to_vec()),
                 5 => Ok(u32_(s.vendor_id)),
                 6 => Ok(u32_(s.product_code)),
@@ -71,7 +72,7 @@ async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, Sdo
                 2 => SlaveInfoCode::AlStatus,
                 _ => return Err(missing()),
             };
-            let v = master.slave_number(n, item).await.map_err(|_| SdoAbortCode::GENERAL)?;
+            let v = master.slave_number(n, item, GATEWAY).await.map_err(|_| SdoAbortCode::GENERAL)?;
             Ok(u16_(v as u16))
         }
         _ => Err(missing()),
