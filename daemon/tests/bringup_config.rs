@@ -9,6 +9,7 @@ use ecmxf_wire::payload::cia402::Cia402State;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
 use ecmxfd::link::sim::SimLink;
+use ecmxfd::master::Call;
 use ecmxfd::master::Immediate;
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
@@ -16,7 +17,7 @@ use ecmxfd::master::Phase;
 /// Asks the chip's CiA402 helper to enable axis 0, as Cia402.Command ENABLE does.
 async fn enable(m: &Master) {
     let set = ecmxf_wire::payload::cia402::Cia402StateSet { axis: 0, state: Cia402State::OperationEnabled };
-    m.immediate(Immediate::Cia402StateSet(set), None).await.expect("402_STATE_SET");
+    m.immediate(Immediate::Cia402StateSet(set), Call::anonymous(None)).await.expect("402_STATE_SET");
 }
 
 const CONFIG: &str = r#"
@@ -88,7 +89,7 @@ fn configured_mapping_sdos_and_helper_are_applied() {
     // Per-slave DC: the first drive free-runs, the second follows the cycle
     // (the IO slave has no DC unit).
     let dc = |slave| {
-        let d = rt_block(m.slave_info(slave, SlaveInfoCode::DcCycle)).unwrap();
+        let d = rt_block(m.slave_info(slave, SlaveInfoCode::DcCycle, Call::anonymous(None))).unwrap();
         match SlaveInfo::decode(SlaveInfoCode::DcCycle, &d).unwrap() {
             SlaveInfo::DcCycle(ns) => ns,
             other => panic!("{other:?}"),
@@ -98,8 +99,8 @@ fn configured_mapping_sdos_and_helper_are_applied() {
     assert_eq!(l.rx_size, 13 + 7 + 1);
     let rt = tokio::runtime::Builder::new_current_thread().enable_all().build().unwrap();
     rt.block_on(async {
-        assert_eq!(m.sdo_read(0, 0x6083, 0, false, None).await.unwrap(), 5555u32.to_le_bytes());
-        assert_eq!(m.sdo_read(1, 0x6085, 0, false, None).await.unwrap(), 10_000u32.to_le_bytes());
+        assert_eq!(m.sdo_read(0, 0x6083, 0, false, Call::anonymous(None)).await.unwrap(), 5555u32.to_le_bytes());
+        assert_eq!(m.sdo_read(1, 0x6085, 0, false, Call::anonymous(None)).await.unwrap(), 10_000u32.to_le_bytes());
         // Restart interlock: the axis comes up disabled; enabled on request,
         // the helper walks TI axis 1 to operation enabled.
         let mut inputs = m.subscribe();
@@ -286,28 +287,28 @@ fn a_new_configuration_is_applied_while_running() {
             .replace("[[0x6040, 0, 16], [0x6060, 0, 8], [0x607A, 0, 32]]", "[[0x6040, 0, 16], [0x607A, 0, 32]]")
             .replace("value = 5555", "value = 6666");
         let new = Config::parse(&text, "t.toml".as_ref()).unwrap();
-        m.apply_config(new.clone(), Some(Duration::from_secs(20))).await.unwrap();
+        m.apply_config(new.clone(), Call::anonymous(Some(Duration::from_secs(20)))).await.unwrap();
         assert_eq!(m.layout().slaves[1].rx_bytes, 6, "the new mapping took");
-        assert_eq!(m.sdo_read(0, 0x6083, 0, false, None).await.unwrap(), 6666u32.to_le_bytes());
+        assert_eq!(m.sdo_read(0, 0x6083, 0, false, Call::anonymous(None)).await.unwrap(), 6666u32.to_le_bytes());
         assert_eq!(m.config(), new);
 
         // What cannot change names itself, and nothing happens.
         let mut other = new.clone();
         other.link = ecmxfd::config::LinkConfig::SimSocket { socket: "/tmp/x.sock".into() };
-        let e = m.apply_config(other, None).await.unwrap_err();
+        let e = m.apply_config(other, Call::anonymous(None)).await.unwrap_err();
         assert!(matches!(e, ecmxfd::master::EngineError::BadArgument { field: "link", .. }), "{e}");
         let mut other = new.clone();
         other.cycle.sync0_us = 100;
-        let e = m.apply_config(other, None).await.unwrap_err();
+        let e = m.apply_config(other, Call::anonymous(None)).await.unwrap_err();
         assert!(e.to_string().contains("sync0_us"), "{e}");
         assert_eq!(m.status().recoveries, 1);
 
         // A configuration the network does not match: the error names the
         // slave; a good one brings it back.
         let wrong = Config::parse(&text.replace("product_code = 0x402", "product_code = 0x403"), "t.toml".as_ref());
-        let e = m.apply_config(wrong.unwrap(), Some(Duration::from_secs(2))).await.unwrap_err();
+        let e = m.apply_config(wrong.unwrap(), Call::anonymous(Some(Duration::from_secs(2)))).await.unwrap_err();
         assert!(e.to_string().contains("slave 1"), "{e}");
-        m.apply_config(new, Some(Duration::from_secs(30))).await.unwrap_or_else(|e| panic!("{e}"));
+        m.apply_config(new, Call::anonymous(Some(Duration::from_secs(30)))).await.unwrap_or_else(|e| panic!("{e}"));
         assert_eq!(m.status().phase, Phase::Running);
     });
     m.stop();

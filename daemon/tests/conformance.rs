@@ -25,6 +25,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice, CatalogEntry};
 use ecmxfd::config::SlaveConfig;
+use ecmxfd::master::Call;
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 use ecmxfd::master::pdos::{PdoSource, SlavePdos};
@@ -135,8 +136,9 @@ fn verify(m: &Master, rt: &tokio::runtime::Runtime, at: u8, want: &CatalogDevice
             (s.rx_bytes, s.tx_bytes)
         ));
     }
-    let pdos: SlavePdos =
-        rt.block_on(m.slave_pdos(at, s.rx_bytes, s.tx_bytes)).map_err(|e| format!("PDO listing failed: {e}"))?;
+    let pdos: SlavePdos = rt
+        .block_on(m.slave_pdos(at, s.rx_bytes, s.tx_bytes, Call::anonymous(None)))
+        .map_err(|e| format!("PDO listing failed: {e}"))?;
     let want_source = if want.coe { PdoSource::Coe } else { PdoSource::Sii };
     if pdos.source != want_source {
         return Err(format!("PDOs from {:?}, expected {want_source:?} ({})", pdos.source, pdos.note));

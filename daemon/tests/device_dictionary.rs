@@ -19,6 +19,7 @@ use std::time::{Duration, Instant};
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice};
 use ecmxf_devices::esi::EsiFile;
 use ecmxf_devices::od::ObjectDictionary;
+use ecmxfd::master::Call;
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 use ecmxfd::master::device_dictionary::DictionaryError;
@@ -96,7 +97,7 @@ fn check(dir: &Path, devices: &[CatalogDevice]) -> Vec<String> {
         let mut set = tokio::task::JoinSet::new();
         for i in 0..devices.len() {
             let m = Arc::clone(&master);
-            set.spawn(async move { (i, m.device_dictionary(i as u8).await) });
+            set.spawn(async move { (i, m.device_dictionary(i as u8, Call::anonymous(None)).await) });
         }
         let mut reads: Vec<_> = set.join_all().await;
         reads.sort_by_key(|(i, _)| *i);

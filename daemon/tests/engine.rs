@@ -10,6 +10,7 @@ use ecmxf_wire::payload::sdo::SdoAbortCode;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 use ecmxfd::config::Config;
 use ecmxfd::link::sim::{SimHandle, SimLink};
+use ecmxfd::master::Call;
 use ecmxfd::master::EngineError;
 use ecmxfd::master::EventKind;
 use ecmxfd::master::Master;
@@ -125,39 +126,42 @@ fn brings_the_demo_network_to_op_and_exchanges_process_data() {
 fn sdo_read_write_abort_and_slave_info() {
     let (m, _sim, _serial) = start();
     rt().block_on(async {
-        let v = m.sdo_read(1, 0x1018, 1, false, None).await.unwrap();
+        let v = m.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.unwrap();
         assert_eq!(v, 0x059Du32.to_le_bytes());
-        m.sdo_write(1, 0x6083, 0, false, 12345u32.to_le_bytes().to_vec(), None).await.unwrap();
-        assert_eq!(m.sdo_read(1, 0x6083, 0, false, None).await.unwrap(), 12345u32.to_le_bytes());
-        let e = m.sdo_read(1, 0x5555, 0, false, None).await.unwrap_err();
+        m.sdo_write(1, 0x6083, 0, false, 12345u32.to_le_bytes().to_vec(), Call::anonymous(None)).await.unwrap();
+        assert_eq!(m.sdo_read(1, 0x6083, 0, false, Call::anonymous(None)).await.unwrap(), 12345u32.to_le_bytes());
+        let e = m.sdo_read(1, 0x5555, 0, false, Call::anonymous(None)).await.unwrap_err();
         assert_eq!(
             e,
             EngineError::SdoAbort { slave: 1, index: 0x5555, subindex: 0, code: SdoAbortCode::OBJECT_MISSING }
         );
-        let e = m.sdo_write(1, 0x6041, 0, false, vec![0, 0], None).await.unwrap_err();
+        let e = m.sdo_write(1, 0x6041, 0, false, vec![0, 0], Call::anonymous(None)).await.unwrap_err();
         assert!(matches!(e, EngineError::SdoAbort { code: SdoAbortCode::READ_ONLY, .. }), "{e}");
-        let name = m.slave_info(0, SlaveInfoCode::Name).await.unwrap();
+        let name = m.slave_info(0, SlaveInfoCode::Name, Call::anonymous(None)).await.unwrap();
         assert_eq!(SlaveInfo::decode(SlaveInfoCode::Name, &name).unwrap(), SlaveInfo::Name(b"CORE"));
-        assert!(m.slave_info(9, SlaveInfoCode::Name).await.is_err());
+        assert!(m.slave_info(9, SlaveInfoCode::Name, Call::anonymous(None)).await.is_err());
         // EEPROM: identity words, and a verified write of the alias.
-        assert_eq!(m.eeprom_read(1, 0x08, None).await.unwrap(), 0x059Du32.to_le_bytes());
-        m.eeprom_write(2, 0x04, 0x0033, None).await.unwrap();
-        assert_eq!(&m.eeprom_read(2, 0x04, None).await.unwrap()[..2], &[0x33, 0x00]);
+        assert_eq!(m.eeprom_read(1, 0x08, Call::anonymous(None)).await.unwrap(), 0x059Du32.to_le_bytes());
+        m.eeprom_write(2, 0x04, 0x0033, Call::anonymous(None)).await.unwrap();
+        assert_eq!(&m.eeprom_read(2, 0x04, Call::anonymous(None)).await.unwrap()[..2], &[0x33, 0x00]);
         assert!(m.write_outputs(60, &[0]).is_err(), "beyond the output image");
         // States, freshly read.
         use ecmxf_wire::payload::state::SlaveSelector;
         for target in [SlaveSelector::All, SlaveSelector::One(0), SlaveSelector::One(2)] {
-            assert_eq!(m.get_state(target, None).await.unwrap(), EcatState::Op, "{target:?}");
+            assert_eq!(m.get_state(target, Call::anonymous(None)).await.unwrap(), EcatState::Op, "{target:?}");
         }
-        let e = m.get_state(SlaveSelector::One(9), None).await.unwrap_err();
+        let e = m.get_state(SlaveSelector::One(9), Call::anonymous(None)).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "slave", .. }), "{e}");
         // Ranges: vendor id, product code, revision (words 8..14), odd count.
-        let words = m.eeprom_read_words(1, 0x08, 5, None).await.unwrap();
+        let words = m.eeprom_read_words(1, 0x08, 5, Call::anonymous(None)).await.unwrap();
         assert_eq!(words, [0x059D, 0, 0x0402, 0, *words.get(4).unwrap()]);
-        assert_eq!(words[4], u16::from_le_bytes(m.eeprom_read(1, 0x0C, None).await.unwrap()[..2].try_into().unwrap()));
-        m.eeprom_write_words(2, 0x04, &[0x0044, 0x0000], None).await.unwrap();
-        assert_eq!(m.eeprom_read_words(2, 0x04, 2, None).await.unwrap(), [0x0044, 0x0000]);
-        let e = m.eeprom_read_words(1, 0xFFFF, 2, None).await.unwrap_err();
+        assert_eq!(
+            words[4],
+            u16::from_le_bytes(m.eeprom_read(1, 0x0C, Call::anonymous(None)).await.unwrap()[..2].try_into().unwrap())
+        );
+        m.eeprom_write_words(2, 0x04, &[0x0044, 0x0000], Call::anonymous(None)).await.unwrap();
+        assert_eq!(m.eeprom_read_words(2, 0x04, 2, Call::anonymous(None)).await.unwrap(), [0x0044, 0x0000]);
+        let e = m.eeprom_read_words(1, 0xFFFF, 2, Call::anonymous(None)).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "count", .. }), "{e}");
     });
 }
@@ -184,7 +188,7 @@ fn an_sdo_read_takes_its_start_its_polls_and_one_exchange_for_the_answer() {
         let mut v = Vec::new();
         for _ in 0..40 {
             let before = m.status().exchanges;
-            m.sdo_read(1, 0x1018, 1, false, None).await.unwrap();
+            m.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.unwrap();
             v.push(m.status().exchanges - before);
         }
         v
@@ -203,13 +207,13 @@ fn an_sdo_read_takes_its_start_its_polls_and_one_exchange_for_the_answer() {
 fn a_timed_out_eeprom_read_never_returns_data_to_a_client() {
     let (m, sim, _serial) = start();
     rt().block_on(async {
-        assert_eq!(m.eeprom_read(1, 0x08, None).await.unwrap(), 0x059Du32.to_le_bytes());
+        assert_eq!(m.eeprom_read(1, 0x08, Call::anonymous(None)).await.unwrap(), 0x059Du32.to_le_bytes());
         let normal = sim.with_chip(|c| std::mem::replace(&mut c.config.timing.eeprom_ns, 150_000_000));
-        let e = m.eeprom_read(1, 0x0A, Some(Duration::from_secs(2))).await.unwrap_err();
+        let e = m.eeprom_read(1, 0x0A, Call::anonymous(Some(Duration::from_secs(2)))).await.unwrap_err();
         assert!(e.to_string().contains("EEPROM word 0x000a of slave 1"), "{e}");
         sim.with_chip(|c| c.config.timing.eeprom_ns = normal);
         // The product code's low word, read again within the time.
-        assert_eq!(&m.eeprom_read(1, 0x0A, None).await.unwrap()[..2], &0x0402u16.to_le_bytes());
+        assert_eq!(&m.eeprom_read(1, 0x0A, Call::anonymous(None)).await.unwrap()[..2], &0x0402u16.to_le_bytes());
     });
 }
 
@@ -218,15 +222,15 @@ fn cancelled_requests_leave_the_slot_clean() {
     let (m, _sim, _serial) = start();
     rt().block_on(async {
         for _ in 0..20 {
-            let e = m.sdo_read(1, 0x1018, 2, false, Some(Duration::from_micros(300))).await;
+            let e = m.sdo_read(1, 0x1018, 2, false, Call::anonymous(Some(Duration::from_micros(300)))).await;
             assert!(matches!(e, Err(EngineError::Timeout) | Ok(_)));
         }
         // A dropped future is a cancellation too.
-        let f = m.sdo_read(1, 0x1018, 3, false, None);
+        let f = m.sdo_read(1, 0x1018, 3, false, Call::anonymous(None));
         drop(f);
         // The next callers get their own, fresh results.
         for sub in 1..=4u8 {
-            let v = m.sdo_read(0, 0x1018, sub, false, None).await.unwrap();
+            let v = m.sdo_read(0, 0x1018, sub, false, Call::anonymous(None)).await.unwrap();
             let expect: u32 = [0x089A, 0x3000_0000, 0x0001_0010, 1001][usize::from(sub) - 1];
             assert_eq!(v, expect.to_le_bytes(), "subindex {sub}");
         }
@@ -239,7 +243,7 @@ fn recovers_from_a_chip_warm_reset_and_an_al_error() {
     sim.control("warm-reset").unwrap();
     recovered_from(&m, 0, "reset not noticed");
     rt().block_on(async {
-        assert_eq!(m.sdo_read(1, 0x1018, 1, false, None).await.unwrap(), 0x059Du32.to_le_bytes());
+        assert_eq!(m.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.unwrap(), 0x059Du32.to_le_bytes());
     });
     let before = m.status().recoveries;
     let mut events = m.events();
@@ -307,7 +311,7 @@ fn a_stalled_network_stays_recovering_until_input_frames_flow() {
 async fn eeprom_words(m: &Master, at: &[u16]) -> Vec<[u8; 4]> {
     let mut out = Vec::new();
     for &w in at {
-        out.push(m.eeprom_read(1, w, None).await.unwrap());
+        out.push(m.eeprom_read(1, w, Call::anonymous(None)).await.unwrap());
     }
     out
 }
@@ -345,10 +349,14 @@ fn recovers_from_unplug_replug_and_bit_flips() {
     rt().block_on(async {
         for i in 0..100u32 {
             let v = (i * 7919).to_le_bytes().to_vec();
-            m.sdo_write(1, 0x6083, 0, false, v.clone(), None).await.unwrap();
-            assert_eq!(m.sdo_read(1, 0x6083, 0, false, None).await.unwrap(), v);
+            m.sdo_write(1, 0x6083, 0, false, v.clone(), Call::anonymous(None)).await.unwrap();
+            assert_eq!(m.sdo_read(1, 0x6083, 0, false, Call::anonymous(None)).await.unwrap(), v);
             let n = i as usize % words.len();
-            assert_eq!(m.eeprom_read(1, 0x08 + 2 * n as u16, None).await.unwrap(), words[n], "read {i}");
+            assert_eq!(
+                m.eeprom_read(1, 0x08 + 2 * n as u16, Call::anonymous(None)).await.unwrap(),
+                words[n],
+                "read {i}"
+            );
         }
     });
     sim.control("flip mosi 0").unwrap();
@@ -360,21 +368,24 @@ fn recovers_from_unplug_replug_and_bit_flips() {
 #[test]
 fn cancelling_every_transaction_type_leaves_the_slot_clean() {
     let (m, _sim, _serial) = start();
-    let short = Some(Duration::from_micros(200));
+    // Each request its own 200 us from when it is made.
+    let short = || Call::anonymous(Some(Duration::from_micros(200)));
     rt().block_on(async {
         for _ in 0..5 {
-            let _ = m.sdo_read(1, 0x1018, 2, false, short).await;
-            let _ = m.sdo_write(1, 0x6083, 0, false, vec![1, 2, 3, 4], short).await;
-            let _ = m.eeprom_read(1, 0x0A, short).await;
-            let _ = m.eeprom_write(2, 0x04, 0x0003, short).await;
-            let _ = m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, short).await;
+            let _ = m.sdo_read(1, 0x1018, 2, false, short()).await;
+            let _ = m.sdo_write(1, 0x6083, 0, false, vec![1, 2, 3, 4], short()).await;
+            let _ = m.eeprom_read(1, 0x0A, short()).await;
+            let _ = m.eeprom_write(2, 0x04, 0x0003, short()).await;
+            let _ = m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, short()).await;
         }
         // Every next caller gets its own fresh result.
-        assert_eq!(m.sdo_read(1, 0x1018, 2, false, None).await.unwrap(), 0x0402u32.to_le_bytes());
-        assert_eq!(m.eeprom_read(1, 0x0A, None).await.unwrap(), 0x0402u32.to_le_bytes());
-        m.sdo_write(1, 0x6083, 0, false, 777u32.to_le_bytes().to_vec(), None).await.unwrap();
-        assert_eq!(m.sdo_read(1, 0x6083, 0, false, None).await.unwrap(), 777u32.to_le_bytes());
-        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, None).await.unwrap();
+        assert_eq!(m.sdo_read(1, 0x1018, 2, false, Call::anonymous(None)).await.unwrap(), 0x0402u32.to_le_bytes());
+        assert_eq!(m.eeprom_read(1, 0x0A, Call::anonymous(None)).await.unwrap(), 0x0402u32.to_le_bytes());
+        m.sdo_write(1, 0x6083, 0, false, 777u32.to_le_bytes().to_vec(), Call::anonymous(None)).await.unwrap();
+        assert_eq!(m.sdo_read(1, 0x6083, 0, false, Call::anonymous(None)).await.unwrap(), 777u32.to_le_bytes());
+        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, Call::anonymous(None))
+            .await
+            .unwrap();
     });
     assert_eq!(m.status().phase, Phase::Running);
 }
@@ -386,24 +397,39 @@ fn raw_datagrams_reach_the_slaves_registers() {
     let head = |command, length, adp, ado| DatagramHead { command, length, adp, ado, logical: 0, timeout_us: 10_000 };
     rt().block_on(async {
         // BRD of the AL status register: every slave answers, all in OP.
-        let a = m.raw_datagram(head(DatagramCommand::Brd, 2, 0, 0x0130), vec![], None).await.unwrap();
+        let a = m.raw_datagram(head(DatagramCommand::Brd, 2, 0, 0x0130), vec![], Call::anonymous(None)).await.unwrap();
         assert_eq!(a.working_counter, 3);
         assert_eq!(a.data, [0x08, 0x00]);
         // APRD of slave 1's station address, then FPRD by that address.
-        let a = m.raw_datagram(head(DatagramCommand::Aprd, 2, 0xFFFF, 0x0010), vec![], None).await.unwrap();
+        let a = m
+            .raw_datagram(head(DatagramCommand::Aprd, 2, 0xFFFF, 0x0010), vec![], Call::anonymous(None))
+            .await
+            .unwrap();
         assert_eq!(a.working_counter, 1);
         let station = u16::from_le_bytes([a.data[0], a.data[1]]);
-        let b = m.raw_datagram(head(DatagramCommand::Fprd, 2, station, 0x0010), vec![], None).await.unwrap();
+        let b = m
+            .raw_datagram(head(DatagramCommand::Fprd, 2, station, 0x0010), vec![], Call::anonymous(None))
+            .await
+            .unwrap();
         assert_eq!((b.working_counter, b.data), (1, station.to_le_bytes().to_vec()));
         // Nobody at that position.
-        let a = m.raw_datagram(head(DatagramCommand::Aprd, 2, 0xFFF0, 0x0010), vec![], None).await.unwrap();
+        let a = m
+            .raw_datagram(head(DatagramCommand::Aprd, 2, 0xFFF0, 0x0010), vec![], Call::anonymous(None))
+            .await
+            .unwrap();
         assert_eq!(a.working_counter, 0);
         // Bad arguments are refused before anything reaches the chip, naming the field.
-        let e = m.raw_datagram(head(DatagramCommand::Brd, 2, 0, 0x0130), vec![1, 2], None).await.unwrap_err();
+        let e = m
+            .raw_datagram(head(DatagramCommand::Brd, 2, 0, 0x0130), vec![1, 2], Call::anonymous(None))
+            .await
+            .unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "data", .. }), "{e}");
-        let e = m.raw_datagram(head(DatagramCommand::Fpwr, 4, station, 0x0F00), vec![1], None).await.unwrap_err();
+        let e = m
+            .raw_datagram(head(DatagramCommand::Fpwr, 4, station, 0x0F00), vec![1], Call::anonymous(None))
+            .await
+            .unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "data", .. }), "{e}");
-        let e = m.raw_datagram(head(DatagramCommand::Brd, 300, 0, 0), vec![], None).await.unwrap_err();
+        let e = m.raw_datagram(head(DatagramCommand::Brd, 300, 0, 0), vec![], Call::anonymous(None)).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "length", .. }), "{e}");
     });
 }
@@ -414,39 +440,41 @@ fn foe_files_go_to_a_slave_and_come_back() {
     let (m, sim, _serial) = start();
     // Larger than one chunk and not a multiple of it.
     let file: Vec<u8> = (0..5000u32).map(|i| (i * 7 + i / 251) as u8).collect();
-    let long = Some(Duration::from_secs(30));
+    let long = || Call::anonymous(Some(Duration::from_secs(30)));
     rt().block_on(async {
         let progress = Arc::new(TransferProgress::default());
-        m.foe_write(1, "firmware.bin", 0, file.clone(), Some(progress.clone()), long).await.unwrap();
+        m.foe_write(1, "firmware.bin", 0, file.clone(), Some(progress.clone()), long()).await.unwrap();
         assert_eq!(progress.get(), (5000, 5000));
         let stored = sim.with_chip(|c| c.net.slaves[1].files.get(&b"firmware.bin"[..]).cloned());
         assert_eq!(stored.as_deref(), Some(&file[..]), "the slave holds exactly the file written");
 
         let progress = Arc::new(TransferProgress::default());
-        let back = m.foe_read(1, "firmware.bin", 0, 65536, Some(progress.clone()), long).await.unwrap();
+        let back = m.foe_read(1, "firmware.bin", 0, 65536, Some(progress.clone()), long()).await.unwrap();
         assert_eq!(back, file);
         assert_eq!(progress.get(), (5000, 5000));
         // A file larger than the caller allows is not silently cut.
-        let e = m.foe_read(1, "firmware.bin", 0, 100, None, long).await;
+        let e = m.foe_read(1, "firmware.bin", 0, 100, None, long()).await;
         assert!(e.is_err_and(|e| matches!(e, EngineError::Failed(_))));
 
         // Missing file and wrong password fail and name the transfer.
-        let e = m.foe_read(1, "nothing.bin", 0, 65536, None, long).await.unwrap_err();
+        let e = m.foe_read(1, "nothing.bin", 0, 65536, None, long()).await.unwrap_err();
         assert!(e.to_string().contains("nothing.bin") && e.to_string().contains("slave 1"), "{e}");
         sim.with_chip(|c| c.net.slaves[1].foe_password = 0x1234);
-        let e = m.foe_write(1, "x.bin", 0, vec![1, 2, 3], None, long).await.unwrap_err();
+        let e = m.foe_write(1, "x.bin", 0, vec![1, 2, 3], None, long()).await.unwrap_err();
         assert!(matches!(e, EngineError::Failed(_)), "{e}");
-        m.foe_write(1, "x.bin", 0x1234, vec![1, 2, 3], None, long).await.unwrap();
+        m.foe_write(1, "x.bin", 0x1234, vec![1, 2, 3], None, long()).await.unwrap();
         // Bad arguments.
-        let e = m.foe_write(1, "", 0, vec![1], None, long).await.unwrap_err();
+        let e = m.foe_write(1, "", 0, vec![1], None, long()).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "name", .. }), "{e}");
-        let e = m.foe_write(1, "big", 0, vec![0; 0x40001], None, long).await.unwrap_err();
+        let e = m.foe_write(1, "big", 0, vec![0; 0x40001], None, long()).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "length", .. }), "{e}");
 
         // Cancelled half-way: the next transaction still gets its own result.
-        let _ = m.foe_write(1, "firmware.bin", 0, vec![9; 20_000], None, Some(Duration::from_millis(30))).await;
-        assert_eq!(m.sdo_read(1, 0x1018, 2, false, None).await.unwrap(), 0x0402u32.to_le_bytes());
-        let back = m.foe_read(1, "x.bin", 0x1234, 16, None, long).await.unwrap();
+        let _ = m
+            .foe_write(1, "firmware.bin", 0, vec![9; 20_000], None, Call::anonymous(Some(Duration::from_millis(30))))
+            .await;
+        assert_eq!(m.sdo_read(1, 0x1018, 2, false, Call::anonymous(None)).await.unwrap(), 0x0402u32.to_le_bytes());
+        let back = m.foe_read(1, "x.bin", 0x1234, 16, None, long()).await.unwrap();
         assert_eq!(back, [1, 2, 3]);
     });
     assert_eq!(m.status().phase, Phase::Running);
@@ -457,18 +485,18 @@ fn pdo_configuration_read_matches_the_object_dictionary() {
     let (m, _sim, _serial) = start();
     rt().block_on(async {
         for (slave, assign) in [(0u8, 0x1C12u16), (1, 0x1C13), (2, 0x1C12)] {
-            let cfg = m.pdo_config_read(slave, assign, None).await.unwrap();
+            let cfg = m.pdo_config_read(slave, assign, Call::anonymous(None)).await.unwrap();
             assert_eq!((cfg.slave, cfg.assign_index), (slave, assign));
-            let count = m.sdo_read(slave, assign, 0, false, None).await.unwrap()[0];
+            let count = m.sdo_read(slave, assign, 0, false, Call::anonymous(None)).await.unwrap()[0];
             assert_eq!(cfg.pdo_count, count);
             assert!(count > 0, "slave {slave} assigns PDOs in {assign:#06x}");
             for (i, pdo) in cfg.used().iter().enumerate() {
-                let index = m.sdo_read(slave, assign, i as u8 + 1, false, None).await.unwrap();
+                let index = m.sdo_read(slave, assign, i as u8 + 1, false, Call::anonymous(None)).await.unwrap();
                 assert_eq!(pdo.index.to_le_bytes(), index[..2]);
-                let entries = m.sdo_read(slave, pdo.index, 0, false, None).await.unwrap()[0];
+                let entries = m.sdo_read(slave, pdo.index, 0, false, Call::anonymous(None)).await.unwrap()[0];
                 assert_eq!(pdo.entry_count, u16::from(entries));
                 for (k, e) in pdo.entries.iter().take(entries.into()).enumerate() {
-                    let raw = m.sdo_read(slave, pdo.index, k as u8 + 1, false, None).await.unwrap();
+                    let raw = m.sdo_read(slave, pdo.index, k as u8 + 1, false, Call::anonymous(None)).await.unwrap();
                     assert_eq!(
                         e.to_u32().to_le_bytes(),
                         raw[..4],
@@ -479,9 +507,9 @@ fn pdo_configuration_read_matches_the_object_dictionary() {
                 }
             }
         }
-        let e = m.pdo_config_read(0, 0x1600, None).await.unwrap_err();
+        let e = m.pdo_config_read(0, 0x1600, Call::anonymous(None)).await.unwrap_err();
         assert!(matches!(e, EngineError::BadArgument { field: "assign_index", .. }), "{e}");
-        assert!(m.pdo_config_read(9, 0x1C12, None).await.is_err(), "no slave 9");
+        assert!(m.pdo_config_read(9, 0x1C12, Call::anonymous(None)).await.is_err(), "no slave 9");
     });
 }
 
@@ -490,14 +518,14 @@ fn clients_can_reinit_and_warm_reset_the_network() {
     let (m, sim, _serial) = start();
     rt().block_on(async {
         let mut events = m.events();
-        m.sdo_write(0, 0x6083, 0, false, 4242u32.to_le_bytes().to_vec(), None).await.unwrap();
-        m.reinit(None).await.unwrap();
+        m.sdo_write(0, 0x6083, 0, false, 4242u32.to_le_bytes().to_vec(), Call::anonymous(None)).await.unwrap();
+        m.reinit(Call::anonymous(None)).await.unwrap();
         assert_eq!(m.status().phase, Phase::Running);
         assert_eq!(m.layout().slaves.len(), 3);
         // The chip's staging flash survives a re-init, not a warm reset.
-        m.foe_write(1, "f", 0, vec![1, 2, 3], None, None).await.unwrap();
+        m.foe_write(1, "f", 0, vec![1, 2, 3], None, Call::anonymous(None)).await.unwrap();
         assert_eq!(sim.with_chip(|c| c.flash[..3].to_vec()), [1, 2, 3]);
-        m.warm_reset(None).await.unwrap();
+        m.warm_reset(Call::anonymous(None)).await.unwrap();
         assert_eq!(m.status().recoveries, 2);
         assert_eq!(sim.with_chip(|c| c.flash[..3].to_vec()), [0xFF; 3], "the chip was reset");
         let mut reasons = Vec::new();
@@ -509,13 +537,12 @@ fn clients_can_reinit_and_warm_reset_the_network() {
         assert_eq!(reasons.len(), 2, "{reasons:?}");
         assert!(reasons[0].contains("re-init") && reasons[1].contains("warm reset"), "{reasons:?}");
         // Everything works after both.
-        assert_eq!(m.sdo_read(1, 0x1018, 1, false, None).await.unwrap(), 0x059Du32.to_le_bytes());
+        assert_eq!(m.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.unwrap(), 0x059Du32.to_le_bytes());
     });
 }
 
 #[test]
 fn a_busy_client_does_not_starve_another() {
-    use ecmxfd::master::as_client;
     use std::sync::atomic::{AtomicU64, Ordering};
     let (m, _sim, _serial) = start();
     let done = Arc::new(AtomicU64::new(0));
@@ -524,14 +551,15 @@ fn a_busy_client_does_not_starve_another() {
         let mut busy = Vec::new();
         for _ in 0..100 {
             let (m, done) = (Arc::clone(&m), Arc::clone(&done));
-            busy.push(tokio::spawn(as_client(1, async move {
-                m.sdo_read(1, 0x1018, 1, false, Some(Duration::from_secs(30))).await.unwrap();
+            let busy_client = Call::new(1, Some(Instant::now() + Duration::from_secs(30)));
+            busy.push(tokio::spawn(async move {
+                m.sdo_read(1, 0x1018, 1, false, busy_client).await.unwrap();
                 done.fetch_add(1, Ordering::Relaxed);
-            })));
+            }));
         }
         tokio::time::sleep(Duration::from_millis(20)).await;
         let before = done.load(Ordering::Relaxed);
-        let v = as_client(2, m.sdo_read(1, 0x1018, 2, false, None)).await.unwrap();
+        let v = m.sdo_read(1, 0x1018, 2, false, Call::new(2, None)).await.unwrap();
         let after = done.load(Ordering::Relaxed);
         assert_eq!(v, 0x0402u32.to_le_bytes());
         assert!(before < 90, "the busy client's requests were still queued ({before} done)");
@@ -569,7 +597,7 @@ fn every_phase_and_state_change_reaches_the_snapshot_watch() {
                 phases
             }
         });
-        m.reinit(Some(Duration::from_secs(20))).await.unwrap();
+        m.reinit(Call::anonymous(Some(Duration::from_secs(20)))).await.unwrap();
         let phases = tokio::time::timeout(Duration::from_secs(5), seen).await.unwrap().unwrap();
         let recovering = phases.iter().position(|p| *p == Phase::Recovering);
         let running = phases.iter().rposition(|p| *p == Phase::Running);
@@ -577,11 +605,15 @@ fn every_phase_and_state_change_reaches_the_snapshot_watch() {
 
         // A state asked for below the target: the next snapshots say so,
         // without anyone reading the status in a loop.
-        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::SafeOp, None).await.unwrap();
+        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::SafeOp, Call::anonymous(None))
+            .await
+            .unwrap();
         let s = m.wait_status(Duration::from_secs(2), |s| s.ecat_state == EcatState::SafeOp).await;
         assert!(s.is_ok(), "the watch never showed SAFE-OP: {s:?}");
         assert!(!m.health().is_healthy(), "{:?}", m.health());
-        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, None).await.unwrap();
+        m.set_state(ecmxf_wire::payload::state::SlaveSelector::All, EcatState::Op, Call::anonymous(None))
+            .await
+            .unwrap();
         let s = m.wait_status(Duration::from_secs(2), |s| s.ecat_state == EcatState::Op).await;
         assert!(s.is_ok(), "the watch never showed OP again: {s:?}");
     });

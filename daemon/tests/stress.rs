@@ -12,6 +12,7 @@ use std::time::{Duration, Instant};
 use ecmxf_sim::Chip;
 use ecmxfd::config::Config;
 use ecmxfd::link::sim::SimLink;
+use ecmxfd::master::Call;
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 
@@ -57,11 +58,11 @@ fn sixteen_tasks_of_sdo_traffic_with_cyclic_data() {
                     value = value.wrapping_add(0x1_0001);
                     let bytes = value.to_le_bytes()[..size].to_vec();
                     let t0 = Instant::now();
-                    m.sdo_write(slave, index, 0, false, bytes.clone(), Some(Duration::from_secs(5)))
+                    m.sdo_write(slave, index, 0, false, bytes.clone(), Call::anonymous(Some(Duration::from_secs(5))))
                         .await
                         .unwrap_or_else(|e| panic!("task {n}: write {index:#06x}: {e}"));
                     let back = m
-                        .sdo_read(slave, index, 0, false, Some(Duration::from_secs(5)))
+                        .sdo_read(slave, index, 0, false, Call::anonymous(Some(Duration::from_secs(5))))
                         .await
                         .unwrap_or_else(|e| panic!("task {n}: read {index:#06x}: {e}"));
                     latencies.push(t0.elapsed());

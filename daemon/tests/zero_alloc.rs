@@ -18,6 +18,7 @@ use ecmxf_sim::Chip;
 use ecmxfd::config::Config;
 use ecmxfd::link::sim::SimLink;
 use ecmxfd::link::{Link, LinkError};
+use ecmxfd::master::Call;
 use ecmxfd::master::Master;
 use ecmxfd::master::Phase;
 
@@ -121,8 +122,8 @@ fn the_cyclic_path_and_transactions_allocate_nothing_on_the_engine_thread() {
     // Warm up: every path runs once before counting (the FIFO plan settles,
     // the fair queue has its line, the first transaction has run).
     rt.block_on(async {
-        master.sdo_read(1, 0x1018, 1, false, None).await.unwrap();
-        master.sdo_write(1, 0x605A, 0, false, vec![2, 0], None).await.unwrap();
+        master.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.unwrap();
+        master.sdo_write(1, 0x605A, 0, false, vec![2, 0], Call::anonymous(None)).await.unwrap();
     });
     std::thread::sleep(Duration::from_millis(200));
 
@@ -142,9 +143,12 @@ fn the_cyclic_path_and_transactions_allocate_nothing_on_the_engine_thread() {
     // Transactions: SDO reads and writes, slave information.
     rt.block_on(async {
         for _ in 0..50 {
-            master.sdo_read(1, 0x1018, 1, false, None).await.unwrap();
-            master.sdo_write(1, 0x605A, 0, false, vec![2, 0], None).await.unwrap();
-            master.slave_info(2, ecmxf_wire::payload::slave_info::SlaveInfoCode::State).await.unwrap();
+            master.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.unwrap();
+            master.sdo_write(1, 0x605A, 0, false, vec![2, 0], Call::anonymous(None)).await.unwrap();
+            master
+                .slave_info(2, ecmxf_wire::payload::slave_info::SlaveInfoCode::State, Call::anonymous(None))
+                .await
+                .unwrap();
         }
     });
     let after = master.status();
@@ -152,7 +156,8 @@ fn the_cyclic_path_and_transactions_allocate_nothing_on_the_engine_thread() {
     // The control: an error reply is made on the engine thread (its reason
     // is a String), and the counter sees it.
     rt.block_on(async {
-        let e = master.slave_info(100, ecmxf_wire::payload::slave_info::SlaveInfoCode::State).await;
+        let e =
+            master.slave_info(100, ecmxf_wire::payload::slave_info::SlaveInfoCode::State, Call::anonymous(None)).await;
         assert!(e.is_err(), "slave 100 does not exist: {e:?}");
     });
     WINDOW.store(false, Ordering::SeqCst);

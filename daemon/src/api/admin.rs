@@ -75,7 +75,7 @@ impl FoeApi for FoeService {
 
     async fn write(&self, request: Request<pb::FoeWriteRequest>) -> Result<Response<ProgressStream>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
-        let t = caller.deadline.unwrap_or(FOE_TIMEOUT);
+        let call = caller.call.or_within(FOE_TIMEOUT);
         let r = request.into_inner();
         let s = self.0.slave(r.slave)?;
         tracing::warn!(who = %caller.who, slave = s, name = %r.name, bytes = r.data.len(), "FoE write");
@@ -83,7 +83,7 @@ impl FoeApi for FoeService {
         let ctx = Arc::clone(&self.0);
         let p = Arc::clone(&progress);
         let work = async move {
-            bounded(&caller, ctx.master.foe_write(s, &r.name, r.password, r.data, Some(p), Some(t)))
+            bounded(&caller, ctx.master.foe_write(s, &r.name, r.password, r.data, Some(p), call))
                 .await
                 .map(|()| Vec::new())
         };
@@ -92,7 +92,7 @@ impl FoeApi for FoeService {
 
     async fn read(&self, request: Request<pb::FoeReadRequest>) -> Result<Response<ProgressStream>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
-        let t = caller.deadline.unwrap_or(FOE_TIMEOUT);
+        let call = caller.call.or_within(FOE_TIMEOUT);
         let r = request.into_inner();
         let s = self.0.slave(r.slave)?;
         if r.max_bytes == 0 {
@@ -102,7 +102,7 @@ impl FoeApi for FoeService {
         let ctx = Arc::clone(&self.0);
         let p = Arc::clone(&progress);
         let work = async move {
-            bounded(&caller, ctx.master.foe_read(s, &r.name, r.password, r.max_bytes, Some(p), Some(t))).await
+            bounded(&caller, ctx.master.foe_read(s, &r.name, r.password, r.max_bytes, Some(p), call)).await
         };
         Ok(Response::new(self.0.until_stopping(stream_transfer(progress, work))))
     }
@@ -138,7 +138,7 @@ impl RegistersApi for RegistersService {
         let (adp, ado) = (u16_field(r.adp, "adp")?, u16_field(r.ado, "ado")?);
         let length = length_field(if command.writes() { r.data.len() } else { r.length as usize })?;
         let data = if command.writes() { r.data } else { Vec::new() };
-        let a = bounded(&caller, self.0.master.datagram(command, adp, ado, length, data, caller.deadline)).await?;
+        let a = bounded(&caller, self.0.master.datagram(command, adp, ado, length, data, caller.call)).await?;
         Ok(Response::new(answer_pb(a)))
     }
 
@@ -154,7 +154,7 @@ impl RegistersApi for RegistersService {
         }
         let address = u16_field(r.address, "address")?;
         let length = length_field(r.length as usize)?;
-        let a = bounded(&caller, self.0.master.read_registers(s, address, length, caller.deadline)).await?;
+        let a = bounded(&caller, self.0.master.read_registers(s, address, length, caller.call)).await?;
         Ok(Response::new(answer_pb(a)))
     }
 
@@ -170,7 +170,7 @@ impl RegistersApi for RegistersService {
         }
         let address = u16_field(r.address, "address")?;
         let data = r.data.clone();
-        let a = bounded(&caller, self.0.master.write_registers(s, address, data, caller.deadline)).await?;
+        let a = bounded(&caller, self.0.master.write_registers(s, address, data, caller.call)).await?;
         Ok(Response::new(answer_pb(a)))
     }
 }

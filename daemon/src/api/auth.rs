@@ -7,6 +7,7 @@
 //! call above the caller's role is PERMISSION_DENIED naming both roles.
 
 use std::collections::HashMap;
+use std::time::{Duration, Instant};
 
 use sha2::{Digest, Sha256};
 use tonic::transport::server::{TcpConnectInfo, TlsConnectInfo, UdsConnectInfo};
@@ -14,6 +15,7 @@ use tonic::{Request, Status};
 
 use crate::config::api::ApiConfig;
 pub(crate) use crate::config::api::Role;
+use crate::master::Call;
 
 /// A caller, as authenticated.
 #[derive(Clone, Debug, PartialEq, Eq)]
@@ -22,11 +24,15 @@ pub(crate) struct Caller {
     pub role: Role,
     /// Who, for logs and errors ("uid 1000", "token ci-robot").
     pub who: String,
-    /// A stable number per peer (pid, or TCP address) so that one peer's
-    /// requests take turns with others' on the chip's blocking slot.
-    pub client_id: u64,
-    /// The time left of the call's deadline (`grpc-timeout`), if it has one.
-    pub deadline: Option<std::time::Duration>,
+    /// What the master needs of the call: the client, a stable number per
+    /// peer (pid, or TCP address) so that one peer's requests take turns
+    /// with others' on the chip's blocking slot; and the deadline, fixed
+    /// once as an instant when the call is authorized, which every request
+    /// and wait of the call then shares.
+    pub call: Call,
+    /// The time that deadline left when the call came (`grpc-timeout`,
+    /// less a margin), for the message when it passes; `None` without one.
+    pub budget: Option<Duration>,
 }
 
 /// The rules from `[api]`.
@@ -62,7 +68,7 @@ impl Authenticator {
 
     /// Identifies the caller of `request`.
     pub(crate) fn identify<T>(&self, request: &Request<T>) -> Result<Caller, Status> {
-        let client_id = client_id(request);
+        let call = Call::new(client_id(request), None);
         if let Some(value) = request.metadata().get("authorization") {
             let token = value
                 .to_str()
@@ -71,7 +77,7 @@ impl Authenticator {
                 .ok_or_else(|| Status::unauthenticated("the authorization header must be \"Bearer <token>\""))?;
             return match self.tokens.get(&fingerprint(token.trim().as_bytes())) {
                 Some((Some(role), name)) => {
-                    Ok(Caller { role: *role, who: format!("token {name}"), client_id, deadline: None })
+                    Ok(Caller { role: *role, who: format!("token {name}"), call, budget: None })
                 }
                 Some((None, name)) => Err(Status::permission_denied(format!("token {name} has no access"))),
                 None => Err(Status::unauthenticated("unknown bearer token")),
@@ -82,7 +88,7 @@ impl Authenticator {
                 let fp = fingerprint(cert.as_ref());
                 return match self.certs.get(&fp) {
                     Some((Some(role), name)) => {
-                        Ok(Caller { role: *role, who: format!("certificate {name}"), client_id, deadline: None })
+                        Ok(Caller { role: *role, who: format!("certificate {name}"), call, budget: None })
                     }
                     Some((None, name)) => Err(Status::permission_denied(format!("certificate {name} has no access"))),
                     None => {
@@ -98,7 +104,7 @@ impl Authenticator {
             };
             let (uid, gid) = (cred.uid(), cred.gid());
             return match self.unix_role(uid, gid) {
-                Some(role) => Ok(Caller { role, who: format!("uid {uid}"), client_id, deadline: None }),
+                Some(role) => Ok(Caller { role, who: format!("uid {uid}"), call, budget: None }),
                 None => Err(Status::permission_denied(format!("uid {uid} (gid {gid}) has no access"))),
             };
         }
@@ -123,7 +129,8 @@ impl Authenticator {
     /// Identifies the caller and checks they have `needed`.
     pub(crate) fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
         let mut caller = self.identify(request)?;
-        caller.deadline = super::deadline(request);
+        caller.budget = super::deadline(request);
+        caller.call.deadline = caller.budget.map(|d| Instant::now() + d);
         if caller.role < needed {
             return Err(Status::permission_denied(format!(
                 "{} has role {}; this call needs {needed}",

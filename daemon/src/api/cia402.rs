@@ -79,15 +79,14 @@ impl From<AxisError> for Status {
 impl Cia402Api for Cia402Service {
     async fn list_axes(&self, request: Request<pb::ListAxesRequest>) -> Result<Response<pb::ListAxesResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let axes = bounded(&caller, self.0.master.axes()).await?;
+        let axes = bounded(&caller, self.0.master.axes(caller.call)).await?;
         Ok(Response::new(pb::ListAxesResponse { axes: axes.into_iter().map(axis_pb).collect() }))
     }
 
     async fn get_axis(&self, request: Request<pb::GetAxisRequest>) -> Result<Response<pb::AxisStatus>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let axis = self.0.master.axis(request.get_ref().axis)?;
-        let t = caller.deadline;
-        Ok(Response::new(status_pb(bounded(&caller, self.0.master.axis_status(&axis, t)).await?)))
+        Ok(Response::new(status_pb(bounded(&caller, self.0.master.axis_status(&axis, caller.call)).await?)))
     }
 
     async fn command(&self, request: Request<pb::AxisCommandRequest>) -> Result<Response<pb::AxisStatus>, Status> {
@@ -102,9 +101,9 @@ impl Cia402Api for Cia402Service {
             Ok(pb::AxisCommand::QuickStop) => AxisCommand::QuickStop,
             _ => return Err(bad_argument("command", format!("{} is not an AxisCommand", r.command))),
         };
-        let budget = wait_budget(&request, r.timeout_ms, COMMAND_WAIT);
+        let call = wait_budget(&caller, r.timeout_ms, COMMAND_WAIT);
         tracing::info!(who = %caller.who, axis = axis.number, target = ?command.target(), "axis command");
-        let status = bounded(&caller, self.0.master.axis_command(&axis, command, r.wait, Some(budget))).await?;
+        let status = bounded(&caller, self.0.master.axis_command(&axis, command, r.wait, call)).await?;
         Ok(Response::new(status_pb(status)))
     }
 
@@ -114,8 +113,8 @@ impl Cia402Api for Cia402Service {
         let axis = self.0.master.axis(r.axis)?;
         let mode =
             i8::try_from(r.mode).map_err(|_| bad_argument("mode", format!("{} is outside -128..=127", r.mode)))?;
-        let t = caller.deadline;
-        let status = bounded(&caller, self.0.master.set_axis_mode(&axis, mode, &r.lease_id, &caller.who, t)).await?;
+        let status =
+            bounded(&caller, self.0.master.set_axis_mode(&axis, mode, &r.lease_id, &caller.who, caller.call)).await?;
         Ok(Response::new(status_pb(status)))
     }
 
@@ -132,9 +131,9 @@ impl Cia402Api for Cia402Service {
             Some(pb::set_target_request::Target::Torque(v)) => AxisTarget::Torque(v),
             None => return Err(bad_argument("target", "give a position, velocity or torque")),
         };
-        let t = caller.deadline;
         let via_process_image =
-            bounded(&caller, self.0.master.set_axis_target(&axis, target, &r.lease_id, &caller.who, t)).await?;
+            bounded(&caller, self.0.master.set_axis_target(&axis, target, &r.lease_id, &caller.who, caller.call))
+                .await?;
         Ok(Response::new(pb::SetTargetResponse { via_process_image }))
     }
 }

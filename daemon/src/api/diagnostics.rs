@@ -166,8 +166,7 @@ impl DiagnosticsApi for DiagnosticsService {
             c @ 1..=8 => Some(c as u8),
             c => return Err(bad_argument("count", format!("{c} records; the chip keeps 1..=8"))),
         };
-        let t = caller.deadline;
-        let records = bounded(&caller, self.0.master.emergency_history(n, t)).await?;
+        let records = bounded(&caller, self.0.master.emergency_history(n, caller.call)).await?;
         let from =
             |source: &'static str, r: &EmergencyRecord| pb::Emergency { source: source.into(), ..emergency_pb(r) };
         let mut out: Vec<pb::Emergency> = records.iter().map(|r| from("chip", r)).collect();
@@ -180,7 +179,7 @@ impl DiagnosticsApi for DiagnosticsService {
         request: Request<pb::GetCountersRequest>,
     ) -> Result<Response<pb::GetCountersResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let list = bounded(&caller, list_slaves(&self.0, false)).await?;
+        let list = bounded(&caller, list_slaves(&self.0, false, caller.call)).await?;
         let slaves = list
             .slaves
             .into_iter()

@@ -2,7 +2,7 @@
 //! found, their EtherCAT states.
 
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Instant;
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::master_server::Master as MasterApi;
@@ -14,11 +14,11 @@ use super::auth::Role;
 use super::bounded;
 use super::convert::{phase_to_pb, state_from_pb, state_to_pb};
 use super::status::to_status;
-use super::{Context, wait_budget};
+use super::{Context, NETWORK_WAIT, wait_budget};
 use crate::config::SlaveConfig;
 use crate::master::diagnostics::{ErrorFlags, StatusFlags};
 use crate::master::states::{SlaveSelector, selector};
-use crate::master::{Master, al_status_text};
+use crate::master::{Call, Master, al_status_text};
 
 /// The `Master` service.
 #[derive(Debug, Clone)]
@@ -112,8 +112,7 @@ impl MasterApi for MasterService {
     async fn reinit(&self, request: Request<pb::ReinitRequest>) -> Result<Response<pb::ReinitResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         tracing::info!(who = %caller.who, "re-init requested");
-        let t = caller.deadline.or(Some(Duration::from_secs(30)));
-        bounded(&caller, self.0.master.reinit(t)).await?;
+        bounded(&caller, self.0.master.reinit(caller.call.or_within(NETWORK_WAIT))).await?;
         Ok(Response::new(pb::ReinitResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
 
@@ -123,8 +122,7 @@ impl MasterApi for MasterService {
     ) -> Result<Response<pb::WarmResetResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Admin)?;
         tracing::info!(who = %caller.who, "warm reset requested");
-        let t = caller.deadline.or(Some(Duration::from_secs(30)));
-        bounded(&caller, self.0.master.warm_reset(t)).await?;
+        bounded(&caller, self.0.master.warm_reset(caller.call.or_within(NETWORK_WAIT))).await?;
         Ok(Response::new(pb::WarmResetResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
     }
 }
@@ -167,7 +165,11 @@ fn mismatch(found: &pb::Slave, expected: &SlaveConfig) -> String {
 }
 
 /// Every slave, read live from the chip, compared with the configuration.
-pub(crate) async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<pb::ListSlavesResponse, Status> {
+pub(crate) async fn list_slaves(
+    ctx: &Context,
+    fresh_identity: bool,
+    call: Call,
+) -> Result<pb::ListSlavesResponse, Status> {
     let m = &ctx.master;
     let layout = m.layout();
     let config = m.config();
@@ -181,7 +183,7 @@ pub(crate) async fn list_slaves(ctx: &Context, fresh_identity: bool) -> Result<p
     }
     let mut slaves = Vec::with_capacity(layout.slaves.len());
     for (i, s) in layout.slaves.iter().enumerate() {
-        let live = m.slave_reading(i as u8, fresh_identity).await.map_err(to_status)?;
+        let live = m.slave_reading(i as u8, fresh_identity, call).await.map_err(to_status)?;
         let ((vendor_id, product_code, revision), name) =
             live.identity.unwrap_or_else(|| ((s.vendor_id, s.product_code, s.revision), s.name.clone()));
         let mut slave = pb::Slave {
@@ -232,7 +234,7 @@ impl SlavesApi for SlavesService {
         request: Request<pb::ListSlavesRequest>,
     ) -> Result<Response<pb::ListSlavesResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        Ok(Response::new(bounded(&caller, list_slaves(&self.0, false)).await?))
+        Ok(Response::new(bounded(&caller, list_slaves(&self.0, false, caller.call)).await?))
     }
 
     async fn scan(&self, request: Request<pb::ScanRequest>) -> Result<Response<pb::ScanResponse>, Status> {
@@ -242,9 +244,9 @@ impl SlavesApi for SlavesService {
         let reinit = request.get_ref().reinit;
         let r = bounded(&caller, async {
             if reinit {
-                ctx.master.reinit(Some(Duration::from_secs(30))).await?;
+                ctx.master.reinit(caller.call.until(Instant::now() + NETWORK_WAIT)).await?;
             }
-            list_slaves(ctx, true).await
+            list_slaves(ctx, true, caller.call).await
         })
         .await?;
         Ok(Response::new(pb::ScanResponse { slaves: r.slaves, missing: r.missing, matches_config: r.matches_config }))
@@ -266,8 +268,7 @@ impl StateApi for StateService {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let m = &self.0.master;
         let target = target(request.get_ref().slave, m.layout().slaves.len())?;
-        let t = caller.deadline;
-        let report = bounded(&caller, m.state_report(target, t)).await?;
+        let report = bounded(&caller, m.state_report(target, caller.call)).await?;
         let slaves = report
             .slaves
             .iter()
@@ -292,16 +293,15 @@ impl StateApi for StateService {
         let r = request.get_ref();
         let target = target(r.slave, m.layout().slaves.len())?;
         let state = state_from_pb(r.state, "state")?;
-        let budget = wait_budget(&request, r.timeout_ms, m.default_timeout);
+        let call = wait_budget(&caller, r.timeout_ms, m.default_timeout);
         let wait = r.wait;
         tracing::info!(who = %caller.who, ?target, %state, "state requested");
         let reached = bounded(&caller, async {
-            let end = Instant::now() + budget;
+            let end = call.deadline.unwrap_or_else(Instant::now);
             let mut changes = m.watch_status();
-            m.set_state(target, state, Some(budget)).await.map_err(to_status)?;
+            m.set_state(target, state, call).await.map_err(to_status)?;
             loop {
-                let left = end.saturating_duration_since(Instant::now());
-                let now = m.get_state(target, Some(left.max(Duration::from_millis(1)))).await.map_err(to_status)?;
+                let now = m.get_state(target, call).await.map_err(to_status)?;
                 if !wait || now == state {
                     return Ok::<_, Status>(now);
                 }
@@ -309,7 +309,7 @@ impl StateApi for StateService {
                     return Err(Status::deadline_exceeded(format!("{target} is {now}, not {state}, at the deadline")));
                 }
                 // Look again when the engine has news (its snapshot).
-                let _ = tokio::time::timeout(left, changes.changed()).await;
+                let _ = tokio::time::timeout_at(end.into(), changes.changed()).await;
             }
         })
         .await?;

@@ -3,20 +3,20 @@
 //! the process image, the newest inputs, the output image as written, the
 //! leases, the output ranges frame streams feed), the authenticator. Every
 //! call identifies its caller
-//! (see `auth`), runs its chip work as that caller's turn on the blocking
-//! slot (`master::as_client`), with the client's deadline, and maps engine
-//! errors once (`status`).
+//! (see `auth`), hands the master its [`Call`] (the client whose turn the
+//! chip work takes on the blocking slot, and the client's deadline), and
+//! maps engine errors once (`status`, [`bounded`]).
 //!
 //! Served on a Unix socket (default) and optionally on TCP with TLS, plus
 //! gRPC health (SERVING only while the bus runs) and reflection (v1 and
 //! v1alpha).
 
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 use tonic::{Request, Status};
 
-use crate::master::Master;
+use crate::master::{Call, Master};
 
 pub(crate) mod admin;
 pub(crate) mod auth;
@@ -116,6 +116,11 @@ impl Context {
     }
 }
 
+/// How long a whole-network action (re-init, warm reset, a new
+/// configuration) may take when the client sets no deadline: a bring-up
+/// takes seconds.
+pub(crate) const NETWORK_WAIT: Duration = Duration::from_secs(30);
+
 /// The time left of the client's deadline (`grpc-timeout`), less a margin
 /// (a tenth, at most 20 ms) so that this daemon answers first with
 /// DEADLINE_EXCEEDED: tonic's own deadline layer, which fires at the exact
@@ -137,37 +142,35 @@ pub(crate) fn deadline<T>(request: &Request<T>) -> Option<Duration> {
     Some(d.saturating_sub((d / 10).min(Duration::from_millis(20))))
 }
 
-/// Runs `work` for `caller`: as their turn on the chip's blocking slot,
-/// and bounded by their deadline as a whole (a multi-step call such as an
-/// SII range or a scan cannot outlive it). At the deadline `work` is
-/// dropped, which withdraws its requests from the engine, and the caller
-/// gets DEADLINE_EXCEEDED.
+/// The outcome of `work`, which runs as `caller.call` (its client's
+/// turns, its deadline on every request and wait), as a status: an error
+/// that comes once the deadline passed is DEADLINE_EXCEEDED saying so,
+/// whatever step of a multi-step call it ended (an SII range, a scan, an
+/// axis command), as the caller needs no other reason. A result that did
+/// come is kept, late or not: the margin of [`deadline`] leaves the client
+/// time to take it.
 pub(crate) async fn bounded<T, E: Into<Status>>(
     caller: &Caller,
     work: impl std::future::Future<Output = Result<T, E>>,
 ) -> Result<T, Status> {
-    let work = crate::master::as_client(caller.client_id, work);
-    match caller.deadline {
-        None => work.await.map_err(Into::into),
-        Some(d) => match tokio::time::timeout(d, work).await {
-            Ok(r) => r.map_err(Into::into),
-            Err(_) => Err(Status::deadline_exceeded(format!(
-                "no result after {d:.1?}, all the time the caller's deadline allowed (its grpc-timeout, less a margin \
-                 to answer before it ends); give the call a longer deadline"
-            ))),
-        },
+    match (work.await, caller.budget) {
+        (Err(_), Some(d)) if caller.call.passed() => Err(Status::deadline_exceeded(format!(
+            "no result after {d:.1?}, all the time the caller's deadline allowed (its grpc-timeout, less a margin \
+             to answer before it ends); give the call a longer deadline"
+        ))),
+        (r, _) => r.map_err(Into::into),
     }
 }
 
-/// The shorter of the client's deadline and `timeout_ms` (0: none).
-pub(crate) fn wait_budget<T>(request: &Request<T>, timeout_ms: u32, default: Duration) -> Duration {
-    let asked = (timeout_ms > 0).then(|| Duration::from_millis(timeout_ms.into()));
-    match (deadline(request), asked) {
-        (Some(a), Some(b)) => a.min(b),
-        (Some(a), None) => a,
-        (None, Some(b)) => b,
-        (None, None) => default,
-    }
+/// `caller.call` ending at the latest `timeout_ms` from now (0: no such
+/// limit), and `default` from now when neither it nor the client sets an
+/// end: for calls that wait for something to happen.
+pub(crate) fn wait_budget(caller: &Caller, timeout_ms: u32, default: Duration) -> Call {
+    let call = match timeout_ms {
+        0 => caller.call,
+        ms => caller.call.until(Instant::now() + Duration::from_millis(ms.into())),
+    };
+    call.or_within(default)
 }
 
 #[cfg(test)]

@@ -9,18 +9,18 @@ use ecmxf_proto::v1::process_data_server::ProcessData as ProcessDataApi;
 use tokio_stream::StreamExt;
 use tonic::{Request, Response, Status, Streaming};
 
-use super::Context;
 use super::auth::Role;
 use super::bounded;
 use super::convert::{encode_entry, existing_slave, pb_type};
 use super::image::entry_value;
 use super::leases;
 use super::status::{bad_argument, to_status};
+use super::{Context, NETWORK_WAIT};
 use crate::config::PdoConfig;
-use crate::master::EngineError;
 use crate::master::entry_writes::{Staging, WriteError, output_entry};
 use crate::master::image::{Entry, Image};
 use crate::master::pdos::{PdoDescription, PdoSource};
+use crate::master::{Call, EngineError};
 
 /// The `ProcessData` service.
 #[derive(Debug, Clone)]
@@ -169,7 +169,7 @@ impl ProcessDataApi for ProcessDataService {
             Some(s) => vec![existing_slave(s, count, "slave")?],
             None => (0..count as u8).collect(),
         };
-        let image = bounded(&caller, m.image()).await?;
+        let image = bounded(&caller, m.image(caller.call)).await?;
         let slaves = which
             .into_iter()
             .filter_map(|s| image.mappings.get(usize::from(s)).map(|p| (s, p)))
@@ -205,12 +205,13 @@ impl ProcessDataApi for ProcessDataService {
         config.slaves[s].rx_pdos = rx;
         config.slaves[s].tx_pdos = tx;
         tracing::info!(who = %caller.who, slave = s, "PDO mapping change");
-        let t = caller.deadline.or(Some(Duration::from_secs(30)));
-        if let Err(e) = bounded(&caller, m.apply_config(config, t)).await {
+        let call = caller.call.or_within(NETWORK_WAIT);
+        if let Err(e) = bounded(&caller, m.apply_config(config, call)).await {
             // Never leave the bus down on a mapping the slave refused: go
             // back to the configuration that ran.
             tracing::warn!(who = %caller.who, slave = s, "PDO mapping refused ({}); restoring the previous one", e.message());
-            let restored = m.apply_config(previous, Some(Duration::from_secs(30))).await;
+            // The daemon's repair, whatever the caller's deadline.
+            let restored = m.apply_config(previous, Call::anonymous(Some(NETWORK_WAIT))).await;
             let how = if restored.is_ok() {
                 "the previous mapping is back"
             } else {
@@ -218,7 +219,7 @@ impl ProcessDataApi for ProcessDataService {
             };
             return Err(Status::new(e.code(), format!("{}; {how}", e.message())));
         }
-        let image = m.image().await.map_err(to_status)?;
+        let image = m.image(Call::anonymous(None)).await.map_err(to_status)?;
         Ok(Response::new(pb::SetMappingResponse { image: Some(super::image::to_pb(&image)) }))
     }
 
@@ -227,7 +228,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::ReadOutputsRequest>,
     ) -> Result<Response<pb::OutputImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = bounded(&caller, self.0.master.image()).await?;
+        let image = bounded(&caller, self.0.master.image(caller.call)).await?;
         // Each value named as asked for: by entry or by variable name.
         let mut selected: Vec<(&String, &Entry)> = Vec::with_capacity(request.get_ref().entries.len());
         for name in &request.get_ref().entries {
@@ -248,7 +249,7 @@ impl ProcessDataApi for ProcessDataService {
 
     async fn get_layout(&self, request: Request<pb::GetLayoutRequest>) -> Result<Response<pb::ProcessImage>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let image = bounded(&caller, self.0.master.image()).await?;
+        let image = bounded(&caller, self.0.master.image(caller.call)).await?;
         Ok(Response::new(super::image::to_pb(&image)))
     }
 
@@ -260,7 +261,7 @@ impl ProcessDataApi for ProcessDataService {
     ) -> Result<Response<Self::StreamInputsStream>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.into_inner();
-        let image = bounded(&caller, self.0.master.image()).await?;
+        let image = bounded(&caller, self.0.master.image(caller.call)).await?;
         if image.input_bytes == 0 {
             // No input frame will ever come: say so instead of a stream
             // that never yields (an output-only network).
@@ -379,7 +380,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<pb::WriteOutputsRequest>,
     ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let image = bounded(&caller, self.0.master.image()).await?;
+        let image = bounded(&caller, self.0.master.image(caller.call)).await?;
         let r = request.get_ref();
         apply_writes(&self.0, &image, &r.lease_id, &caller.who, &r.writes)?;
         Ok(Response::new(pb::WriteOutputsResponse { applied: 1 }))
@@ -401,7 +402,7 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<Streaming<pb::WriteOutputsRequest>>,
     ) -> Result<Response<pb::WriteOutputsResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let image = bounded(&caller, self.0.master.image()).await?;
+        let image = bounded(&caller, self.0.master.image(caller.call)).await?;
         let mut stream = request.into_inner();
         let mut applied = 0;
         while let Some(msg) = stream.next().await {

@@ -58,30 +58,26 @@ impl PeripheralsApi for PeripheralsService {
             Ok(pb::GpioPull::Down) => GpioPull::Down,
             Err(_) => return Err(bad_argument("pull", format!("{} is not a GpioPull", r.pull))),
         };
-        let t = caller.deadline;
-        bounded(&caller, self.0.master.configure_gpio(l, mode, pull, t)).await?;
+        bounded(&caller, self.0.master.configure_gpio(l, mode, pull, caller.call)).await?;
         Ok(Response::new(pb::ConfigureGpioResponse {}))
     }
 
     async fn set_gpio(&self, request: Request<pb::SetGpioRequest>) -> Result<Response<pb::GpioLevels>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let l = lines(request.get_ref().levels, "levels")?;
-        let t = caller.deadline;
-        let out = bounded(&caller, self.0.master.set_gpio(l, t)).await?;
+        let out = bounded(&caller, self.0.master.set_gpio(l, caller.call)).await?;
         Ok(Response::new(levels_pb(out)))
     }
 
     async fn get_gpio(&self, request: Request<pb::GetGpioRequest>) -> Result<Response<pb::GpioLevels>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let t = caller.deadline;
-        Ok(Response::new(levels_pb(bounded(&caller, self.0.master.gpio_levels(t)).await?)))
+        Ok(Response::new(levels_pb(bounded(&caller, self.0.master.gpio_levels(caller.call)).await?)))
     }
 
     async fn read_adc(&self, request: Request<pb::ReadAdcRequest>) -> Result<Response<pb::ReadAdcResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let differential = request.get_ref().differential;
-        let t = caller.deadline;
-        let value = bounded(&caller, self.0.master.read_adc(differential, t)).await?;
+        let value = bounded(&caller, self.0.master.read_adc(differential, caller.call)).await?;
         Ok(Response::new(pb::ReadAdcResponse { value: value.into() }))
     }
 
@@ -91,8 +87,7 @@ impl PeripheralsApi for PeripheralsService {
         if v > u32::from(DAC_MAX) {
             return Err(bad_argument("value", format!("{v} is outside 0..=4095")));
         }
-        let t = caller.deadline;
-        bounded(&caller, self.0.master.write_dac(v as u16, t)).await?;
+        bounded(&caller, self.0.master.write_dac(v as u16, caller.call)).await?;
         Ok(Response::new(pb::WriteDacResponse {}))
     }
 
@@ -107,8 +102,7 @@ impl PeripheralsApi for PeripheralsService {
             pb::QeiAction::Stop => QeiAction::Stop,
             pb::QeiAction::Unspecified => return Err(bad_argument("action", "give READ, START or STOP")),
         };
-        let t = caller.deadline;
-        let count = bounded(&caller, self.0.master.qei(action, t)).await?;
+        let count = bounded(&caller, self.0.master.qei(action, caller.call)).await?;
         Ok(Response::new(pb::QeiResponse { count }))
     }
 }

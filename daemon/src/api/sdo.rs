@@ -11,9 +11,9 @@ use super::auth::Role;
 use super::bounded;
 use super::convert::{data_type, decode_value, encode_value, index, pb_type, subindex, type_size};
 use super::status::to_status;
-use crate::master::EngineError;
 use crate::master::Master;
 use crate::master::objects::{KNOWN, axis_index, lookup};
+use crate::master::{Call, EngineError};
 
 /// The `Sdo` service.
 #[derive(Debug, Clone)]
@@ -46,7 +46,7 @@ impl SdoApi for SdoService {
         let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
         let t = effective_type(&self.0.master, s, data_type(r.data_type)?, i, sub, r.complete_access);
         let started = std::time::Instant::now();
-        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.deadline)).await;
+        let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.call)).await;
         self.0.sdo_latency.observe(started.elapsed());
         let raw = raw?;
         // A type narrower than the object would show part of it as if it
@@ -81,8 +81,7 @@ impl SdoApi for SdoService {
         let n = bytes.len() as u32;
         tracing::debug!(who = %caller.who, slave = s, object = format_args!("{i:#06x}:{sub:02x}"), "SDO download");
         let started = std::time::Instant::now();
-        let done =
-            bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, caller.deadline)).await;
+        let done = bounded(&caller, self.0.master.sdo_write(s, i, sub, r.complete_access, bytes, caller.call)).await;
         self.0.sdo_latency.observe(started.elapsed());
         done?;
         Ok(Response::new(pb::SdoDownloadResponse { bytes_written: n }))
@@ -106,7 +105,9 @@ impl SdoApi for SdoService {
         if wants(Source::Device) {
             // The read is the daemon's work: a caller whose deadline passes
             // leaves it running for the next one.
-            let read = bounded(&caller, async { Ok::<_, Status>(self.0.master.device_dictionary(s).await) }).await?;
+            let read =
+                bounded(&caller, async { Ok::<_, Status>(self.0.master.device_dictionary(s, caller.call).await) })
+                    .await?;
             match read {
                 Ok(d) => {
                     let entries = dictionary_objects(&d.to_od(), Some(&d));
@@ -135,7 +136,7 @@ impl SdoApi for SdoService {
                 return Err(Status::failed_precondition(notes.join("; ")));
             }
         }
-        let entries = bounded(&caller, probe(&self.0.master, s)).await?;
+        let entries = bounded(&caller, probe(&self.0.master, s, caller.call)).await?;
         let note = notes.join("; ");
         Ok(Response::new(pb::ListObjectsResponse { source: Source::Probe as i32, entries, note }))
     }
@@ -170,8 +171,8 @@ fn dictionary_status(e: crate::master::device_dictionary::DictionaryError) -> St
 
 /// Uploads `index:subindex`; `None` when the slave aborts (the object is
 /// not there), other errors pass.
-async fn try_read(m: &Master, s: u8, index: u16, subindex: u8) -> Result<Option<Vec<u8>>, Status> {
-    match m.sdo_read(s, index, subindex, false, None).await {
+async fn try_read(m: &Master, s: u8, index: u16, subindex: u8, call: Call) -> Result<Option<Vec<u8>>, Status> {
+    match m.sdo_read(s, index, subindex, false, call).await {
         Ok(v) => Ok(Some(v)),
         Err(EngineError::SdoAbort { .. }) => Ok(None),
         Err(e) => Err(to_status(e)),
@@ -214,22 +215,22 @@ fn known_bits(t: ecmxf_devices::od::DataType, value: &[u8]) -> u32 {
 /// communication objects, the PDO assignment and every assigned PDO's
 /// mapping, and the CiA 402 objects of each axis found (axis n exists when
 /// its statusword does).
-async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
+async fn probe(m: &Master, s: u8, call: Call) -> Result<Vec<pb::ObjectEntry>, Status> {
     let mut out = Vec::new();
     for k in KNOWN.iter().filter(|k| !k.per_axis) {
-        if let Some(v) = try_read(m, s, k.index, k.subindex).await? {
+        if let Some(v) = try_read(m, s, k.index, k.subindex, call).await? {
             let bits = known_bits(k.data_type, &v);
             out.push(entry(k.index, k.subindex, k.name.into(), pb_type(k.data_type), bits, k.access, v));
         }
     }
     for assign in [0x1C12u16, 0x1C13] {
-        let Some(count) = try_read(m, s, assign, 0).await? else { continue };
+        let Some(count) = try_read(m, s, assign, 0, call).await? else { continue };
         for sub in 1..=count.first().copied().unwrap_or(0) {
-            let Some(pdo) = try_read(m, s, assign, sub).await? else { continue };
+            let Some(pdo) = try_read(m, s, assign, sub, call).await? else { continue };
             let pdo_index = u16::from_le_bytes([pdo[0], *pdo.get(1).unwrap_or(&0)]);
             let name = format!("{}.{sub}", if assign == 0x1C12 { "rx_pdo_assign" } else { "tx_pdo_assign" });
             out.push(entry(assign, sub, name, pb::DataType::Unsigned16, 16, "rw", pdo.clone()));
-            let Some(n) = try_read(m, s, pdo_index, 0).await? else { continue };
+            let Some(n) = try_read(m, s, pdo_index, 0, call).await? else { continue };
             out.push(entry(
                 pdo_index,
                 0,
@@ -240,7 +241,7 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
                 n.clone(),
             ));
             for e in 1..=n.first().copied().unwrap_or(0) {
-                if let Some(v) = try_read(m, s, pdo_index, e).await? {
+                if let Some(v) = try_read(m, s, pdo_index, e, call).await? {
                     let name = format!("pdo_{pdo_index:#06x}.entry{e}");
                     out.push(entry(pdo_index, e, name, pb::DataType::Unsigned32, 32, "rw", v));
                 }
@@ -248,12 +249,12 @@ async fn probe(m: &Master, s: u8) -> Result<Vec<pb::ObjectEntry>, Status> {
         }
     }
     for axis in 0..8u8 {
-        if try_read(m, s, axis_index(0x6041, axis), 0).await?.is_none() {
+        if try_read(m, s, axis_index(0x6041, axis), 0, call).await?.is_none() {
             break;
         }
         for k in KNOWN.iter().filter(|k| k.per_axis) {
             let i = axis_index(k.index, axis);
-            if let Some(v) = try_read(m, s, i, 0).await? {
+            if let Some(v) = try_read(m, s, i, 0, call).await? {
                 let bits = known_bits(k.data_type, &v);
                 let name = if axis == 0 { k.name.to_string() } else { format!("axis{axis}.{}", k.name) };
                 out.push(entry(i, 0, name, pb_type(k.data_type), bits, k.access, v));

@@ -69,7 +69,7 @@ impl SiiApi for SiiService {
         if r.count == 0 || r.count > MAX_WORDS {
             return Err(bad_argument("count", format!("{} words; read 1..={MAX_WORDS} at a time", r.count)));
         }
-        let words = bounded(&caller, self.0.master.eeprom_read_words(s, w, r.count as u16, caller.deadline)).await?;
+        let words = bounded(&caller, self.0.master.eeprom_read_words(s, w, r.count as u16, caller.call)).await?;
         Ok(Response::new(pb::SiiReadResponse { data: bytes_of(&words) }))
     }
 
@@ -86,10 +86,9 @@ impl SiiApi for SiiService {
         let values: Vec<u16> = r.data.chunks_exact(2).map(|c| u16::from_le_bytes([c[0], c[1]])).collect();
         tracing::warn!(who = %caller.who, slave = s, word = w, words = values.len(), "SII write");
         let m = &self.0.master;
-        let t = caller.deadline;
         let backup = bounded(&caller, async {
-            let backup = m.eeprom_read_words(s, w, values.len() as u16, t).await?;
-            m.eeprom_write_words(s, w, &values, t).await.map_err(to_status)?;
+            let backup = m.eeprom_read_words(s, w, values.len() as u16, caller.call).await?;
+            m.eeprom_write_words(s, w, &values, caller.call).await.map_err(to_status)?;
             Ok::<_, Status>(backup)
         })
         .await?;
@@ -99,8 +98,10 @@ impl SiiApi for SiiService {
     async fn decode(&self, request: Request<pb::SiiDecodeRequest>) -> Result<Response<pb::SiiDecodeResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let s = self.0.slave(request.get_ref().slave)?;
-        let words =
-            bounded(&caller, async { self.0.master.sii_words(s, Categories::All).await.map_err(to_status) }).await?;
+        let words = bounded(&caller, async {
+            self.0.master.sii_words(s, Categories::All, caller.call).await.map_err(to_status)
+        })
+        .await?;
         let image = bytes_of(&words);
         let sii = Sii::parse(&image).map_err(|e| Status::internal(format!("slave {s}'s SII does not parse: {e}")))?;
         let text = |i: u8| sii.string(i).map(decode_text).unwrap_or_default();

@@ -39,6 +39,7 @@ use std::time::{Duration, Instant};
 use ecmxf_wire::payload::control::InfoUpdate;
 use ecmxfd::config::{Config, LinkConfig};
 use ecmxfd::link::socket::SocketLink;
+use ecmxfd::master::Call;
 use ecmxfd::master::Master;
 use ecmxfd::port::Port;
 use support::{cpu_seconds, packet_counter, serve, started};
@@ -119,7 +120,7 @@ fn main() -> Result<(), String> {
         let end = Instant::now() + Duration::from_secs(secs / 2);
         while Instant::now() < end {
             let t = Instant::now();
-            master.sdo_read(1, 0x1018, 1, false, None).await.map_err(|e| e.to_string())?;
+            master.sdo_read(1, 0x1018, 1, false, Call::anonymous(None)).await.map_err(|e| e.to_string())?;
             single.push(t.elapsed());
         }
         single_window = (packets()? - p1, t1.elapsed());
@@ -133,7 +134,7 @@ fn main() -> Result<(), String> {
                 let mut v = Vec::new();
                 while Instant::now() < end {
                     let t = Instant::now();
-                    m.sdo_read((n % 3) as u8, 0x1018, 1 + (n % 4) as u8, false, None)
+                    m.sdo_read((n % 3) as u8, 0x1018, 1 + (n % 4) as u8, false, Call::anonymous(None))
                         .await
                         .map_err(|e| e.to_string())?;
                     v.push(t.elapsed());
@@ -195,11 +196,11 @@ fn main() -> Result<(), String> {
     // 6. Dictionaries the devices describe (no state_dir: read cold).
     for slave in 0..master.layout().slaves.len() as u8 {
         let (p0, t0) = (packets()?, Instant::now());
-        let d = rt.block_on(master.device_dictionary(slave)).map_err(|e| e.to_string())?;
+        let d = rt.block_on(master.device_dictionary(slave, Call::anonymous(None))).map_err(|e| e.to_string())?;
         let cold = t0.elapsed();
         let extra = packets()? as f64 - p0 as f64 - idle_rate * cold.as_secs_f64();
         let t1 = Instant::now();
-        rt.block_on(master.device_dictionary(slave)).map_err(|e| e.to_string())?;
+        rt.block_on(master.device_dictionary(slave, Call::anonymous(None))).map_err(|e| e.to_string())?;
         let cached = t1.elapsed();
         let entries: usize = d.objects.iter().map(|o| o.entries.len()).sum();
         println!(

@@ -101,7 +101,7 @@ fn main() -> Result<(), String> {
         .build()
         .map_err(|e| e.to_string())?;
     rt.spawn(Arc::clone(&master).keep_image_built());
-    let image = rt.block_on(master.image()).map_err(|e| e.to_string())?;
+    let image = rt.block_on(master.image(ecmxfd::master::Call::anonymous(None))).map_err(|e| e.to_string())?;
     let outputs: Vec<usize> =
         image.entries.iter().enumerate().filter(|(_, e)| e.output && e.index == 0x7000).map(|(i, _)| i).collect();
     let lease = master.acquire_lease(&[], Some(Duration::from_secs(5)), "bench").map_err(|e| e.to_string())?;

@@ -15,8 +15,8 @@
 //!
 //! Everything else aborts as missing; a download aborts as read-only.
 
-use crate::master::SlaveInfoCode;
 use crate::master::mailbox_channel::framing::{SdoAbortCode, SdoRequest, SdoResponse};
+use crate::master::{Call, SlaveInfoCode};
 
 use crate::master::Master;
 
@@ -29,7 +29,7 @@ fn u32_(v: u32) -> Vec<u8> {
 }
 
 /// The value of `index:subindex`, or the abort code.
-async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, SdoAbortCode> {
+async fn value(master: &Master, index: u16, subindex: u8, call: Call) -> Result<Vec<u8>, SdoAbortCode> {
     let layout = master.layout();
     let slaves = layout.slaves.len();
     let missing = || if subindex == 0 { SdoAbortCode::OBJECT_MISSING } else { SdoAbortCode::SUBINDEX_MISSING };
@@ -48,14 +48,14 @@ async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, Sdo
         (0xF000, 2) => Ok(u16_(slaves as u16)),
         (0xF020, 0) => Ok(vec![slaves.min(255) as u8]),
         (0xF020, s) if usize::from(s) <= slaves => {
-            master.station_address(s - 1).await.map(u16_).ok_or(SdoAbortCode::GENERAL)
+            master.station_address(s - 1, call).await.map(u16_).ok_or(SdoAbortCode::GENERAL)
         }
         (0x8000..=0x8FFF, _) => {
             let n = slave_of(0x8000)?;
             let s = &layout.slaves[usize::from(n)];
             match subindex {
                 0 => Ok(vec![7]),
-                1 => master.station_address(n).await.map(u16_).ok_or(SdoAbortCode::GENERAL),
+                1 => master.station_address(n, call).await.map(u16_).ok_or(SdoAbortCode::GENERAL),
                 3 => Ok(s.name.as_bytes().to_vec()),
                 5 => Ok(u32_(s.vendor_id)),
                 6 => Ok(u32_(s.product_code)),
@@ -71,7 +71,7 @@ async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, Sdo
                 2 => SlaveInfoCode::AlStatus,
                 _ => return Err(missing()),
             };
-            let v = master.slave_number(n, item).await.map_err(|_| SdoAbortCode::GENERAL)?;
+            let v = master.slave_number(n, item, call).await.map_err(|_| SdoAbortCode::GENERAL)?;
             Ok(u16_(v as u16))
         }
         _ => Err(missing()),
@@ -80,13 +80,15 @@ async fn value(master: &Master, index: u16, subindex: u8) -> Result<Vec<u8>, Sdo
 
 /// The CoE body answering a CoE body sent to the master; `None` when it is
 /// not an SDO request.
-pub(crate) async fn answer(master: &Master, body: &[u8]) -> Option<Vec<u8>> {
+pub(crate) async fn answer(master: &Master, body: &[u8], call: Call) -> Option<Vec<u8>> {
     let request = SdoRequest::decode(body).ok()?;
     let response = match request {
-        SdoRequest::Upload { index, subindex, complete_access: false } => match value(master, index, subindex).await {
-            Ok(data) => Ok((index, subindex, data)),
-            Err(code) => Err((index, subindex, code)),
-        },
+        SdoRequest::Upload { index, subindex, complete_access: false } => {
+            match value(master, index, subindex, call).await {
+                Ok(data) => Ok((index, subindex, data)),
+                Err(code) => Err((index, subindex, code)),
+            }
+        }
         SdoRequest::Upload { index, subindex, complete_access: true } => {
             Err((index, subindex, SdoAbortCode::NO_COMPLETE_ACCESS))
         }

@@ -35,7 +35,7 @@ use crate::master::mailbox_channel::framing::{self as mbx, MailboxError, Mailbox
 use tokio::net::UdpSocket;
 
 use crate::config::GatewayConfig;
-use crate::master::Master;
+use crate::master::{Call, Master};
 
 /// EtherCAT header type of a mailbox (ETG.1000.4 Table 3).
 const MAILBOX_FRAME: u16 = 5;
@@ -152,27 +152,32 @@ pub(crate) async fn serve(
     }
 }
 
+/// Whose turn the gateway's chip work takes: the line of work no client
+/// owns (its datagrams come from peers the API does not number), each
+/// request with the master's default time.
+pub(crate) const GATEWAY: Call = Call::new(0, None);
+
 /// The answer datagram to one request; a mailbox error in the slave's
 /// stead (or the slave's own) is `Err`.
 async fn answer(master: &Master, request: MailboxHeader, body: &[u8]) -> Result<Vec<u8>, Vec<u8>> {
     if request.address == 0 {
-        let reply = master_od::answer(master, body).await;
+        let reply = master_od::answer(master, body, GATEWAY).await;
         let header = MailboxHeader::new(MailboxType::Coe, 0, request.counter);
         return reply
             .map(|r| datagram(header, &r))
             .ok_or_else(|| refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED));
     }
-    let Some(slave) = master.slave_at_station(request.address).await else {
+    let Some(slave) = master.slave_at_station(request.address, GATEWAY).await else {
         return Err(refusal(&request, MailboxError::INVALID_HEADER));
     };
-    let state = master.slave_number(slave, crate::master::SlaveInfoCode::State).await;
+    let state = master.slave_number(slave, crate::master::SlaveInfoCode::State, GATEWAY).await;
     let state = state.map(|s| EcatState::from_u8(s as u8)).unwrap_or(EcatState::None);
     if !matches!(state, EcatState::PreOp | EcatState::SafeOp | EcatState::Op) {
         return Err(refusal(&request, MailboxError::SERVICE_NOT_SUPPORTED));
     }
     let exchange = async {
         let _lock = master.mailbox_lock(slave).await;
-        master.mailbox_exchange(slave, request.kind, body, ANSWER_TIMEOUT).await
+        master.mailbox_exchange(slave, request.kind, body, ANSWER_TIMEOUT, GATEWAY).await
     };
     match exchange.await {
         Ok(Ok((header, body))) => {

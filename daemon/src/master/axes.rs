@@ -22,7 +22,7 @@ use super::entry_writes::{Staging, WriteError};
 use super::image::{Entry, Image, read_bits};
 use super::objects::{axis_index, lookup};
 use super::value::{DataType, Value, ValueError};
-use super::{EngineError, Immediate, Master, NetworkLayout};
+use super::{Call, EngineError, Immediate, Master, NetworkLayout};
 use crate::config::AxisConfig;
 
 /// How long a command waits for the drive to arrive when the caller gives
@@ -282,8 +282,8 @@ impl Master {
 
     /// The configured axes, each with its number within its slave (which
     /// the process image tells).
-    pub(crate) async fn axes(&self) -> Result<Vec<AxisInfo>, EngineError> {
-        let image = self.image().await?;
+    pub(crate) async fn axes(&self, call: Call) -> Result<Vec<AxisInfo>, EngineError> {
+        let image = self.image(call).await?;
         let layout = self.layout();
         Ok(self.with_axes(|axes| {
             axes.iter()
@@ -298,48 +298,48 @@ impl Master {
     }
 
     /// The axis' state (from the helper) and its actual values.
-    pub(crate) async fn axis_status(&self, axis: &Axis, t: Option<Duration>) -> Result<AxisStatus, EngineError> {
-        let image = self.image().await?;
+    pub(crate) async fn axis_status(&self, axis: &Axis, call: Call) -> Result<AxisStatus, EngineError> {
+        let image = self.image(call).await?;
         let a = &axis.config;
         let k = slave_axis(&image, &self.layout(), a);
-        let state = self.drive_state(axis.number, t).await?;
-        let (_, sw) = self.immediate(Immediate::Cia402Statusword(axis.number), t).await?;
+        let state = self.drive_state(axis.number, call).await?;
+        let (_, sw) = self.immediate(Immediate::Cia402Statusword(axis.number), call).await?;
         Ok(AxisStatus {
             axis: axis.number,
             state,
             statusword: u16::from_le_bytes([sw.first().copied().unwrap_or(0), sw.get(1).copied().unwrap_or(0)]),
-            mode_display: self.axis_value(&image, a, k, MODES_OF_OPERATION_DISPLAY, t).await? as i32,
-            position_actual: self.axis_value(&image, a, k, POSITION_ACTUAL, t).await?,
-            velocity_actual: self.axis_value(&image, a, k, VELOCITY_ACTUAL, t).await?,
-            torque_actual: self.axis_value(&image, a, k, TORQUE_ACTUAL, t).await?,
-            error_code: self.axis_value(&image, a, k, ERROR_CODE, t).await? as u32,
+            mode_display: self.axis_value(&image, a, k, MODES_OF_OPERATION_DISPLAY, call).await? as i32,
+            position_actual: self.axis_value(&image, a, k, POSITION_ACTUAL, call).await?,
+            velocity_actual: self.axis_value(&image, a, k, VELOCITY_ACTUAL, call).await?,
+            torque_actual: self.axis_value(&image, a, k, TORQUE_ACTUAL, call).await?,
+            error_code: self.axis_value(&image, a, k, ERROR_CODE, call).await? as u32,
         })
     }
 
     /// Asks the helper to walk the axis to the command's state and, with
-    /// `wait`, waits until the drive is there, all within `t` (`None`:
-    /// [`COMMAND_WAIT`]); then the axis' status.
+    /// `wait`, waits until the drive is there, all before `call`'s
+    /// deadline (none: [`COMMAND_WAIT`]); then the axis' status.
     pub(crate) async fn axis_command(
         &self,
         axis: &Axis,
         command: AxisCommand,
         wait: bool,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<AxisStatus, AxisError> {
-        let budget = t.unwrap_or(COMMAND_WAIT);
-        let t = Some(budget);
+        let call = call.or_within(COMMAND_WAIT);
+        let budget = call.left().unwrap_or_default();
         let end = Instant::now() + budget;
         let (n, target) = (axis.number, command.target());
         // Walking the state machine for the caller: from FAULT, enabling
         // starts with a fault reset, as FAULT_RESET itself does.
-        let faulted = self.drive_state(n, t).await? == Cia402State::Fault;
+        let faulted = self.drive_state(n, call).await? == Cia402State::Fault;
         if command == AxisCommand::FaultReset || (command == AxisCommand::Enable && faulted) {
-            self.fault_reset(axis, t).await?;
+            self.fault_reset(axis, call).await?;
         }
-        self.immediate(Immediate::Cia402StateSet(Cia402StateSet { axis: n, state: target }), t).await?;
+        self.immediate(Immediate::Cia402StateSet(Cia402StateSet { axis: n, state: target }), call).await?;
         if wait {
             loop {
-                let now = self.drive_state(n, t).await?;
+                let now = self.drive_state(n, call).await?;
                 // A quick stop may end in SWITCH ON DISABLED (option code).
                 let arrived =
                     now == target || (target == Cia402State::QuickStopActive && now == Cia402State::SwitchOnDisabled);
@@ -347,9 +347,9 @@ impl Master {
                     break;
                 }
                 if now == Cia402State::Fault && Instant::now() + budget / 2 >= end {
-                    let image = self.image().await?;
+                    let image = self.image(call).await?;
                     let k = slave_axis(&image, &self.layout(), &axis.config);
-                    let error_code = self.axis_value(&image, &axis.config, k, ERROR_CODE, t).await?;
+                    let error_code = self.axis_value(&image, &axis.config, k, ERROR_CODE, call).await?;
                     return Err(AxisError::StaysInFault { axis: n, error_code });
                 }
                 if Instant::now() >= end {
@@ -359,24 +359,25 @@ impl Master {
                 self.next_inputs(end.saturating_duration_since(Instant::now())).await;
             }
         }
-        Ok(self.axis_status(axis, t).await?)
+        Ok(self.axis_status(axis, call).await?)
     }
 
     /// Sets the axis' mode of operation (0x6060) under `lease_id` (`who`'s) and
-    /// waits, within `t`, until the drive shows it (0x6061); then the
-    /// axis' status.
+    /// waits, before `call`'s deadline (none: [`MODE_WAIT`]), until the
+    /// drive shows it (0x6061); then the axis' status.
     pub(crate) async fn set_axis_mode(
         &self,
         axis: &Axis,
         mode: i8,
         lease_id: &str,
         who: &str,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<AxisStatus, AxisError> {
-        self.write_axis_object(axis, MODES_OF_OPERATION, mode.into(), lease_id, who, t).await?;
-        let end = Instant::now() + t.unwrap_or(MODE_WAIT);
+        self.write_axis_object(axis, MODES_OF_OPERATION, mode.into(), lease_id, who, call).await?;
+        let call = call.or_within(MODE_WAIT);
+        let end = Instant::now() + call.left().unwrap_or_default();
         loop {
-            let s = self.axis_status(axis, t).await?;
+            let s = self.axis_status(axis, call).await?;
             if s.mode_display == i32::from(mode) {
                 return Ok(s);
             }
@@ -395,10 +396,10 @@ impl Master {
         target: AxisTarget,
         lease_id: &str,
         who: &str,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<bool, AxisError> {
         let (base, value) = target.object();
-        self.write_axis_object(axis, base, value, lease_id, who, t).await
+        self.write_axis_object(axis, base, value, lease_id, who, call).await
     }
 
     /// Writes CiA 402 object `base` (axis 0's index) of the axis: into the
@@ -411,9 +412,9 @@ impl Master {
         value: i64,
         lease_id: &str,
         who: &str,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<bool, AxisError> {
-        let image = self.image().await?;
+        let image = self.image(call).await?;
         let a = &axis.config;
         let index = axis_index(base, slave_axis(&image, &self.layout(), a));
         if let Some(e) = image.find(a.slave, index, true) {
@@ -422,7 +423,7 @@ impl Master {
         }
         let ty = object_type(index);
         let bytes = Value::Int(value).encode(ty, ty.bits()).map_err(|error| AxisError::Value { entry: None, error })?;
-        self.sdo_write(a.slave, index, 0, false, bytes, t).await?;
+        self.sdo_write(a.slave, index, 0, false, bytes, call).await?;
         Ok(false)
     }
 
@@ -448,18 +449,18 @@ impl Master {
 
     /// One fault reset through the helper (402_CTL_SET with bit3; the
     /// chip raises controlword bit7 once and clears the request itself).
-    async fn fault_reset(&self, axis: &Axis, t: Option<Duration>) -> Result<(), EngineError> {
+    async fn fault_reset(&self, axis: &Axis, call: Call) -> Result<(), EngineError> {
         let mut control = Cia402Control::ENABLE | Cia402Control::FAULT_RESET;
         control.set(Cia402Control::AUTO_FAULT_RESET, axis.config.auto_fault_reset);
         let axis_count = self.with_axes(|axes| axes.len() as u8);
         let set = Cia402CtlSet { axis: axis.number, control, axis_count, slave: axis.config.slave };
-        self.immediate(Immediate::Cia402CtlSet(set), t).await?;
+        self.immediate(Immediate::Cia402CtlSet(set), call).await?;
         Ok(())
     }
 
     /// The axis' state as the helper reads it (402_STATE_GET).
-    async fn drive_state(&self, axis: u8, t: Option<Duration>) -> Result<Cia402State, EngineError> {
-        let (v, _) = self.immediate(Immediate::Cia402StateGet(axis), t).await?;
+    async fn drive_state(&self, axis: u8, call: Call) -> Result<Cia402State, EngineError> {
+        let (v, _) = self.immediate(Immediate::Cia402StateGet(axis), call).await?;
         Ok(Cia402State::from_u8(v))
     }
 
@@ -471,13 +472,13 @@ impl Master {
         a: &AxisConfig,
         k: u8,
         base: u16,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<i64, EngineError> {
         let index = axis_index(base, k);
         if let (Some(e), Some(frame)) = (image.find(a.slave, index, false), self.latest_inputs()) {
             return Ok(integer(e.data_type, &read_bits(&frame.data, e.bit_offset, e.bit_length)));
         }
-        match self.sdo_read(a.slave, index, 0, false, t).await {
+        match self.sdo_read(a.slave, index, 0, false, call).await {
             Ok(raw) => Ok(integer(object_type(index), &raw)),
             // Not every drive has every object (a CST drive has no target
             // position...): report 0, not an error.

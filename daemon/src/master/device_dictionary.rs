@@ -27,7 +27,7 @@ use serde::{Deserialize, Serialize};
 use tokio::sync::watch;
 
 use super::mailbox_channel::{ANSWER_TIMEOUT, MailboxFailure};
-use super::{Identity, Master};
+use super::{Call, Identity, Master};
 use crate::engine::error::EngineError;
 
 /// One entry as the slave describes it.
@@ -214,8 +214,14 @@ impl Master {
 
     /// The dictionary of the device at `slave`, as the device describes it:
     /// from the cache, else read from the device by a task of the daemon's
-    /// own that this call waits for.
-    pub async fn device_dictionary(self: &Arc<Self>, slave: u8) -> Result<Arc<DeviceDictionary>, DictionaryError> {
+    /// own that this call waits for. `call`'s deadline ends the wait
+    /// ([`EngineError::Timeout`]), never the read, which the next caller
+    /// finds done or under way.
+    pub async fn device_dictionary(
+        self: &Arc<Self>,
+        slave: u8,
+        call: Call,
+    ) -> Result<Arc<DeviceDictionary>, DictionaryError> {
         let identity = self.identity(slave).ok_or_else(|| {
             DictionaryError::Engine(EngineError::BadArgument {
                 field: "slave",
@@ -237,7 +243,10 @@ impl Master {
                     let master = Arc::clone(self);
                     tokio::spawn(async move {
                         let started = std::time::Instant::now();
-                        let outcome = master.load_device_dictionary(slave, identity).await.map(Arc::new);
+                        // No caller's: the read outlives the call that
+                        // started it, each request with the default time.
+                        let reader = Call::anonymous(None);
+                        let outcome = master.load_device_dictionary(slave, identity, reader).await.map(Arc::new);
                         match &outcome {
                             Ok(d) => tracing::info!(
                                 slave,
@@ -253,14 +262,27 @@ impl Master {
                 }
             }
         };
-        let done = rx.wait_for(Option::is_some).await.map_err(|_| {
-            DictionaryError::Engine(EngineError::Unavailable(crate::engine::error::NotRunning::Stopped))
-        })?;
-        done.clone().unwrap_or_else(|| Err(DictionaryError::Garbled("no outcome".into())))
+        let outcome = async {
+            let done = rx.wait_for(Option::is_some).await.map_err(|_| {
+                DictionaryError::Engine(EngineError::Unavailable(crate::engine::error::NotRunning::Stopped))
+            })?;
+            done.clone().unwrap_or_else(|| Err(DictionaryError::Garbled("no outcome".into())))
+        };
+        match call.deadline {
+            None => outcome.await,
+            Some(end) => tokio::time::timeout_at(end.into(), outcome)
+                .await
+                .unwrap_or(Err(DictionaryError::Engine(EngineError::Timeout))),
+        }
     }
 
     /// From disk when kept there, else from the device (then kept).
-    async fn load_device_dictionary(&self, slave: u8, identity: Identity) -> Result<DeviceDictionary, DictionaryError> {
+    async fn load_device_dictionary(
+        &self,
+        slave: u8,
+        identity: Identity,
+        call: Call,
+    ) -> Result<DeviceDictionary, DictionaryError> {
         let (vendor, product, revision) = identity;
         let file = self.dictionary_dir().map(|d| d.join(format!("{vendor:08x}-{product:08x}-{revision:08x}.json")));
         if let Some(f) = &file {
@@ -273,7 +295,7 @@ impl Master {
                 }
             }
         }
-        let d = self.read_device_dictionary(slave, identity).await?;
+        let d = self.read_device_dictionary(slave, identity, call).await?;
         if let Some(f) = &file {
             let kept = f
                 .parent()
@@ -293,16 +315,22 @@ impl Master {
 
     /// Whether the slave says (SII General, CoE details bit 1) that it
     /// answers SDO Information.
-    pub(crate) async fn supports_sdo_info(&self, slave: u8) -> Result<bool, EngineError> {
-        let sii = self.sii(slave, super::sii::Categories::Only(&[ecmxf_devices::sii::category::GENERAL])).await?;
+    pub(crate) async fn supports_sdo_info(&self, slave: u8, call: Call) -> Result<bool, EngineError> {
+        let general = super::sii::Categories::Only(&[ecmxf_devices::sii::category::GENERAL]);
+        let sii = self.sii(slave, general, call).await?;
         Ok(sii.general.is_some_and(|g| g.coe_details & 0x02 != 0))
     }
 
-    async fn read_device_dictionary(&self, slave: u8, identity: Identity) -> Result<DeviceDictionary, DictionaryError> {
-        if !self.supports_sdo_info(slave).await? {
+    async fn read_device_dictionary(
+        &self,
+        slave: u8,
+        identity: Identity,
+        call: Call,
+    ) -> Result<DeviceDictionary, DictionaryError> {
+        if !self.supports_sdo_info(slave, call).await? {
             return Err(DictionaryError::NotSupported(slave));
         }
-        let payload = self.sdo_info(slave, InfoRequest::OdList(ListType::All), "the object list").await?;
+        let payload = self.sdo_info(slave, InfoRequest::OdList(ListType::All), "the object list", call).await?;
         let list = OdList::decode(&payload).map_err(|e| DictionaryError::Garbled(e.to_string()))?;
         let mut indices: Vec<u16> = list.indices().collect();
         indices.sort_unstable();
@@ -310,14 +338,14 @@ impl Master {
         let mut objects = Vec::with_capacity(indices.len());
         for index in indices {
             let what = format!("object {index:#06x}");
-            let payload = self.sdo_info(slave, InfoRequest::Object { index }, &what).await?;
+            let payload = self.sdo_info(slave, InfoRequest::Object { index }, &what, call).await?;
             let o = ObjectDescription::decode(&payload).map_err(|e| DictionaryError::Garbled(e.to_string()))?;
             let subs = if o.object_code == 7 { 0..=0 } else { 0..=o.max_subindex };
             let mut entries = Vec::new();
             for subindex in subs {
                 let ask = InfoRequest::Entry { index, subindex, value_info: ValueInfo::ALL };
                 let what = format!("entry {index:#06x}:{subindex:02x}");
-                let payload = match self.sdo_info(slave, ask, &what).await {
+                let payload = match self.sdo_info(slave, ask, &what, call).await {
                     // A record may skip subindices.
                     Err(DictionaryError::Aborted { code, .. }) if code == SdoAbortCode::SUBINDEX_MISSING => continue,
                     other => other?,
@@ -348,12 +376,18 @@ impl Master {
 
     /// One SDO Information question and its whole answer (fragments
     /// joined), under the slave's mailbox lock.
-    async fn sdo_info(&self, slave: u8, request: InfoRequest, what: &str) -> Result<Vec<u8>, DictionaryError> {
+    async fn sdo_info(
+        &self,
+        slave: u8,
+        request: InfoRequest,
+        what: &str,
+        call: Call,
+    ) -> Result<Vec<u8>, DictionaryError> {
         let mut body = [0u8; 16];
         let n = request.encode(&mut body).map_err(|e| DictionaryError::Garbled(e.to_string()))?;
         let want = request.answer_opcode();
         let _lock = self.mailbox_lock(slave).await;
-        let mut answer = self.mailbox_exchange(slave, MailboxType::Coe, &body[..n], ANSWER_TIMEOUT).await?;
+        let mut answer = self.mailbox_exchange(slave, MailboxType::Coe, &body[..n], ANSWER_TIMEOUT, call).await?;
         let mut joined = Vec::new();
         let mut expected_left: Option<u16> = None;
         loop {
@@ -373,7 +407,7 @@ impl Master {
                 return Ok(joined);
             }
             expected_left = Some(f.header.fragments_left);
-            answer = self.mailbox_next(slave, ANSWER_TIMEOUT).await?;
+            answer = self.mailbox_next(slave, ANSWER_TIMEOUT, call).await?;
         }
     }
 }

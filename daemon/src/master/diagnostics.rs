@@ -3,15 +3,13 @@
 //! state, AL status, addresses, identity and distributed clock
 //! (SLV_INFO_GET, v049 15).
 
-use std::time::Duration;
-
 pub(crate) use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 pub(crate) use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::payload::emergency::{CoeEmergencyReply, EMERGENCY_MAX};
 use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::{EcatState, PayloadError};
 
-use super::{Identity, Master};
+use super::{Call, Identity, Master};
 use crate::engine::error::EngineError;
 use crate::engine::slot::Immediate;
 
@@ -70,14 +68,14 @@ impl Master {
     pub(crate) async fn emergency_history(
         &self,
         count: Option<u8>,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<Vec<EmergencyRecord>, HistoryError> {
         let n = count.unwrap_or(EMERGENCY_MAX);
         if !(1..=EMERGENCY_MAX).contains(&n) {
             let reason = format!("{n} records; the chip keeps 1..={EMERGENCY_MAX}");
             return Err(EngineError::BadArgument { field: "count", reason }.into());
         }
-        let (_, data) = self.immediate(Immediate::Emergencies(n), t).await?;
+        let (_, data) = self.immediate(Immediate::Emergencies(n), call).await?;
         let reply = CoeEmergencyReply::new(&data).map_err(HistoryError::Unreadable)?;
         let mut out: Vec<EmergencyRecord> = reply.records().filter(|r| !r.is_empty()).collect();
         out.sort_by_key(|r| std::cmp::Reverse(r.number));
@@ -87,12 +85,17 @@ impl Master {
     /// A slave's state, AL status, addresses and distributed clock, read
     /// live; with `fresh_identity`, its identity and name too (else
     /// [`SlaveReading::identity`] is `None`: the layout has them).
-    pub(crate) async fn slave_reading(&self, slave: u8, fresh_identity: bool) -> Result<SlaveReading, EngineError> {
-        let number = |item| self.slave_number(slave, item);
+    pub(crate) async fn slave_reading(
+        &self,
+        slave: u8,
+        fresh_identity: bool,
+        call: Call,
+    ) -> Result<SlaveReading, EngineError> {
+        let number = |item| self.slave_number(slave, item, call);
         let state = EcatState::from_u8(number(SlaveInfoCode::State).await? as u8);
         let al_status = number(SlaveInfoCode::AlStatus).await? as u16;
         let identity = if fresh_identity {
-            let name = self.slave_name(slave).await?;
+            let name = self.slave_name(slave, call).await?;
             let vendor = number(SlaveInfoCode::VendorId).await?;
             let product = number(SlaveInfoCode::ProductCode).await?;
             let revision = number(SlaveInfoCode::Revision).await?;

@@ -7,7 +7,7 @@
 //!
 //! The daemon builds it, not a caller ([`ImageCache::keep_built`]): once
 //! the network runs after each bring-up, as its own client on the blocking
-//! slot (every other turn, see `engine::slot::DAEMON_CLIENT`), several
+//! slot (every other turn, see [`Call::daemon`]), several
 //! slaves at a time, and keeps it across recoveries that find the same
 //! network. A call that needs it before it is ready waits for that one
 //! build; its deadline can end the wait, never the work (when the build
@@ -24,7 +24,7 @@ use tokio::sync::{Notify, watch};
 
 use super::objects::{entry_name, lookup};
 use super::pdos::{PdoDescription, SlavePdos};
-use super::{DAEMON_CLIENT, EngineError, Master, NotRunning, Phase, SlaveSummary, as_client};
+use super::{Call, EngineError, Master, NotRunning, Phase, SlaveSummary};
 
 /// Slaves whose PDOs are read at once: each read waits for the chip, so
 /// with a few in flight the next request is always queued when the slot
@@ -303,14 +303,14 @@ async fn read_all_pdos(master: &Arc<Master>, slaves: &[SlaveSummary]) -> Result<
     let mut tasks = tokio::task::JoinSet::new();
     for _ in 0..BUILDERS.min(slaves.len()) {
         let (master, next, sizes) = (Arc::clone(master), Arc::clone(&next), Arc::clone(&sizes));
-        tasks.spawn(as_client(DAEMON_CLIENT, async move {
+        tasks.spawn(async move {
             let mut done = Vec::new();
             loop {
                 let i = next.fetch_add(1, Ordering::Relaxed);
                 let Some(&(rx, tx)) = sizes.get(i) else { return Ok(done) };
-                done.push((i, master.slave_pdos(i as u8, rx, tx).await?));
+                done.push((i, master.slave_pdos(i as u8, rx, tx, Call::daemon()).await?));
             }
-        }));
+        });
     }
     let mut out: Vec<Option<Arc<SlavePdos>>> = vec![None; slaves.len()];
     while let Some(joined) = tasks.join_next().await {

@@ -8,8 +8,8 @@
 
 use ecmxf_devices::sii::protocol;
 
-use super::Master;
 use super::per_slave::PerSlave;
+use super::{Call, Master};
 use crate::engine::error::{EngineError, WrongState};
 
 /// SII word of the mailbox protocols.
@@ -22,11 +22,11 @@ impl Master {
     /// Ok when `slave` speaks CoE, or when its SII cannot say (the SDO then
     /// goes out and the slave answers for itself); [`WrongState::NoCoe`]
     /// when its SII lists the mailbox protocols and CoE is not among them.
-    pub(crate) async fn check_coe(&self, slave: u8) -> Result<(), EngineError> {
+    pub(crate) async fn check_coe(&self, slave: u8, call: Call) -> Result<(), EngineError> {
         let Some(identity) = self.identity(slave) else { return Ok(()) };
         let protocols = match self.mailbox.get(slave, identity) {
             Some(p) => p,
-            None => match self.eeprom_read(slave, PROTOCOLS_WORD, None).await {
+            None => match self.eeprom_read(slave, PROTOCOLS_WORD, call).await {
                 Ok(words) => {
                     let p = u16::from_le_bytes([words[0], words[1]]);
                     self.mailbox.put(slave, identity, p);

@@ -62,8 +62,8 @@ use ecmxf_wire::mbx::{self, MailboxError, MailboxHeader, MailboxType, Message};
 use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::payload::raw::{DatagramCommand, DatagramHead, RAW_MAX_DATA};
 
-use super::Master;
 use super::per_slave::PerSlave;
+use super::{Call, Master};
 use crate::engine::error::EngineError;
 use crate::engine::events::{Event, EventKind};
 
@@ -196,22 +196,22 @@ impl Master {
 
     /// The configured station address of the slave at `slave` (SLV_INFO,
     /// read once per identity); `None` when it cannot be read.
-    pub(crate) async fn station_address(&self, slave: u8) -> Option<u16> {
+    pub(crate) async fn station_address(&self, slave: u8, call: Call) -> Option<u16> {
         let identity = self.identity(slave)?;
         if let Some(a) = self.channels.stations.get(slave, identity) {
             return Some(a);
         }
         let code = ecmxf_wire::payload::slave_info::SlaveInfoCode::ConfiguredAddress;
-        let a = self.slave_number(slave, code).await.ok()? as u16;
+        let a = self.slave_number(slave, code, call).await.ok()? as u16;
         self.channels.stations.put(slave, identity, a);
         Some(a)
     }
 
     /// The position of the slave with station address `station`.
-    pub(crate) async fn slave_at_station(&self, station: u16) -> Option<u8> {
+    pub(crate) async fn slave_at_station(&self, station: u16, call: Call) -> Option<u8> {
         let count = self.layout().slaves.len().min(usize::from(u8::MAX)) as u8;
         for slave in 0..count {
-            if self.station_address(slave).await == Some(station) {
+            if self.station_address(slave, call).await == Some(station) {
                 return Some(slave);
             }
         }
@@ -219,7 +219,7 @@ impl Master {
     }
 
     /// Where `slave`'s mailboxes are, from its SII (read once per identity).
-    pub(crate) async fn mailbox_geometry(&self, slave: u8) -> Result<MailboxGeometry, EngineError> {
+    pub(crate) async fn mailbox_geometry(&self, slave: u8, call: Call) -> Result<MailboxGeometry, EngineError> {
         let identity = self.identity(slave).ok_or_else(|| EngineError::BadArgument {
             field: "slave",
             reason: format!("slave {slave} does not exist"),
@@ -227,7 +227,7 @@ impl Master {
         if let Some(g) = self.channels.geometry.get(slave, identity) {
             return Ok(g);
         }
-        let w = self.eeprom_read_words(slave, 0x18, 4, None).await?;
+        let w = self.eeprom_read_words(slave, 0x18, 4, call).await?;
         let word = |k: usize| w.get(k).copied().unwrap_or(0);
         let g = MailboxGeometry { rx_offset: word(0), rx_size: word(1), tx_offset: word(2), tx_size: word(3) };
         self.channels.geometry.put(slave, identity, g);
@@ -235,15 +235,18 @@ impl Master {
     }
 
     /// Sends one mailbox message (`kind`, `body`) to `slave` and returns the
-    /// answer's header and body. The caller holds [`Master::mailbox_lock`].
+    /// answer's header and body, given up on after `timeout` (the slave's
+    /// time to answer; `call` is whose turn each datagram takes, and its
+    /// deadline bounds each). The caller holds [`Master::mailbox_lock`].
     pub(crate) async fn mailbox_exchange(
         &self,
         slave: u8,
         kind: MailboxType,
         body: &[u8],
         timeout: Duration,
+        call: Call,
     ) -> Result<Result<(MailboxHeader, Vec<u8>), MailboxFailure>, EngineError> {
-        let g = self.mailbox_geometry(slave).await?;
+        let g = self.mailbox_geometry(slave, call).await?;
         if g.rx_size == 0 || g.tx_size == 0 {
             return Ok(Err(MailboxFailure::NoMailbox(slave)));
         }
@@ -258,10 +261,10 @@ impl Master {
         let header = MailboxHeader::new(kind, body.len() as u16, 0);
         Message::write(header, body, &mut area)
             .map_err(|e| EngineError::BadArgument { field: "message", reason: e.to_string() })?;
-        if !self.mailbox_write(slave, g, &area, deadline).await? {
+        if !self.mailbox_write(slave, g, &area, deadline, call).await? {
             return Ok(Err(MailboxFailure::NoAnswer(slave)));
         }
-        self.mailbox_read(slave, g, deadline).await
+        self.mailbox_read(slave, g, deadline, call).await
     }
 
     /// Reads the next message from `slave`'s send mailbox (a fragment after
@@ -270,9 +273,10 @@ impl Master {
         &self,
         slave: u8,
         timeout: Duration,
+        call: Call,
     ) -> Result<Result<(MailboxHeader, Vec<u8>), MailboxFailure>, EngineError> {
-        let g = self.mailbox_geometry(slave).await?;
-        self.mailbox_read(slave, g, Instant::now() + timeout).await
+        let g = self.mailbox_geometry(slave, call).await?;
+        self.mailbox_read(slave, g, Instant::now() + timeout, call).await
     }
 
     /// Writes `area` into the receive mailbox, in datagrams of at most
@@ -283,6 +287,7 @@ impl Master {
         g: MailboxGeometry,
         area: &[u8],
         deadline: Instant,
+        call: Call,
     ) -> Result<bool, EngineError> {
         let mut wait = Duration::ZERO;
         loop {
@@ -290,7 +295,7 @@ impl Master {
             for (k, chunk) in area.chunks(usize::from(RAW_MAX_DATA)).enumerate() {
                 let ado = g.rx_offset + (k * usize::from(RAW_MAX_DATA)) as u16;
                 let h = head(DatagramCommand::Apwr, slave, ado, chunk.len() as u16);
-                let a = self.raw_datagram(h, chunk.to_vec(), None).await?;
+                let a = self.raw_datagram(h, chunk.to_vec(), call).await?;
                 if a.working_counter == 0 {
                     taken = false;
                     break;
@@ -314,6 +319,7 @@ impl Master {
         slave: u8,
         g: MailboxGeometry,
         deadline: Instant,
+        call: Call,
     ) -> Result<Result<(MailboxHeader, Vec<u8>), MailboxFailure>, EngineError> {
         let mut quiet_since = Instant::now();
         // The counter of the copy a repeat request may bring back that the
@@ -321,12 +327,12 @@ impl Master {
         let mut stale: Option<u8> = None;
         let mut wait = Duration::ZERO;
         loop {
-            let taken = self.mailbox_take(slave, g).await?;
+            let taken = self.mailbox_take(slave, g, call).await?;
             if taken == Take::Lost {
                 // The read freed the mailbox and never came back: ask for
                 // that message again at once.
                 stale = self.channels.counters.lock().unwrap_or_else(|e| e.into_inner()).get(&slave).copied();
-                self.mailbox_repeat(slave).await?;
+                self.mailbox_repeat(slave, call).await?;
                 quiet_since = Instant::now();
                 continue;
             }
@@ -361,7 +367,7 @@ impl Master {
             if now.duration_since(quiet_since) >= REPEAT_AFTER {
                 quiet_since = now;
                 stale = self.channels.counters.lock().unwrap_or_else(|e| e.into_inner()).get(&slave).copied();
-                self.mailbox_repeat(slave).await?;
+                self.mailbox_repeat(slave, call).await?;
                 continue;
             }
             wait = (wait * 2).max(Duration::from_micros(500)).min(POLL_MAX);
@@ -371,11 +377,11 @@ impl Master {
 
     /// One read of the send mailbox. The read that reaches the last byte
     /// frees it.
-    async fn mailbox_take(&self, slave: u8, g: MailboxGeometry) -> Result<Take, EngineError> {
+    async fn mailbox_take(&self, slave: u8, g: MailboxGeometry, call: Call) -> Result<Take, EngineError> {
         let size = usize::from(g.tx_size);
         let first = size.min(usize::from(RAW_MAX_DATA));
         let a = match self
-            .raw_datagram(head(DatagramCommand::Aprd, slave, g.tx_offset, first as u16), Vec::new(), None)
+            .raw_datagram(head(DatagramCommand::Aprd, slave, g.tx_offset, first as u16), Vec::new(), call)
             .await
         {
             Ok(a) => a,
@@ -396,21 +402,21 @@ impl Master {
             while at < want {
                 let n = (want - at).min(usize::from(RAW_MAX_DATA));
                 let h = head(DatagramCommand::Aprd, slave, g.tx_offset + at as u16, n as u16);
-                message.extend(self.raw_datagram(h, Vec::new(), None).await?.data);
+                message.extend(self.raw_datagram(h, Vec::new(), call).await?.data);
                 at += n;
             }
             let last = head(DatagramCommand::Aprd, slave, g.tx_offset + (size - 1) as u16, 1);
-            self.raw_datagram(last, Vec::new(), None).await?;
+            self.raw_datagram(last, Vec::new(), call).await?;
         }
         Ok(Take::Message(message))
     }
 
     /// Toggles SM1's repeat request: the slave puts its last answer back.
-    async fn mailbox_repeat(&self, slave: u8) -> Result<(), EngineError> {
-        let now = self.raw_datagram(head(DatagramCommand::Aprd, slave, SM1_ACTIVATE, 1), Vec::new(), None).await?;
+    async fn mailbox_repeat(&self, slave: u8, call: Call) -> Result<(), EngineError> {
+        let now = self.raw_datagram(head(DatagramCommand::Aprd, slave, SM1_ACTIVATE, 1), Vec::new(), call).await?;
         let toggled = now.data.first().copied().unwrap_or(0) ^ 0x02;
         tracing::debug!(slave, "mailbox repeat request");
-        self.raw_datagram(head(DatagramCommand::Apwr, slave, SM1_ACTIVATE, 1), vec![toggled], None).await?;
+        self.raw_datagram(head(DatagramCommand::Apwr, slave, SM1_ACTIVATE, 1), vec![toggled], call).await?;
         Ok(())
     }
 

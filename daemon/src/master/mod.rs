@@ -32,6 +32,7 @@ pub use outputs::OutputWriter;
 pub use transactions::RawAnswer;
 
 pub(crate) mod axes;
+mod call;
 pub mod device_dictionary;
 pub(crate) mod diagnostics;
 pub mod entry_writes;
@@ -58,8 +59,9 @@ pub(crate) mod value;
 pub type Identity = (u32, u32, u32);
 
 pub use crate::engine::inputs::InputFrame;
-pub use crate::engine::slot::{DAEMON_CLIENT, as_client};
+pub use crate::engine::slot::DAEMON_CLIENT;
 pub use crate::engine::{EVENT_BACKLOG, QUEUE_DEPTH, SUBSCRIBER_BACKLOG};
+pub use call::Call;
 
 // What front ends (the gRPC API, and any other) need of the engine, named
 // here so that they import the master alone, never the engine's modules: errors, phases and
@@ -358,23 +360,26 @@ impl Master {
         Ok((Self::start(link, config), sim))
     }
 
-    async fn request(&self, request: SlotRequest, timeout: Option<Duration>) -> Result<Vec<u8>, EngineError> {
-        self.request_with_progress(request, timeout, None).await
+    async fn request(&self, request: SlotRequest, call: Call) -> Result<Vec<u8>, EngineError> {
+        self.request_with_progress(request, call, None).await
     }
 
+    /// Queues `request` for `call`'s client and waits for its answer until
+    /// `call`'s deadline (none: [`Master::default_timeout`] from now). The
+    /// job carries the same instant, so the engine drops it unanswered
+    /// when it comes too late, as it does when this future is dropped.
     async fn request_with_progress(
         &self,
         request: SlotRequest,
-        timeout: Option<Duration>,
+        call: Call,
         progress: Option<Arc<TransferProgress>>,
     ) -> Result<Vec<u8>, EngineError> {
-        let timeout = timeout.unwrap_or(self.default_timeout);
+        let deadline = call.deadline.unwrap_or_else(|| Instant::now() + self.default_timeout);
         let (reply, rx) = oneshot::channel();
-        let client = crate::engine::slot::current_client();
         let buffer = Vec::with_capacity(crate::engine::slot::request::reply_capacity(&request));
-        let job = Job { request, deadline: Instant::now() + timeout, reply, progress, client, buffer };
+        let job = Job { request, deadline, reply, progress, client: call.client, buffer };
         self.engine.send(Command::Job(job))?;
-        match tokio::time::timeout(timeout, rx).await {
+        match tokio::time::timeout_at(deadline.into(), rx).await {
             Ok(Ok(r)) => r,
             Ok(Err(_)) => Err(EngineError::Unavailable(NotRunning::Stopped)),
             // Dropping `rx` here tells the engine.
@@ -564,9 +569,16 @@ impl Master {
     }
 
     /// The process image of the network in force (image::ImageCache::get:
-    /// at once when built, else after the build under way).
-    pub async fn image(&self) -> Result<Arc<image::Image>, EngineError> {
-        self.image.get(self).await
+    /// at once when built, else after the build under way). `call`'s
+    /// deadline ends the wait ([`EngineError::Timeout`]), never the build,
+    /// which is the daemon's own work.
+    pub async fn image(&self, call: Call) -> Result<Arc<image::Image>, EngineError> {
+        match call.deadline {
+            None => self.image.get(self).await,
+            Some(end) => {
+                tokio::time::timeout_at(end.into(), self.image.get(self)).await.unwrap_or(Err(EngineError::Timeout))
+            }
+        }
     }
 
     /// The process image of the network in force if it is built (or its

@@ -5,7 +5,7 @@
 use std::sync::atomic::Ordering;
 use std::time::Duration;
 
-use super::Master;
+use super::{Call, Master};
 use crate::config::Config;
 use crate::engine::Command;
 use crate::engine::error::{EngineError, NotRunning};
@@ -17,14 +17,14 @@ impl Master {
     /// Scans the network again and redoes the whole bring-up from the
     /// configuration (mapping, start-up SDOs, states); returns once the
     /// network runs again. Requests in flight fail with `Unavailable`.
-    pub async fn reinit(&self, timeout: Option<Duration>) -> Result<(), EngineError> {
-        self.network_action(NetworkAction::Reinit, timeout).await
+    pub async fn reinit(&self, call: Call) -> Result<(), EngineError> {
+        self.network_action(NetworkAction::Reinit, call).await
     }
 
     /// Warm-resets the chip (cmd 127), then redoes the bring-up; returns once
     /// the network runs again.
-    pub async fn warm_reset(&self, timeout: Option<Duration>) -> Result<(), EngineError> {
-        self.network_action(NetworkAction::WarmReset, timeout).await
+    pub async fn warm_reset(&self, call: Call) -> Result<(), EngineError> {
+        self.network_action(NetworkAction::WarmReset, call).await
     }
 
     /// Brings the network up again with `config`: expected slaves, PDO
@@ -34,7 +34,7 @@ impl Master {
     /// to the running process and cannot change. Returns once the network
     /// runs with it; on a bring-up failure the engine keeps retrying the new
     /// configuration, and [`Master::last_error`] says why.
-    pub async fn apply_config(&self, config: Config, timeout: Option<Duration>) -> Result<(), EngineError> {
+    pub async fn apply_config(&self, config: Config, call: Call) -> Result<(), EngineError> {
         config
             .validate(std::path::Path::new("(applied)"))
             .map_err(|e| EngineError::BadArgument { field: "config", reason: e.to_string() })?;
@@ -75,7 +75,7 @@ impl Master {
             }
         };
         tokio::select! {
-            r = self.until(timeout, |s| s.config_generation >= generation && s.phase == Phase::Running) => r,
+            r = self.until(call, |s| s.config_generation >= generation && s.phase == Phase::Running) => r,
             e = failed => Err(e),
         }
     }
@@ -99,17 +99,18 @@ impl Master {
         Ok(())
     }
 
-    async fn network_action(&self, action: NetworkAction, timeout: Option<Duration>) -> Result<(), EngineError> {
+    async fn network_action(&self, action: NetworkAction, call: Call) -> Result<(), EngineError> {
         self.running_or_unavailable()?;
         let before = self.status().recoveries;
         self.engine.send(Command::Network(action))?;
-        self.until(timeout, |s| s.recoveries > before && s.phase == Phase::Running).await
+        self.until(call, |s| s.recoveries > before && s.phase == Phase::Running).await
     }
 
-    /// Waits until the status satisfies `done` (default limit 30 s); a
-    /// stopped engine ends the wait at once.
-    async fn until(&self, timeout: Option<Duration>, done: impl Fn(&Snapshot) -> bool) -> Result<(), EngineError> {
-        let limit = timeout.unwrap_or(Duration::from_secs(30));
+    /// Waits until the status satisfies `done`, until `call`'s deadline
+    /// (none: 30 s from now); a stopped engine ends the wait at once. Only
+    /// the deadline of `call` matters here: no request is queued.
+    async fn until(&self, call: Call, done: impl Fn(&Snapshot) -> bool) -> Result<(), EngineError> {
+        let limit = call.or_within(Duration::from_secs(30)).left().unwrap_or_default();
         match self.wait_status(limit, |s| done(s) || s.phase == Phase::Stopped).await {
             Ok(s) if s.phase != Phase::Stopped || done(&s) => Ok(()),
             Ok(_) => Err(EngineError::Unavailable(NotRunning::Stopped)),

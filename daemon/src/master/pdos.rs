@@ -18,9 +18,9 @@ use ecmxf_devices::od::DataType;
 use ecmxf_devices::sii::{self, PdoRecord, Sii, decode_text};
 use ecmxf_wire::payload::pdo::{PdoEntry, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 
-use super::Master;
 use super::esi::EsiRef;
 use super::sii::Categories;
+use super::{Call, Master};
 use crate::engine::error::EngineError;
 
 /// Where a slave's PDO list came from.
@@ -110,7 +110,13 @@ impl Master {
     /// `slave`'s assigned PDOs from the best source it has (module docs).
     /// `rx_bytes`/`tx_bytes` are its process data as bring-up found it: a
     /// direction without bytes is not asked for.
-    pub async fn slave_pdos(&self, slave: u8, rx_bytes: usize, tx_bytes: usize) -> Result<SlavePdos, EngineError> {
+    pub async fn slave_pdos(
+        &self,
+        slave: u8,
+        rx_bytes: usize,
+        tx_bytes: usize,
+        call: Call,
+    ) -> Result<SlavePdos, EngineError> {
         if rx_bytes == 0 && tx_bytes == 0 {
             return Ok(SlavePdos::none("no process data"));
         }
@@ -126,7 +132,7 @@ impl Master {
         // Without an ESI, an ENI entry describes the PDOs (names, types).
         let eni_device = if esi_device.is_none() { self.eni_device(slave).await } else { None };
         let mut notes = Vec::new();
-        match self.coe_pdos(slave, rx_bytes, tx_bytes).await {
+        match self.coe_pdos(slave, rx_bytes, tx_bytes, call).await {
             Ok((mut rx, mut tx)) => {
                 // Without an ESI, the SII's PDO categories (when it has
                 // them) are what names and types the entries.
@@ -136,7 +142,7 @@ impl Master {
                     from_description(&mut tx, &esi_described(d.tx_pdos.iter()));
                 }
                 if esi_device.is_none() && eni_device.is_none() {
-                    match self.sii_described(slave, PDO_CATEGORIES).await {
+                    match self.sii_described(slave, PDO_CATEGORIES, call).await {
                         Ok(image) => {
                             let (all_rx, all_tx) =
                                 (from_sii_all(&image, &image.rx_pdos), from_sii_all(&image, &image.tx_pdos));
@@ -165,7 +171,7 @@ impl Master {
             Err(e) if source_lacks(&e) => notes.push(format!("CoE: {e}")),
             Err(e) => return Err(e),
         }
-        match self.sii_described(slave, PDO_CATEGORIES).await {
+        match self.sii_described(slave, PDO_CATEGORIES, call).await {
             Ok(image) if !image.rx_pdos.is_empty() || !image.tx_pdos.is_empty() => {
                 let (rx, tx) = (from_sii(&image, &image.rx_pdos), from_sii(&image, &image.tx_pdos));
                 let note = notes.join("; ");
@@ -190,29 +196,30 @@ impl Master {
         slave: u8,
         rx_bytes: usize,
         tx_bytes: usize,
+        call: Call,
     ) -> Result<(Vec<PdoDescription>, Vec<PdoDescription>), EngineError> {
-        let rx = if rx_bytes > 0 { self.coe_assignment(slave, RX_PDO_ASSIGN).await? } else { Vec::new() };
-        let tx = if tx_bytes > 0 { self.coe_assignment(slave, TX_PDO_ASSIGN).await? } else { Vec::new() };
+        let rx = if rx_bytes > 0 { self.coe_assignment(slave, RX_PDO_ASSIGN, call).await? } else { Vec::new() };
+        let tx = if tx_bytes > 0 { self.coe_assignment(slave, TX_PDO_ASSIGN, call).await? } else { Vec::new() };
         Ok((rx, tx))
     }
 
     /// One assignment: what PDO_CONFIG_GET carries, completed with SDO
     /// uploads where it is cut (more than 3 PDOs, more than 8 entries).
-    async fn coe_assignment(&self, slave: u8, assign: u16) -> Result<Vec<PdoDescription>, EngineError> {
-        let config = self.pdo_config_read(slave, assign, None).await?;
+    async fn coe_assignment(&self, slave: u8, assign: u16, call: Call) -> Result<Vec<PdoDescription>, EngineError> {
+        let config = self.pdo_config_read(slave, assign, call).await?;
         let mut out = Vec::with_capacity(usize::from(config.pdo_count));
         for n in 0..config.pdo_count {
             let (index, count, mut entries) = match config.used().get(usize::from(n)) {
                 Some(p) => (p.index, p.entry_count, p.used().to_vec()),
                 None => {
-                    let v = self.sdo_read(slave, assign, n + 1, false, None).await?;
+                    let v = self.sdo_read(slave, assign, n + 1, false, call).await?;
                     let index = le_u32(&v) as u16;
-                    let count = self.sdo_read(slave, index, 0, false, None).await?;
+                    let count = self.sdo_read(slave, index, 0, false, call).await?;
                     (index, u16::from(count.first().copied().unwrap_or(0)), Vec::new())
                 }
             };
             for sub in entries.len() + 1..=usize::from(count).min(255) {
-                let v = self.sdo_read(slave, index, sub as u8, false, None).await?;
+                let v = self.sdo_read(slave, index, sub as u8, false, call).await?;
                 entries.push(PdoEntry::from_u32(le_u32(&v)));
             }
             out.push(PdoDescription {

@@ -1,7 +1,7 @@
 //! The chip's own peripherals: GPIO, ADC, DAC and the encoder input
 //! (GPIO_CONFIG_SET 31, GPIO_FUNC_OP 32, QEI_FUNC_OP 33, DAC_FUNC_OP 34,
 //! ADC_FUNC_OP 35). Each operation is one or a few non-blocking chip
-//! commands; the caller's deadline applies to each.
+//! commands; the caller's deadline bounds them all.
 
 use std::time::Duration;
 
@@ -10,7 +10,7 @@ use ecmxf_wire::payload::gpio::{GpioConfig, GpioFunc};
 pub(crate) use ecmxf_wire::payload::gpio::{GpioMode, GpioPull};
 use ecmxf_wire::payload::periph::{AdcInput, AdcOp, DacOp, DacTrigger, QeiMode, QeiOp};
 
-use super::Master;
+use super::{Call, Master};
 use crate::engine::error::EngineError;
 use crate::engine::slot::Immediate;
 
@@ -85,8 +85,8 @@ fn gpio_lines(lines: u32, field: &'static str) -> Result<u32, EngineError> {
 
 impl Master {
     /// One peripheral command: the word its data starts with.
-    async fn peripheral(&self, command: Immediate, t: Option<Duration>) -> Result<u32, EngineError> {
-        self.immediate(command, t).await.map(|(_, d)| word(&d))
+    async fn peripheral(&self, command: Immediate, call: Call) -> Result<u32, EngineError> {
+        self.immediate(command, call).await.map(|(_, d)| word(&d))
     }
 
     /// Sets the mode and pull of `lines` (bit n = line n, 0..=19): lines
@@ -96,44 +96,44 @@ impl Master {
         lines: u32,
         mode: GpioMode,
         pull: GpioPull,
-        t: Option<Duration>,
+        call: Call,
     ) -> Result<(), EngineError> {
         let l = gpio_lines(lines, "lines")?;
         if l & 0xFFFF != 0 {
-            self.peripheral(Immediate::GpioConfig(GpioConfig::SetMode { lines: l as u16, mode, pull }), t).await?;
+            self.peripheral(Immediate::GpioConfig(GpioConfig::SetMode { lines: l as u16, mode, pull }), call).await?;
         }
         if l >> 16 != 0 {
             let ext = GpioConfig::SetModeExt { lines: (l >> 16) as u8, mode, pull };
-            self.peripheral(Immediate::GpioConfig(ext), t).await?;
+            self.peripheral(Immediate::GpioConfig(ext), call).await?;
         }
         Ok(())
     }
 
     /// Sets the output levels of lines 0..=19 (bit n = line n high), then
     /// reads the levels back.
-    pub(crate) async fn set_gpio(&self, levels: u32, t: Option<Duration>) -> Result<GpioLevels, EngineError> {
+    pub(crate) async fn set_gpio(&self, levels: u32, call: Call) -> Result<GpioLevels, EngineError> {
         let l = gpio_lines(levels, "levels")?;
-        self.peripheral(Immediate::Gpio(GpioFunc::ExtSetValue { values: GpioMask(l) }), t).await?;
-        self.gpio_levels(t).await
+        self.peripheral(Immediate::Gpio(GpioFunc::ExtSetValue { values: GpioMask(l) }), call).await?;
+        self.gpio_levels(call).await
     }
 
     /// The levels and interrupt flags of lines 0..=19.
-    pub(crate) async fn gpio_levels(&self, t: Option<Duration>) -> Result<GpioLevels, EngineError> {
-        let levels = self.peripheral(Immediate::Gpio(GpioFunc::ExtGetValue), t).await?;
-        let flags = self.peripheral(Immediate::Gpio(GpioFunc::ExtGetIntFlag), t).await?;
+    pub(crate) async fn gpio_levels(&self, call: Call) -> Result<GpioLevels, EngineError> {
+        let levels = self.peripheral(Immediate::Gpio(GpioFunc::ExtGetValue), call).await?;
+        let flags = self.peripheral(Immediate::Gpio(GpioFunc::ExtGetIntFlag), call).await?;
         Ok(GpioLevels { levels: levels & GPIO_LINES, interrupt_flags: flags & GPIO_LINES })
     }
 
     /// One ADC conversion, 0..=4095 for 0..3.3 V, of the single-ended or
     /// the differential input.
-    pub(crate) async fn read_adc(&self, differential: bool, t: Option<Duration>) -> Result<u16, AdcError> {
+    pub(crate) async fn read_adc(&self, differential: bool, call: Call) -> Result<u16, AdcError> {
         let input = if differential { AdcInput::Differential } else { AdcInput::SingleEnded };
-        self.peripheral(Immediate::Adc(AdcOp::Open(input)), t).await?;
-        self.peripheral(Immediate::Adc(AdcOp::ConfigSampleModule), t).await?;
-        self.peripheral(Immediate::Adc(AdcOp::StartConv), t).await?;
+        self.peripheral(Immediate::Adc(AdcOp::Open(input)), call).await?;
+        self.peripheral(Immediate::Adc(AdcOp::ConfigSampleModule), call).await?;
+        self.peripheral(Immediate::Adc(AdcOp::StartConv), call).await?;
         for _ in 0..ADC_POLLS {
-            if self.peripheral(Immediate::Adc(AdcOp::GetDataValidFlag), t).await? != 0 {
-                let data = self.peripheral(Immediate::Adc(AdcOp::GetConvData), t).await?;
+            if self.peripheral(Immediate::Adc(AdcOp::GetDataValidFlag), call).await? != 0 {
+                let data = self.peripheral(Immediate::Adc(AdcOp::GetConvData), call).await?;
                 return Ok((data & 0x0FFF) as u16);
             }
             // The chip raises no event for a finished conversion (v049
@@ -146,28 +146,28 @@ impl Master {
 
     /// Sets the DAC output, 0..=4095 for 0..3.3 V (opened to convert on
     /// each value set).
-    pub(crate) async fn write_dac(&self, value: u16, t: Option<Duration>) -> Result<(), EngineError> {
+    pub(crate) async fn write_dac(&self, value: u16, call: Call) -> Result<(), EngineError> {
         if value > DAC_MAX {
             return Err(EngineError::BadArgument { field: "value", reason: format!("{value} is outside 0..=4095") });
         }
-        self.peripheral(Immediate::Dac(DacOp::Open(DacTrigger::OnSetData)), t).await?;
-        self.peripheral(Immediate::Dac(DacOp::SetData(value)), t).await?;
+        self.peripheral(Immediate::Dac(DacOp::Open(DacTrigger::OnSetData)), call).await?;
+        self.peripheral(Immediate::Dac(DacOp::SetData(value)), call).await?;
         Ok(())
     }
 
     /// Starts, stops or only reads the encoder input: its count after
     /// `action`.
-    pub(crate) async fn qei(&self, action: QeiAction, t: Option<Duration>) -> Result<u32, EngineError> {
+    pub(crate) async fn qei(&self, action: QeiAction, call: Call) -> Result<u32, EngineError> {
         match action {
             QeiAction::Start => {
-                self.peripheral(Immediate::Qei(QeiOp::Open(QeiMode::X4Free)), t).await?;
-                self.peripheral(Immediate::Qei(QeiOp::Start), t).await?;
+                self.peripheral(Immediate::Qei(QeiOp::Open(QeiMode::X4Free)), call).await?;
+                self.peripheral(Immediate::Qei(QeiOp::Start), call).await?;
             }
             QeiAction::Stop => {
-                self.peripheral(Immediate::Qei(QeiOp::Stop), t).await?;
+                self.peripheral(Immediate::Qei(QeiOp::Stop), call).await?;
             }
             QeiAction::Read => {}
         }
-        self.peripheral(Immediate::Qei(QeiOp::GetCount), t).await
+        self.peripheral(Immediate::Qei(QeiOp::GetCount), call).await
     }
 }

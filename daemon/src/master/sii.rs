@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex};
 use ecmxf_devices::sii::{Sii, SiiError, category};
 use tokio::sync::OnceCell;
 
-use super::{Identity, Master};
+use super::{Call, Identity, Master};
 use crate::engine::error::EngineError;
 
 /// Where the category area starts (word 0x40).
@@ -71,19 +71,24 @@ impl Master {
     /// whatever the EEPROM answers there.
     /// With [`Categories::Only`] the fixed area is not wanted: only its size
     /// word is read (the rest stays 0), one request instead of 32.
-    pub(crate) async fn sii_words(&self, slave: u8, which: Categories<'_>) -> Result<Vec<u16>, EngineError> {
+    pub(crate) async fn sii_words(
+        &self,
+        slave: u8,
+        which: Categories<'_>,
+        call: Call,
+    ) -> Result<Vec<u16>, EngineError> {
         let mut words = match which {
-            Categories::All => self.eeprom_read_words(slave, 0, CATEGORIES, None).await?,
+            Categories::All => self.eeprom_read_words(slave, 0, CATEGORIES, call).await?,
             Categories::Only(_) => {
                 let mut fixed = vec![0; usize::from(SIZE_WORD)];
-                fixed.extend(self.eeprom_read_words(slave, SIZE_WORD, CATEGORIES - SIZE_WORD, None).await?);
+                fixed.extend(self.eeprom_read_words(slave, SIZE_WORD, CATEGORIES - SIZE_WORD, call).await?);
                 fixed
             }
         };
         let size = words.get(0x3E).map_or(0x1_0000, |&n| (u32::from(n) + 1) * 64).min(0x1_0000);
         let mut at = u32::from(CATEGORIES);
         while at + 2 <= size {
-            let head = self.eeprom_read_words(slave, at as u16, 2, None).await?;
+            let head = self.eeprom_read_words(slave, at as u16, 2, call).await?;
             words.extend_from_slice(&head);
             if head[0] == category::END || head[0] == 0 {
                 break;
@@ -95,7 +100,7 @@ impl Master {
                 return Err(EngineError::BadDeviceData { slave, error });
             }
             if which.wants(head[0]) {
-                let body = self.eeprom_read_words(slave, (at + 2) as u16, len as u16, None).await?;
+                let body = self.eeprom_read_words(slave, (at + 2) as u16, len as u16, call).await?;
                 words.extend_from_slice(&body);
             } else {
                 words.resize(words.len() + len as usize, 0);
@@ -106,8 +111,8 @@ impl Master {
     }
 
     /// The SII parsed, with the bodies `which` asks for.
-    pub(crate) async fn sii(&self, slave: u8, which: Categories<'_>) -> Result<Sii, EngineError> {
-        let words = self.sii_words(slave, which).await?;
+    pub(crate) async fn sii(&self, slave: u8, which: Categories<'_>, call: Call) -> Result<Sii, EngineError> {
+        let words = self.sii_words(slave, which, call).await?;
         let bytes: Vec<u8> = words.iter().flat_map(|w| w.to_le_bytes()).collect();
         Sii::parse(&bytes).map_err(|error| EngineError::BadDeviceData { slave, error })
     }
@@ -116,13 +121,18 @@ impl Master {
     /// [`SiiCache`]): `which` must be the same set for every caller of
     /// this, as only the PDO description's reader is. A slave whose
     /// identity bring-up did not learn (all zero) is always read.
-    pub(crate) async fn sii_described(&self, slave: u8, which: Categories<'_>) -> Result<Arc<Sii>, EngineError> {
+    pub(crate) async fn sii_described(
+        &self,
+        slave: u8,
+        which: Categories<'_>,
+        call: Call,
+    ) -> Result<Arc<Sii>, EngineError> {
         match self.identity(slave).filter(|&id| id != (0, 0, 0)) {
             Some(id) => {
                 let cell = self.sii_cache.cell(id);
-                cell.get_or_try_init(|| async { self.sii(slave, which).await.map(Arc::new) }).await.cloned()
+                cell.get_or_try_init(|| async { self.sii(slave, which, call).await.map(Arc::new) }).await.cloned()
             }
-            None => self.sii(slave, which).await.map(Arc::new),
+            None => self.sii(slave, which, call).await.map(Arc::new),
         }
     }
 }

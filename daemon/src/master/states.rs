@@ -11,13 +11,11 @@
 //! A step a slave refuses ends the walk with an error naming the slave, the
 //! state it is in, the one asked for and its AL status code and text.
 
-use std::time::{Duration, Instant};
-
 use ecmxf_wire::EcatState;
 use ecmxf_wire::payload::slave_info::{SlaveInfo, SlaveInfoCode};
 pub(crate) use ecmxf_wire::payload::state::SlaveSelector;
 
-use super::Master;
+use super::{Call, Master};
 use crate::engine::error::{EngineError, WrongState};
 use crate::engine::slot::SlotRequest;
 
@@ -81,21 +79,17 @@ pub(crate) struct StateReport {
 impl Master {
     /// The state `target` is in now with the AL status of the slave or,
     /// for the network, of each slave (SLV_INFO_GET, v049 15).
-    pub(crate) async fn state_report(
-        &self,
-        target: SlaveSelector,
-        t: Option<Duration>,
-    ) -> Result<StateReport, EngineError> {
-        let state = self.get_state(target, t).await?;
+    pub(crate) async fn state_report(&self, target: SlaveSelector, call: Call) -> Result<StateReport, EngineError> {
+        let state = self.get_state(target, call).await?;
         let mut report = StateReport { state, al_status: None, slaves: Vec::new() };
         match target {
             SlaveSelector::One(i) => {
-                report.al_status = Some(self.slave_number(i, SlaveInfoCode::AlStatus).await? as u16)
+                report.al_status = Some(self.slave_number(i, SlaveInfoCode::AlStatus, call).await? as u16)
             }
             SlaveSelector::All => {
                 for position in 0..self.layout().slaves.len() as u8 {
-                    let s = EcatState::from_u8(self.slave_number(position, SlaveInfoCode::State).await? as u8);
-                    let al_status = self.slave_number(position, SlaveInfoCode::AlStatus).await? as u16;
+                    let s = EcatState::from_u8(self.slave_number(position, SlaveInfoCode::State, call).await? as u8);
+                    let al_status = self.slave_number(position, SlaveInfoCode::AlStatus, call).await? as u16;
                     report.slaves.push(SlaveState { position, state: s, al_status });
                 }
             }
@@ -104,25 +98,20 @@ impl Master {
     }
 
     /// Requests a state, walking the state machine (see the module doc);
-    /// `timeout` bounds the whole walk. A refused step is
+    /// `call`'s deadline (none: the master's `default_timeout` from now)
+    /// bounds the whole walk. A refused step is
     /// [`WrongState::StepRefused`], naming the slave and why.
-    pub async fn set_state(
-        &self,
-        target: SlaveSelector,
-        state: EcatState,
-        timeout: Option<Duration>,
-    ) -> Result<(), EngineError> {
+    pub async fn set_state(&self, target: SlaveSelector, state: EcatState, call: Call) -> Result<(), EngineError> {
         if !state.is_requestable() {
             return Err(EngineError::BadArgument { field: "state", reason: format!("{state} cannot be requested") });
         }
-        let end = Instant::now() + timeout.unwrap_or(self.default_timeout);
-        let left = || Some(end.saturating_duration_since(Instant::now()).max(Duration::from_millis(1)));
-        let now = self.get_state(target, left()).await?;
+        let call = call.or_within(self.default_timeout);
+        let now = self.get_state(target, call).await?;
         for step in walk(now, state) {
-            match self.request(SlotRequest::SetState { target, state: step }, left()).await {
+            match self.request(SlotRequest::SetState { target, state: step }, call).await {
                 Ok(_) => {}
                 Err(EngineError::WrongState(WrongState::Refused(_))) => {
-                    return Err(self.refusal(target, step, left()).await);
+                    return Err(self.refusal(target, step, call).await);
                 }
                 Err(e) => return Err(e),
             }
@@ -133,14 +122,14 @@ impl Master {
     /// Why `step` was refused: the first slave of `target` not there, with
     /// its state and AL status code (read now; a slave that cannot be read
     /// is named without them).
-    async fn refusal(&self, target: SlaveSelector, step: EcatState, timeout: Option<Duration>) -> EngineError {
+    async fn refusal(&self, target: SlaveSelector, step: EcatState, call: Call) -> EngineError {
         let slaves: Vec<u8> = match target {
             SlaveSelector::One(s) => vec![s],
             SlaveSelector::All => (0..self.layout().slaves.len().min(usize::from(u8::MAX)) as u8).collect(),
         };
         for slave in slaves {
             let read = |item| async move {
-                let d = self.request(SlotRequest::SlaveInfo { slave, item }, timeout).await.ok()?;
+                let d = self.request(SlotRequest::SlaveInfo { slave, item }, call).await.ok()?;
                 SlaveInfo::decode(item, &d).ok()?.number()
             };
             let state = read(SlaveInfoCode::State).await.map(|v| EcatState::from_u8(v as u8));

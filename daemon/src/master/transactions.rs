@@ -3,9 +3,6 @@
 //! for ranges, one per word pair) with a deadline; arguments are checked
 //! here, before anything is queued, and errors name the field.
 
-use std::sync::Arc;
-use std::time::Duration;
-
 use ecmxf_wire::payload::foe::FOE_FLASH_SIZE;
 use ecmxf_wire::payload::pdo::{PdoConfig, PdoConfigReply, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 pub(crate) use ecmxf_wire::payload::raw::DatagramCommand;
@@ -13,9 +10,10 @@ use ecmxf_wire::payload::raw::{DatagramHead, RAW_MAX_DATA};
 use ecmxf_wire::payload::slave_info::SlaveInfo;
 pub(crate) use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::{EcatState, Reply, ReplyFields};
+use std::sync::Arc;
 
-use super::Master;
 use super::states::SlaveSelector;
+use super::{Call, Master};
 use crate::engine::error::EngineError;
 pub(crate) use crate::engine::slot::Immediate;
 use crate::engine::slot::{SlotRequest, TransferProgress};
@@ -49,11 +47,11 @@ impl Master {
         index: u16,
         subindex: u8,
         complete: bool,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<Vec<u8>, EngineError> {
-        self.check_coe(slave).await?;
+        self.check_coe(slave, call).await?;
         let _mailbox = self.coe_lock(slave).await;
-        self.request(SlotRequest::SdoRead { slave, index, subindex, complete }, timeout).await
+        self.request(SlotRequest::SdoRead { slave, index, subindex, complete }, call).await
     }
 
     /// SDO download.
@@ -64,16 +62,16 @@ impl Master {
         subindex: u8,
         complete: bool,
         data: Vec<u8>,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<(), EngineError> {
-        self.check_coe(slave).await?;
+        self.check_coe(slave, call).await?;
         let _mailbox = self.coe_lock(slave).await;
-        self.request(SlotRequest::SdoWrite { slave, index, subindex, complete, data }, timeout).await.map(|_| ())
+        self.request(SlotRequest::SdoWrite { slave, index, subindex, complete, data }, call).await.map(|_| ())
     }
 
     /// SII words `word` and `word + 1`.
-    pub async fn eeprom_read(&self, slave: u8, word: u16, timeout: Option<Duration>) -> Result<[u8; 4], EngineError> {
-        let d = self.request(SlotRequest::EepromRead { slave, word }, timeout).await?;
+    pub async fn eeprom_read(&self, slave: u8, word: u16, call: Call) -> Result<[u8; 4], EngineError> {
+        let d = self.request(SlotRequest::EepromRead { slave, word }, call).await?;
         let mut out = [0xFF; 4];
         for (o, b) in out.iter_mut().zip(d) {
             *o = b;
@@ -83,13 +81,13 @@ impl Master {
 
     /// `count` SII words from `word` on. Each word pair is its own
     /// transaction, so a long read shares the blocking slot fairly with
-    /// other callers; `timeout` applies to each.
+    /// other callers; `call`'s deadline bounds the whole range.
     pub async fn eeprom_read_words(
         &self,
         slave: u8,
         word: u16,
         count: u16,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<Vec<u16>, EngineError> {
         if u32::from(word) + u32::from(count) > 0x1_0000 {
             let reason = format!("{count} words from {word:#06x} run past the 16-bit word address space");
@@ -98,7 +96,7 @@ impl Master {
         let mut out = Vec::with_capacity(usize::from(count));
         let mut at = word;
         while out.len() < usize::from(count) {
-            let pair = self.eeprom_read(slave, at, timeout).await?;
+            let pair = self.eeprom_read(slave, at, call).await?;
             out.push(u16::from_le_bytes([pair[0], pair[1]]));
             if out.len() < usize::from(count) {
                 out.push(u16::from_le_bytes([pair[2], pair[3]]));
@@ -115,27 +113,21 @@ impl Master {
         slave: u8,
         word: u16,
         values: &[u16],
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<(), EngineError> {
         if u32::from(word) + values.len() as u32 > 0x1_0000 {
             let reason = format!("{} words from {word:#06x} run past the 16-bit word address space", values.len());
             return Err(EngineError::BadArgument { field: "values", reason });
         }
         for (i, v) in values.iter().enumerate() {
-            self.eeprom_write(slave, word + i as u16, *v, timeout).await?;
+            self.eeprom_write(slave, word + i as u16, *v, call).await?;
         }
         Ok(())
     }
 
     /// Writes one SII word and verifies it.
-    pub async fn eeprom_write(
-        &self,
-        slave: u8,
-        word: u16,
-        value: u16,
-        timeout: Option<Duration>,
-    ) -> Result<(), EngineError> {
-        let written = self.request(SlotRequest::EepromWrite { slave, word, value }, timeout).await.map(|_| ());
+    pub async fn eeprom_write(&self, slave: u8, word: u16, value: u16, call: Call) -> Result<(), EngineError> {
+        let written = self.request(SlotRequest::EepromWrite { slave, word, value }, call).await.map(|_| ());
         // What was read of this EEPROM (or one of its identity) may be old.
         self.sii_cache.forget();
         written
@@ -143,16 +135,16 @@ impl Master {
 
     /// The state a slave (or, for `All`, the network) is in now, freshly
     /// read from the slaves.
-    pub async fn get_state(&self, target: SlaveSelector, timeout: Option<Duration>) -> Result<EcatState, EngineError> {
-        let d = self.request(SlotRequest::GetState { target }, timeout).await?;
+    pub async fn get_state(&self, target: SlaveSelector, call: Call) -> Result<EcatState, EngineError> {
+        let d = self.request(SlotRequest::GetState { target }, call).await?;
         Ok(EcatState::from_u8(d.first().copied().unwrap_or(0)))
     }
 
     /// One item of slave information, as the chip answers it (checked to
     /// decode as `item`); [`Master::slave_number`] and
     /// [`Master::slave_name`] decode it for callers.
-    pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode) -> Result<Vec<u8>, EngineError> {
-        let d = self.request(SlotRequest::SlaveInfo { slave, item }, None).await?;
+    pub async fn slave_info(&self, slave: u8, item: SlaveInfoCode, call: Call) -> Result<Vec<u8>, EngineError> {
+        let d = self.request(SlotRequest::SlaveInfo { slave, item }, call).await?;
         SlaveInfo::decode(item, &d)
             .map_err(|error| EngineError::BadAnswer { what: format!("{item} of slave {slave}"), error })?;
         Ok(d)
@@ -161,8 +153,8 @@ impl Master {
     /// A numeric item of slave information (state, AL status code,
     /// identity, sizes, DC), decoded here once for every caller (the API,
     /// the metrics).
-    pub(crate) async fn slave_number(&self, slave: u8, item: SlaveInfoCode) -> Result<u32, EngineError> {
-        let d = self.slave_info(slave, item).await?;
+    pub(crate) async fn slave_number(&self, slave: u8, item: SlaveInfoCode, call: Call) -> Result<u32, EngineError> {
+        let d = self.slave_info(slave, item, call).await?;
         SlaveInfo::decode(item, &d)
             .ok()
             .and_then(|i| i.number())
@@ -170,8 +162,8 @@ impl Master {
     }
 
     /// The slave's name as the chip reads it (up to the first NUL).
-    pub(crate) async fn slave_name(&self, slave: u8) -> Result<String, EngineError> {
-        let d = self.slave_info(slave, SlaveInfoCode::Name).await?;
+    pub(crate) async fn slave_name(&self, slave: u8, call: Call) -> Result<String, EngineError> {
+        let d = self.slave_info(slave, SlaveInfoCode::Name, call).await?;
         match SlaveInfo::decode(SlaveInfoCode::Name, &d) {
             Ok(SlaveInfo::Name(n)) => Ok(String::from_utf8_lossy(n).into_owned()),
             _ => Err(EngineError::Failed(format!("the name of slave {slave} does not decode"))),
@@ -180,20 +172,15 @@ impl Master {
 
     /// A slave's PDO assignment (`assign_index` 0x1C12 for RxPDOs, 0x1C13
     /// for TxPDOs) and the mapping of each assigned PDO, read from the slave.
-    pub async fn pdo_config_read(
-        &self,
-        slave: u8,
-        assign_index: u16,
-        timeout: Option<Duration>,
-    ) -> Result<PdoConfig, EngineError> {
+    pub async fn pdo_config_read(&self, slave: u8, assign_index: u16, call: Call) -> Result<PdoConfig, EngineError> {
         if ![RX_PDO_ASSIGN, TX_PDO_ASSIGN].contains(&assign_index) {
             let reason = format!("{assign_index:#06x}; use {RX_PDO_ASSIGN:#06x} or {TX_PDO_ASSIGN:#06x}");
             return Err(EngineError::BadArgument { field: "assign_index", reason });
         }
         // The chip reads the assignment over CoE.
-        self.check_coe(slave).await?;
+        self.check_coe(slave, call).await?;
         let _mailbox = self.coe_lock(slave).await;
-        let d = self.request(SlotRequest::PdoConfigRead { slave, assign_index }, timeout).await?;
+        let d = self.request(SlotRequest::PdoConfigRead { slave, assign_index }, call).await?;
         let fields = ReplyFields { value: 0, data_len: d.len() as u16 };
         PdoConfigReply::decode(&fields, &d).map(|r| r.0).map_err(|error| EngineError::BadAnswer {
             what: format!("PDO assignment {assign_index:#06x} of slave {slave}"),
@@ -204,12 +191,7 @@ impl Master {
     /// Sends one raw EtherCAT datagram and returns what came back. A reading
     /// datagram sends `head.length` zero bytes; a writing one sends `data`,
     /// which must be exactly `head.length` bytes.
-    pub async fn raw_datagram(
-        &self,
-        head: DatagramHead,
-        data: Vec<u8>,
-        timeout: Option<Duration>,
-    ) -> Result<RawAnswer, EngineError> {
+    pub async fn raw_datagram(&self, head: DatagramHead, data: Vec<u8>, call: Call) -> Result<RawAnswer, EngineError> {
         if head.length > RAW_MAX_DATA {
             let reason = format!("{} bytes; a datagram carries at most {RAW_MAX_DATA}", head.length);
             return Err(EngineError::BadArgument { field: "length", reason });
@@ -222,7 +204,7 @@ impl Master {
             let reason = format!("{} is a reading datagram and sends no data", head.command);
             return Err(EngineError::BadArgument { field: "data", reason });
         }
-        let d = self.request(SlotRequest::Raw { head, data }, timeout).await?;
+        let d = self.request(SlotRequest::Raw { head, data }, call).await?;
         let Some((wkc, data)) = d.split_first_chunk::<2>() else {
             return Err(EngineError::Failed("raw datagram: answer without a working counter".into()));
         };
@@ -240,7 +222,7 @@ impl Master {
         ado: u16,
         length: u16,
         data: Vec<u8>,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<RawAnswer, EngineError> {
         let logical = if matches!(command, DatagramCommand::Lrd | DatagramCommand::Lwr | DatagramCommand::Lrw) {
             (u32::from(adp) << 16) | u32::from(ado)
@@ -248,7 +230,7 @@ impl Master {
             0
         };
         let head = DatagramHead { command, length, adp, ado, logical, timeout_us: RAW_TIMEOUT_US };
-        self.raw_datagram(head, data, timeout).await
+        self.raw_datagram(head, data, call).await
     }
 
     /// Reads `length` bytes of a slave's ESC registers from `address` on
@@ -258,9 +240,9 @@ impl Master {
         slave: u8,
         address: u16,
         length: u16,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<RawAnswer, EngineError> {
-        self.datagram(DatagramCommand::Aprd, position(slave), address, length, Vec::new(), timeout).await
+        self.datagram(DatagramCommand::Aprd, position(slave), address, length, Vec::new(), call).await
     }
 
     /// Writes `data` to a slave's ESC registers from `address` on (APWR:
@@ -270,11 +252,11 @@ impl Master {
         slave: u8,
         address: u16,
         data: Vec<u8>,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<RawAnswer, EngineError> {
         let length = u16::try_from(data.len())
             .map_err(|_| EngineError::BadArgument { field: "length", reason: format!("{} bytes", data.len()) })?;
-        self.datagram(DatagramCommand::Apwr, position(slave), address, length, data, timeout).await
+        self.datagram(DatagramCommand::Apwr, position(slave), address, length, data, call).await
     }
 
     /// Writes a file to a slave over FoE (the slave must be in PRE-OP or
@@ -286,11 +268,11 @@ impl Master {
         password: u32,
         data: Vec<u8>,
         progress: Option<Arc<TransferProgress>>,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<(), EngineError> {
         let request = SlotRequest::FoeWrite { slave, name: name.to_owned(), password, data };
         let _mailbox = self.coe_lock(slave).await;
-        self.request_with_progress(request, timeout, progress).await.map(|_| ())
+        self.request_with_progress(request, call, progress).await.map(|_| ())
     }
 
     /// Reads a file of at most `max_len` bytes from a slave over FoE.
@@ -302,17 +284,17 @@ impl Master {
         password: u32,
         max_len: u32,
         progress: Option<Arc<TransferProgress>>,
-        timeout: Option<Duration>,
+        call: Call,
     ) -> Result<Vec<u8>, EngineError> {
         let request = SlotRequest::FoeRead { slave, name: name.to_owned(), password, max_len };
         let _mailbox = self.coe_lock(slave).await;
-        self.request_with_progress(request, timeout, progress).await
+        self.request_with_progress(request, call, progress).await
     }
 
     /// A non-blocking chip command (peripherals, CiA402 helper, emergency
     /// history): its return value and data.
-    pub async fn immediate(&self, command: Immediate, timeout: Option<Duration>) -> Result<(u8, Vec<u8>), EngineError> {
-        let mut d = self.request(SlotRequest::Immediate(command), timeout).await?;
+    pub async fn immediate(&self, command: Immediate, call: Call) -> Result<(u8, Vec<u8>), EngineError> {
+        let mut d = self.request(SlotRequest::Immediate(command), call).await?;
         if d.is_empty() {
             return Err(EngineError::Failed(format!("{}: empty answer", SlotRequest::Immediate(command))));
         }

@@ -57,8 +57,11 @@ fn state_value(s: EcatState) -> u8 {
 
 /// A slave's state and AL status code, read from the chip.
 async fn slave_state(master: &Master, slave: u8) -> Option<(EcatState, u16)> {
-    let state = master.slave_number(slave, SlaveInfoCode::State).await.ok()?;
-    let code = master.slave_number(slave, SlaveInfoCode::AlStatus).await.ok()?;
+    // No client's: a scrape's requests share the line of work no client
+    // owns, each with the master's default time.
+    let call = crate::master::Call::anonymous(None);
+    let state = master.slave_number(slave, SlaveInfoCode::State, call).await.ok()?;
+    let code = master.slave_number(slave, SlaveInfoCode::AlStatus, call).await.ok()?;
     Some((EcatState::from_u8(state as u8), code as u16))
 }
 

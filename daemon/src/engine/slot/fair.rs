@@ -4,7 +4,7 @@
 //! client's single read by at most one transaction per busy client, not by
 //! two hundred (the vendor driver's one global mutex gives no such promise).
 //!
-//! Clients are numbered by the API layer (see [`super::as_client`]); requests
+//! Clients are numbered by the front ends (`master::Call`); requests
 //! made outside any client share line 0. The daemon's own work
 //! ([`super::client::DAEMON_CLIENT`]) has a line of its own that takes
 //! every other turn while clients are busy.

@@ -4,7 +4,7 @@
 //!
 //! - [`request`]: what async code asks for ([`SlotRequest`]) and how it
 //!   travels ([`Job`]: deadline, one-shot reply, client).
-//! - [`client`]: whose turn a request is ([`as_client`]).
+//! - [`client`]: the daemon's own turn ([`DAEMON_CLIENT`]).
 //! - `fair`: the queue in front of the slot, round-robin between clients.
 //! - `transaction`: the one job on the slot (`Active`), advanced a step
 //!   at a time between FIFO exchanges. What every kind of request shares
@@ -43,9 +43,8 @@ mod state;
 mod transaction;
 
 // Re-exported by the master as its own (the one door).
-pub(crate) use client::current_client;
 #[allow(unreachable_pub)]
-pub use client::{DAEMON_CLIENT, as_client};
+pub use client::DAEMON_CLIENT;
 pub(super) use fair::FairQueue;
 #[allow(unreachable_pub)]
 pub use request::{Immediate, TransferProgress};
