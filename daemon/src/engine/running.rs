@@ -548,7 +548,7 @@ impl<'a, L: Link> Running<'a, L> {
                 if let SlotRequest::SetState { state, .. } = &j.request {
                     self.held_below_target = state.to_u8() < self.core.config.cycle.target().to_u8();
                 }
-                if let Some(a) = Active::new(j, now) {
+                if let Some(a) = Active::new(j, now, &self.core.telemetry) {
                     self.core.active = Some(a);
                     break;
                 }
@@ -576,7 +576,6 @@ impl<'a, L: Link> Running<'a, L> {
         let (rest, progress) = active.step(&mut self.core.port, now)?;
         self.core.active = rest;
         if progress == Progress::Done {
-            self.core.telemetry.transactions.fetch_add(1, Relaxed);
             clocks.slot_freed = Some(Instant::now());
         }
         let sent = self.core.port.stats().exchanges != exchanges;

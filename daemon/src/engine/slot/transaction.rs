@@ -38,6 +38,7 @@ use super::handler::{Cx, Handler, Next, refused};
 use super::kind::Kind;
 use super::request::{Job, SlotRequest, TransferProgress};
 use crate::engine::error::EngineError;
+use crate::engine::telemetry::Telemetry;
 use crate::link::Link;
 use crate::port::{Port, PortError};
 
@@ -85,6 +86,9 @@ pub(crate) struct Active {
     /// a header brought after this exchange says (busy: it runs; not busy:
     /// start again, a read may run twice).
     unsure_after: Option<u64>,
+    /// Counted as a finished transaction before its caller hears the
+    /// result, so a caller that reads the status next sees it counted.
+    finished: Arc<Telemetry>,
 }
 
 /// What a step did.
@@ -100,7 +104,7 @@ pub(crate) enum Progress {
 
 impl Active {
     /// Takes a job into the slot; a job whose caller already left is dropped.
-    pub(crate) fn new(job: Job, now: Instant) -> Option<Self> {
+    pub(crate) fn new(job: Job, now: Instant, finished: &Arc<Telemetry>) -> Option<Self> {
         if job.reply.is_closed() {
             return None;
         }
@@ -119,12 +123,16 @@ impl Active {
             fetching: false,
             sent_read: None,
             unsure_after: None,
+            finished: Arc::clone(finished),
         })
     }
 
     /// Ends it with `e` (the engine is leaving the running state).
-    pub(crate) fn fail(self, e: EngineError) {
-        let _ = self.finish(Err(e));
+    pub(crate) fn fail(mut self, e: EngineError) {
+        // Not run to its end: not counted.
+        if let Some(reply) = self.reply.take() {
+            let _ = reply.send(Err(e));
+        }
     }
 
     fn orphaned(&self) -> bool {
@@ -132,6 +140,7 @@ impl Active {
     }
 
     fn finish(mut self, result: Result<Vec<u8>, EngineError>) -> Progress {
+        self.finished.transactions.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         if let Some(reply) = self.reply.take() {
             // The receiver may have gone meanwhile; nothing to do then.
             let _ = reply.send(result);
