@@ -19,9 +19,9 @@ pub struct SocketLink {
     pending_wait: Option<Duration>,
     /// The answer timeout the socket has now (set only when it changes).
     answer_timeout: Option<Duration>,
-    /// An answer did not come in time: the stream is out of step until
-    /// [`Link::reopen`].
-    stalled: bool,
+    /// An answer did not come in the time given (that time): the stream is
+    /// out of step until [`Link::reopen`].
+    stalled: Option<Duration>,
     /// INT0's active level (command 58; high after power-up).
     int0_active_high: bool,
     int0: super::LevelChanges,
@@ -45,7 +45,7 @@ impl SocketLink {
             path: path.into(),
             pending_wait: None,
             answer_timeout: None,
-            stalled: false,
+            stalled: None,
             int0_active_high: true,
             int0: super::LevelChanges::default(),
         })
@@ -79,8 +79,8 @@ impl Link for SocketLink {
     fn transfer(&mut self, tx: &[u8], rx: &mut [u8]) -> Result<(), LinkError> {
         // An answer that never came leaves the stream out of step: nothing
         // more goes through it until it is reopened.
-        if self.stalled {
-            return Err(LinkError::Stalled { what: self.describe(), waited: Duration::ZERO });
+        if let Some(waited) = self.stalled {
+            return Err(LinkError::Stalled { what: self.describe(), waited });
         }
         let limit = self.bound_answer(self.pending_wait.unwrap_or_default())?;
         let result = match self.pending_wait.take() {
@@ -97,7 +97,7 @@ impl Link for SocketLink {
         };
         let lines = result.map_err(|e| {
             if matches!(e.kind(), ErrorKind::WouldBlock | ErrorKind::TimedOut) {
-                self.stalled = true;
+                self.stalled = Some(limit);
                 tracing::warn!(link = %self.describe(), waited_ms = limit.as_millis() as u64, "link stalled: no answer");
                 LinkError::Stalled { what: self.describe(), waited: limit }
             } else {
@@ -138,7 +138,7 @@ impl Link for SocketLink {
             .map_err(|e| LinkError::io(format!("reconnect to simulator at {}", self.path.display()), e))?;
         self.pending_wait = None;
         self.answer_timeout = None;
-        self.stalled = false;
+        self.stalled = None;
         self.int0 = super::LevelChanges::default();
         Ok(())
     }

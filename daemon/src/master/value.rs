@@ -157,23 +157,21 @@ impl Value {
         if size == 0 || size > 8 {
             return Err(ValueError::Unholdable { bits, target: target() });
         }
-        match self {
+        // A number: a whole one exactly, or a real.
+        let number: Result<i128, f64> = match self {
             Self::Text(_) => return Err(ValueError::TextForNumber { target: target() }),
             Self::Bytes(b) if b.len() != size => {
                 return Err(ValueError::WrongSize { given: b.len(), size, target: target() });
             }
             Self::Bytes(b) => return Ok(b.clone()),
-            _ => {}
-        }
+            Self::Bool(b) => Ok(i128::from(*b)),
+            Self::Int(i) => Ok(i128::from(*i)),
+            Self::UInt(u) => Ok(i128::from(*u)),
+            Self::Real(f) => Err(*f),
+        };
         let Some((width, signed)) = integer_width(t, bits) else {
             // A real type.
-            let f = match self {
-                Self::Real(f) => *f,
-                Self::Int(i) => *i as f64,
-                Self::UInt(u) => *u as f64,
-                Self::Bool(b) => f64::from(u8::from(*b)),
-                Self::Text(_) | Self::Bytes(_) => unreachable!("handled above"),
-            };
+            let f = number.map_or_else(|f| f, |i| i as f64);
             let mut out = match t {
                 DataType::Real32 => (f as f32).to_le_bytes().to_vec(),
                 _ => f.to_le_bytes().to_vec(),
@@ -181,13 +179,7 @@ impl Value {
             out.resize(size, 0);
             return Ok(out);
         };
-        let wide: i128 = match self {
-            Self::Bool(b) => i128::from(*b),
-            Self::Int(i) => i128::from(*i),
-            Self::UInt(u) => i128::from(*u),
-            Self::Real(f) => return Err(ValueError::NotAnInteger { value: f.to_string(), target: target() }),
-            Self::Text(_) | Self::Bytes(_) => unreachable!("handled above"),
-        };
+        let wide = number.map_err(|f| ValueError::NotAnInteger { value: f.to_string(), target: target() })?;
         let (low, high) = if signed { (-(1i128 << (width - 1)), 1i128 << (width - 1)) } else { (0, 1i128 << width) };
         if wide < low || wide >= high {
             return Err(ValueError::OutOfRange { value: self.shown(), target: target() });
