@@ -12,6 +12,7 @@ flip mosi|miso RATE             flip one bit in a byte with probability RATE (0.
 seed N                          seed the bit-flip generator
 int0 stuck high|low|off         hold INT0 at a level, or release it
 tx-fifo stall|resume            stop (or resume) queuing input frames; all else goes on
+rx-fifo starve CYCLES           the next CYCLES DC cycles find the RxFIFO empty (FIFO error, outputs repeat)
 unplug SLAVE | replug SLAVE     pull a slave out of the ring / plug it back (powers up in INIT)
 al-error SLAVE CODE             force an AL error (drops to SAFE-OP at most)
 drive-fault SLAVE AXIS CODE     raise a CiA402 fault with an error code (emergency sent)
@@ -119,6 +120,14 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
                 ok()
             }
             _ => Err("tx-fifo stall|resume".into()),
+        },
+        "rx-fifo" => match w.next() {
+            Some("starve") => {
+                let n = num(w.next(), "rx-fifo starve CYCLES")?;
+                chip.faults.rx_starved_cycles = u32::try_from(n).map_err(|_| format!("{n} cycles is too many"))?;
+                ok()
+            }
+            _ => Err("rx-fifo starve CYCLES".into()),
         },
         "unplug" => {
             let i = slave_index(chip, w.next())?;
@@ -341,5 +350,8 @@ mod tests {
         execute(&mut c, "tx-fifo resume").unwrap();
         assert!(!c.faults.tx_stalled);
         assert!(execute(&mut c, "tx-fifo sometimes").is_err());
+        execute(&mut c, "rx-fifo starve 3").unwrap();
+        assert_eq!(c.faults.rx_starved_cycles, 3);
+        assert!(execute(&mut c, "rx-fifo starve").is_err());
     }
 }

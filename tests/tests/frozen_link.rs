@@ -36,9 +36,28 @@ fn a_frozen_link_is_a_fault_that_recovers_and_never_holds_up_a_stop() {
         let before = status(&ch).await;
         assert_eq!(before.phase, pb::EnginePhase::Running as i32, "{before:?}");
 
-        // Frozen: the phase leaves RUNNING, the error names the stalled link.
+        // Frozen: an event names the stall within 100 ms of its limit,
+        // though the engine is held in a link call that cannot return;
+        // then the phase leaves RUNNING, the error names the stalled link.
+        let mut diag = pb::diagnostics_client::DiagnosticsClient::new(ch.clone());
+        let mut events = diag.stream_events(pb::StreamEventsRequest {}).await.unwrap().into_inner();
+        let limit = Duration::from_micros(before.flow_limit_us);
+        assert!(limit > Duration::ZERO, "{before:?}");
         sim.freeze();
         let frozen = Instant::now();
+        let stall = tokio::time::timeout(Duration::from_secs(2), async {
+            loop {
+                let e = events.message().await.unwrap().expect("the event stream goes on");
+                if e.kind == pb::EventKind::ProcessData as i32 && !e.flag {
+                    return (frozen.elapsed(), e);
+                }
+            }
+        })
+        .await
+        .expect("a stall event");
+        eprintln!("stall event {:?} after the freeze (limit {limit:?}): {}", stall.0, stall.1.text);
+        assert!(stall.0 < limit + Duration::from_millis(100), "stall event after {:?}, limit {limit:?}", stall.0);
+        assert!(stall.1.text.contains("process data stalled"), "{:?}", stall.1);
         let left = loop {
             let s = status(&ch).await;
             if s.phase != pb::EnginePhase::Running as i32 {

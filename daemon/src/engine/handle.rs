@@ -23,7 +23,7 @@ use tokio::sync::{broadcast, watch};
 use super::command::Command;
 use super::core::{Inbound, Outbound, Shared};
 use super::error::{EngineError, NotRunning};
-use super::events::{Event, RING as EVENT_RING};
+use super::events::{Event, EventKind, RING as EVENT_RING};
 use super::inputs::{InputFrame, read_frame};
 use super::layout::NetworkLayout;
 use super::output_writes::{OutputWrite, Writers};
@@ -87,6 +87,7 @@ pub(crate) fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle 
     let (latest, _) = watch::channel(None);
     let (tx, latest_tx) = (inputs.clone(), latest.clone());
     let (event_tx, stop) = (events.clone(), Arc::clone(&stop_distributor));
+    let watched = Arc::clone(&telemetry);
     let distributor = std::thread::Builder::new()
         .name("ecmxf-inputs".into())
         .spawn(move || {
@@ -104,6 +105,15 @@ pub(crate) fn spawn<L: Link + 'static>(link: L, config: Config) -> EngineHandle 
                 }
                 while let Ok(e) = event_consumer.pop() {
                     let _ = event_tx.send(e);
+                }
+                // A stall the engine cannot announce while a link call
+                // holds it (a link that stopped answering), announced
+                // within this thread's few ms of the limit instead.
+                let now_ns =
+                    crate::realtime::monotonic_ns().saturating_sub(watched.epoch_monotonic_ns.load(Ordering::Relaxed));
+                if let Some(age_us) = watched.unannounced_stall(now_ns) {
+                    let _ = event_tx
+                        .send(Event { time_ns: now_ns, kind: EventKind::ProcessData { flowing: false, age_us } });
                 }
                 std::thread::park_timeout(Duration::from_millis(5));
             }

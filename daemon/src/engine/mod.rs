@@ -49,6 +49,7 @@ pub(crate) mod slot;
 pub(crate) mod supervisor;
 pub(crate) mod telemetry;
 mod thread;
+pub(crate) mod trouble;
 
 pub(crate) use command::Command;
 // Re-exported by the master as its own (the one door).

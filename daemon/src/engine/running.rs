@@ -153,6 +153,7 @@ impl<'a, L: Link> Running<'a, L> {
         };
         let supervisor = Supervisor::new(shape, core.port.status().wkc_errors, now);
         core.telemetry.int0_stuck.store(false, Relaxed);
+        core.telemetry.stall_excused.store(false, Relaxed);
         core.port.pending_control |= ControlFlags::CLEAR_FIFO_ERROR;
         if let Some(c) = cyclic {
             core.intake.start(c, &core.telemetry, now);
@@ -308,7 +309,9 @@ impl<'a, L: Link> Running<'a, L> {
         if let Some(stall) = self.supervisor.take_stall(self.held_below_target, now) {
             if let RecoverCause::InputStall { age, .. } = &stall {
                 let age_us = age.as_micros() as u64;
-                self.core.events.emit(EventKind::ProcessData { flowing: false, age_us });
+                if self.core.telemetry.claim_stall_notice() {
+                    self.core.events.emit(EventKind::ProcessData { flowing: false, age_us });
+                }
             }
             return Err(stall.into());
         }
@@ -330,6 +333,7 @@ impl<'a, L: Link> Running<'a, L> {
         if news.ran_dry {
             // Logged with the event (one line, not two).
             self.core.telemetry.fifo_alarms.fetch_add(1, Relaxed);
+            self.core.telemetry.recent_fifo_alarms.record(self.core.intake.ns(now), 1, 0);
             self.core.events.emit(EventKind::FifoUnderrun);
         }
         if news.clear_fifo_error {
@@ -464,6 +468,12 @@ impl<'a, L: Link> Running<'a, L> {
         if let Some(last) = c.last_exchange() {
             let gap = now.saturating_duration_since(last).as_micros() as u64;
             self.core.telemetry.max_fifo_gap_us.fetch_max(gap, Relaxed);
+            // Longer than the process-data limit: inputs were that stale
+            // for a moment though no stall is left to see afterwards.
+            let limit_ns = self.core.telemetry.flow_limit_ns.load(Relaxed);
+            if limit_ns > 0 && gap.saturating_mul(1000) > limit_ns {
+                self.core.telemetry.recent_long_gaps.record(self.core.intake.ns(now), 1, gap);
+            }
         }
         let room = self.core.port.data_size().checked_div(c.rx_size).unwrap_or(0);
         let n = if c.rx_size > 0 { c.frames_to_push(now, room) } else { 0 };
@@ -488,6 +498,7 @@ impl<'a, L: Link> Running<'a, L> {
             if lost > 0 {
                 self.core.intake.inputs.lost(lost);
                 self.core.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
+                self.core.telemetry.recent_chip_drops.record(self.core.intake.ns(now), lost, 0);
             }
             read = self.core.intake.inputs.publish(reply.inputs, c.tx_size, now);
             self.core.telemetry.input_frames.fetch_add(read as u64, Relaxed);
@@ -547,6 +558,7 @@ impl<'a, L: Link> Running<'a, L> {
             while let Some(j) = self.core.queue.pop() {
                 if let SlotRequest::SetState { state, .. } = &j.request {
                     self.held_below_target = state.to_u8() < self.core.config.cycle.target().to_u8();
+                    self.core.telemetry.stall_excused.store(self.held_below_target, Relaxed);
                 }
                 if let Some(a) = Active::new(j, now, &self.core.telemetry) {
                     self.core.active = Some(a);

@@ -8,6 +8,7 @@
 //! [`ANNOUNCE_EVERY`] while it runs, so counters reach waiters too.
 
 use super::failure::Failure;
+use super::trouble::{Recent, RecentTrouble};
 use std::sync::Mutex;
 use std::sync::atomic::{AtomicU8, AtomicU32, AtomicU64, Ordering::Relaxed};
 use std::time::Duration;
@@ -142,6 +143,19 @@ pub(crate) struct Telemetry {
     pub output_latency_misses: AtomicU64,
     /// Input frames the chip dropped (TxFIFO full).
     pub inputs_dropped_by_chip: AtomicU64,
+    /// The latest run of RxFIFO alarms (health, see [`RecentTrouble`]).
+    pub recent_fifo_alarms: RecentTrouble,
+    /// The latest run of input frames the chip dropped.
+    pub recent_chip_drops: RecentTrouble,
+    /// The latest run of FIFO exchanges later than the process-data limit
+    /// after the one before (the host stalled); figure: the gap, us.
+    pub recent_long_gaps: RecentTrouble,
+    /// A client holds the network below the target state on purpose:
+    /// stale inputs are no stall then.
+    pub stall_excused: std::sync::atomic::AtomicBool,
+    /// `newest_input_ns + 1` of the stall already announced (see
+    /// [`Telemetry::claim_stall_notice`]); 0: none.
+    stall_noticed: AtomicU64,
 }
 
 /// The latest [`LatencyWindow::LEN`] latencies, us, written by the engine
@@ -282,6 +296,13 @@ pub struct Snapshot {
     pub output_latency_misses: u64,
     /// Input frames the chip dropped (TxFIFO full).
     pub inputs_dropped_by_chip: u64,
+    /// The latest run of RxFIFO alarms.
+    pub recent_fifo_alarms: Recent,
+    /// The latest run of input frames the chip dropped.
+    pub recent_chip_drops: Recent,
+    /// The latest run of FIFO exchanges later than the process-data limit
+    /// (worst: the longest gap, us).
+    pub recent_long_gaps: Recent,
 }
 
 impl Snapshot {
@@ -338,6 +359,33 @@ impl Telemetry {
     pub(crate) fn forget_network(&self) {
         self.ecat_state.store(EcatState::None.to_u8(), Relaxed);
         self.flow_limit_ns.store(0, Relaxed);
+        self.recent_fifo_alarms.forget();
+        self.recent_chip_drops.forget();
+        self.recent_long_gaps.forget();
+    }
+
+    /// Claims the one event of the stall that began after the newest input
+    /// frame: true for the first to ask, the engine when it sees the stall
+    /// itself, or the distributor when the engine is held up in a link call
+    /// (see [`Telemetry::unannounced_stall`]). A new frame makes the next
+    /// stall a new one.
+    pub(crate) fn claim_stall_notice(&self) -> bool {
+        let key = self.newest_input_ns.load(Relaxed) + 1;
+        self.stall_noticed.swap(key, Relaxed) != key
+    }
+
+    /// How long no input frame came, us, when process data should flow, is
+    /// older than its limit at `now_ns`, and nobody announced that stall
+    /// yet (this call claims it). For the distributor: the engine notices
+    /// a stall only between link calls, and a link that stops answering
+    /// holds a call for its whole answer limit.
+    pub(crate) fn unannounced_stall(&self, now_ns: u64) -> Option<u64> {
+        let limit = self.flow_limit_ns.load(Relaxed);
+        if limit == 0 || self.phase() != Phase::Running || self.stall_excused.load(Relaxed) {
+            return None;
+        }
+        let age = now_ns.saturating_sub(self.newest_input_ns.load(Relaxed));
+        (age > limit && self.claim_stall_notice()).then_some(age / 1000)
     }
 
     /// Records why bring-up failed or recovery started.
@@ -404,6 +452,9 @@ impl Telemetry {
             config_generation: self.config_generation.load(Relaxed),
             output_latency_misses: self.output_latency_misses.load(Relaxed),
             inputs_dropped_by_chip: self.inputs_dropped_by_chip.load(Relaxed),
+            recent_fifo_alarms: self.recent_fifo_alarms.read(),
+            recent_chip_drops: self.recent_chip_drops.read(),
+            recent_long_gaps: self.recent_long_gaps.read(),
         }
     }
 }

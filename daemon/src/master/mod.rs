@@ -75,6 +75,7 @@ pub use crate::engine::link_budget;
 pub use crate::engine::slot::{Immediate, TransferProgress};
 pub use crate::engine::supervisor::RecoverCause;
 pub use crate::engine::telemetry::{Phase, Snapshot};
+pub use crate::engine::trouble::TROUBLE_WINDOW;
 
 /// The steps of bring-up, for `ecmxfd probe`: it walks them one by one on a
 /// chip no engine runs, to say which one fails and why.
@@ -96,7 +97,7 @@ pub struct Verdict {
 impl Verdict {
     /// Healthy, with a cyclic exchange that delivers input frames.
     pub(crate) fn flowing(&self) -> bool {
-        matches!(self.health, Health::Healthy | Health::SlavesMissing { .. } | Health::Int0Stuck)
+        matches!(self.health, Health::Healthy | Health::SlavesMissing { .. } | Health::Int0Stuck | Health::Troubled(_))
             && self.input_age.is_some()
     }
 }
@@ -138,6 +139,78 @@ pub enum Health {
     /// hundreds of exchanges (`supervisor::Int0Watch`): packets may be
     /// clocked while the chip is busy. Degraded until the line moves.
     Int0Stuck,
+    /// Running, process data flowing, but trouble that passes happened
+    /// within the last [`TROUBLE_WINDOW`]: the RxFIFO ran dry, the chip
+    /// dropped input frames, or the host went longer than the process-data
+    /// limit between two FIFO exchanges. Degraded until a whole window
+    /// passes without one (see `engine::trouble`).
+    Troubled(Trouble),
+}
+
+/// Trouble that passes, as [`Health::Troubled`] reports it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct Trouble {
+    /// What happened.
+    pub kind: TroubleKind,
+    /// How many times in the latest run (events no more than a window
+    /// apart).
+    pub count: u64,
+    /// The longest gap of the run ([`TroubleKind::LongGaps`]; else zero).
+    pub worst: Duration,
+    /// How long ago the latest was.
+    pub ago: Duration,
+}
+
+/// The kinds of [`Trouble`], in the order health names them.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum TroubleKind {
+    /// The RxFIFO ran dry: slaves got their last outputs again.
+    FifoAlarms,
+    /// The chip dropped input frames (its TxFIFO was full).
+    InputsDroppedByChip,
+    /// FIFO exchanges further apart than the process-data limit.
+    LongGaps,
+}
+
+impl Trouble {
+    /// The most pressing recent trouble in `s` at `now_ns`, if any.
+    fn of(s: &Snapshot, now_ns: u64) -> Option<Self> {
+        [
+            (TroubleKind::FifoAlarms, s.recent_fifo_alarms),
+            (TroubleKind::InputsDroppedByChip, s.recent_chip_drops),
+            (TroubleKind::LongGaps, s.recent_long_gaps),
+        ]
+        .into_iter()
+        .find_map(|(kind, r)| {
+            let ago = r.ago(now_ns)?;
+            let worst = if kind == TroubleKind::LongGaps { Duration::from_micros(r.worst) } else { Duration::ZERO };
+            Some(Self { kind, count: r.count, worst, ago })
+        })
+    }
+}
+
+impl std::fmt::Display for Trouble {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let n = self.count;
+        let times = if n == 1 { "once".to_string() } else { format!("{n} times") };
+        match self.kind {
+            TroubleKind::FifoAlarms => write!(f, "the RxFIFO ran dry {times} (slaves got their last outputs again)")?,
+            TroubleKind::InputsDroppedByChip => {
+                write!(f, "the chip dropped {n} input frame{} (its TxFIFO was full)", if n == 1 { "" } else { "s" })?
+            }
+            TroubleKind::LongGaps => write!(
+                f,
+                "FIFO exchanges came later than the process-data limit {times} (longest gap {} ms: the host stalled)",
+                self.worst.as_millis()
+            )?,
+        }
+        write!(
+            f,
+            ", the latest {:.1} s ago; healthy again after {} s without",
+            self.ago.as_secs_f64(),
+            TROUBLE_WINDOW.as_secs()
+        )
+    }
 }
 
 impl Health {
@@ -153,7 +226,7 @@ impl Health {
             Some((age, limit)) if age > limit => Self::Stalled { age, limit },
             _ if s.slaves < s.slaves_seen => Self::SlavesMissing { now: s.slaves, seen: s.slaves_seen },
             _ if s.int0_stuck => Self::Int0Stuck,
-            _ => Self::Healthy,
+            _ => Trouble::of(s, now_ns).map_or(Self::Healthy, Self::Troubled),
         }
     }
 
@@ -184,6 +257,7 @@ impl std::fmt::Display for Health {
                 "degraded: INT0 stays at its ready level while packets go through, so the chip's busy time is not \
                  seen (check link.int0_line, its wiring and chip.int0_active_high; `ecmxfd probe`, step 2)",
             ),
+            Self::Troubled(t) => write!(f, "degraded: {t}"),
         }
     }
 }
@@ -668,5 +742,40 @@ mod tests {
         assert!(h.to_string().starts_with("degraded: INT0 stays at its ready level"), "{h}");
         assert!(Verdict { health: h, input_age: s.input_age(ms(140)) }.flowing());
         assert!(matches!(Health::judge(&s, EcatState::Op, ms(151)), Health::Stalled { .. }));
+    }
+
+    /// FIFO alarms, chip-dropped inputs and long gaps: degraded with the
+    /// figure while recent, healthy again one quiet window later; a stall
+    /// still says stall.
+    #[test]
+    fn recent_trouble_degrades_health_until_a_quiet_window_passes() {
+        let ms = |v: u64| v * 1_000_000;
+        let t = Telemetry::default();
+        t.set_phase(Phase::Running);
+        t.header(&ecmxf_wire::ResponseHeader { ecat_state: EcatState::Op, ..Default::default() });
+        t.flow_limit_ns.store(ms(50), Ordering::Relaxed);
+        t.recent_long_gaps.record(ms(1_000), 1, 122_000);
+        t.recent_fifo_alarms.record(ms(1_000), 1, 0);
+        t.recent_fifo_alarms.record(ms(1_500), 1, 0);
+        t.newest_input_ns.store(ms(2_000), Ordering::Relaxed);
+        let s = t.snapshot();
+        let h = Health::judge(&s, EcatState::Op, ms(2_010));
+        let Health::Troubled(trouble) = h else { panic!("{h:?}") };
+        assert_eq!((trouble.kind, trouble.count), (TroubleKind::FifoAlarms, 2), "FIFO alarms named first");
+        assert!(!h.is_healthy());
+        assert!(Verdict { health: h, input_age: s.input_age(ms(2_010)) }.flowing());
+        let said = h.to_string();
+        assert!(said.starts_with("degraded: the RxFIFO ran dry 2 times"), "{said}");
+        assert!(said.contains("the latest 0.5 s ago; healthy again after 10 s without"), "{said}");
+        assert!(matches!(Health::judge(&s, EcatState::Op, ms(2_051)), Health::Stalled { .. }));
+
+        t.recent_fifo_alarms.forget();
+        let s = t.snapshot();
+        let h = Health::judge(&s, EcatState::Op, ms(2_010));
+        assert!(h.to_string().contains("longest gap 122 ms"), "{h}");
+
+        let mut quiet = s;
+        quiet.newest_input_ns = ms(11_001);
+        assert_eq!(Health::judge(&quiet, EcatState::Op, ms(11_001)), Health::Healthy, "a whole window without");
     }
 }

@@ -138,6 +138,7 @@ fn health_word(h: &crate::master::Health) -> &'static str {
         Health::Stalled { .. } => "stalled",
         Health::SlavesMissing { .. } => "slaves missing",
         Health::Int0Stuck => "int0 stuck",
+        Health::Troubled(_) => "troubled",
     }
 }
 

@@ -44,6 +44,10 @@ impl Chip {
         // RxFIFO to run dry (modelling decision: the manual describes the
         // underrun as repeating the last outputs, and there are none).
         if running && self.fifo.enabled && self.master.rx_size > 0 {
+            if self.faults.rx_starved_cycles > 0 {
+                self.faults.rx_starved_cycles -= 1;
+                self.fifo.rx.clear();
+            }
             let repeated = match self.fifo.rx.pop_front() {
                 Some(frame) if frame.len() == self.master.outputs.len() => {
                     self.master.outputs = frame;

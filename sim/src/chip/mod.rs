@@ -234,6 +234,10 @@ pub struct Faults {
     /// (answers, state, outputs): the "OP on paper, nothing flows" fault a
     /// host must notice by itself.
     pub tx_stalled: bool,
+    /// The next this many DC cycles find the RxFIFO empty (its frames are
+    /// discarded): the RxFIFO runs dry as when the host falls behind,
+    /// while the host itself goes on as before.
+    pub rx_starved_cycles: u32,
     rng: u64,
 }
 
