@@ -117,3 +117,60 @@ fn a_lease_is_its_takers_and_no_other_identity_writes_renews_or_releases_it() {
         pd.acquire_lease(with_token(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 0 }, two)).await.unwrap();
     });
 }
+
+/// A token taken out of the configuration (SIGHUP) ends what it holds: its
+/// open input stream ends within a second with PERMISSION_DENIED, its lease
+/// is gone (another operator takes the slave), and it is refused from then
+/// on. A token kept keeps its stream.
+#[test]
+fn a_revoked_token_loses_its_streams_and_leases_at_the_reload() {
+    run(async {
+        let link = "backend = \"sim\"";
+        let both =
+            format!("[api]\n{}{}", token("one", "secret-one", "operator"), token("two", "secret-two", "operator"));
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config(link, &both));
+        let ch = d.connect().await;
+        let mut pd = ProcessDataClient::new(ch.clone());
+        let (one, two) = ("secret-one", "secret-two");
+        let inputs = || pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false };
+        let mut streamed_one = pd.stream_inputs(with_token(inputs(), one)).await.unwrap().into_inner();
+        let mut streamed_two = pd.stream_inputs(with_token(inputs(), two)).await.unwrap().into_inner();
+        pd.acquire_lease(with_token(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 60_000 }, one)).await.unwrap();
+        streamed_one.next().await.unwrap().unwrap();
+
+        // One's token is taken out; the daemon reads its file again.
+        let only_two = format!("[api]\n{}", token("two", "secret-two", "operator"));
+        std::fs::write(d.dir.join("ecmxfd.toml"), ecmxf_e2e::config(link, &only_two)).unwrap();
+        let pid = nix::unistd::Pid::from_raw(d.pid() as i32);
+        let revoked = Instant::now();
+        nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGHUP).unwrap();
+        let end = tokio::time::timeout(Duration::from_secs(1), async {
+            loop {
+                match streamed_one.next().await {
+                    Some(Ok(_)) => continue,
+                    Some(Err(e)) => return Some(e),
+                    None => return None,
+                }
+            }
+        })
+        .await
+        .expect("one's stream ends within a second of the reload");
+        let e = end.expect("ends with a status");
+        eprintln!("one's stream ended {:?} after SIGHUP: {e:?}", revoked.elapsed());
+        assert_eq!(e.code(), Code::PermissionDenied, "{e:?}");
+        assert!(e.message().contains("token one lost its access"), "{}", e.message());
+
+        // Its lease went with it: two takes the slave; one is refused.
+        pd.acquire_lease(with_token(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 0 }, two))
+            .await
+            .expect("one's lease ended at the reload");
+        let e = pd.get_layout(with_token(pb::GetLayoutRequest {}, one)).await.unwrap_err();
+        assert_eq!(e.code(), Code::Unauthenticated, "{e:?}");
+        // Two, still in the configuration, streams on.
+        for _ in 0..5 {
+            streamed_two.next().await.expect("two's stream goes on").expect("a sample");
+        }
+        assert!(d.log().contains("output lease ended"), "the lease's end is logged:\n{}", d.log());
+        assert_eq!(d.stop(), Some(0), "{}", d.log());
+    });
+}

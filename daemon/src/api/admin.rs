@@ -82,12 +82,13 @@ impl FoeApi for FoeService {
         let progress = Arc::new(TransferProgress::default());
         let ctx = Arc::clone(&self.0);
         let p = Arc::clone(&progress);
+        let streamed_for = caller.clone();
         let work = async move {
             bounded(&caller, ctx.master.foe_write(s, &r.name, r.password, r.data, Some(p), call))
                 .await
                 .map(|()| Vec::new())
         };
-        Ok(Response::new(self.0.until_stopping(stream_transfer(progress, work))))
+        Ok(Response::new(self.0.serve_stream(&streamed_for, stream_transfer(progress, work))))
     }
 
     async fn read(&self, request: Request<pb::FoeReadRequest>) -> Result<Response<ProgressStream>, Status> {
@@ -101,10 +102,11 @@ impl FoeApi for FoeService {
         let progress = Arc::new(TransferProgress::default());
         let ctx = Arc::clone(&self.0);
         let p = Arc::clone(&progress);
+        let streamed_for = caller.clone();
         let work = async move {
             bounded(&caller, ctx.master.foe_read(s, &r.name, r.password, r.max_bytes, Some(p), call)).await
         };
-        Ok(Response::new(self.0.until_stopping(stream_transfer(progress, work))))
+        Ok(Response::new(self.0.serve_stream(&streamed_for, stream_transfer(progress, work))))
     }
 }
 

@@ -33,6 +33,27 @@ pub(crate) struct Caller {
     /// The time that deadline left when the call came (`grpc-timeout`,
     /// less a margin), for the message when it passes; `None` without one.
     pub budget: Option<Duration>,
+    /// What identified them, to ask again after the rules change (a token
+    /// revoked by a reload ends the caller's streams and leases).
+    pub identity: Identity,
+    /// The role the call was authorized for.
+    pub needed: Role,
+}
+
+/// What identified a caller.
+#[derive(Clone, Debug, PartialEq, Eq, Hash)]
+pub(crate) enum Identity {
+    /// A bearer token, by the fingerprint of its secret.
+    Token(String),
+    /// A TLS client certificate, by its fingerprint.
+    Certificate(String),
+    /// A Unix peer (SO_PEERCRED).
+    Unix {
+        /// User.
+        uid: u32,
+        /// Primary group.
+        gid: u32,
+    },
 }
 
 /// The rules from `[api]`.
@@ -75,10 +96,16 @@ impl Authenticator {
                 .ok()
                 .and_then(|v| v.strip_prefix("Bearer "))
                 .ok_or_else(|| Status::unauthenticated("the authorization header must be \"Bearer <token>\""))?;
-            return match self.tokens.get(&fingerprint(token.trim().as_bytes())) {
-                Some((Some(role), name)) => {
-                    Ok(Caller { role: *role, who: format!("token {name}"), call, budget: None })
-                }
+            let fp = fingerprint(token.trim().as_bytes());
+            return match self.tokens.get(&fp) {
+                Some((Some(role), name)) => Ok(Caller {
+                    role: *role,
+                    who: format!("token {name}"),
+                    call,
+                    budget: None,
+                    identity: Identity::Token(fp),
+                    needed: Role::Observer,
+                }),
                 Some((None, name)) => Err(Status::permission_denied(format!("token {name} has no access"))),
                 None => Err(Status::unauthenticated("unknown bearer token")),
             };
@@ -87,9 +114,14 @@ impl Authenticator {
             if let Some(cert) = tls.peer_certs().and_then(|c| c.first().cloned()) {
                 let fp = fingerprint(cert.as_ref());
                 return match self.certs.get(&fp) {
-                    Some((Some(role), name)) => {
-                        Ok(Caller { role: *role, who: format!("certificate {name}"), call, budget: None })
-                    }
+                    Some((Some(role), name)) => Ok(Caller {
+                        role: *role,
+                        who: format!("certificate {name}"),
+                        call,
+                        budget: None,
+                        identity: Identity::Certificate(fp),
+                        needed: Role::Observer,
+                    }),
                     Some((None, name)) => Err(Status::permission_denied(format!("certificate {name} has no access"))),
                     None => {
                         Err(Status::unauthenticated(format!("client certificate {fp} is not in [[api.client_cert]]")))
@@ -104,7 +136,14 @@ impl Authenticator {
             };
             let (uid, gid) = (cred.uid(), cred.gid());
             return match self.unix_role(uid, gid) {
-                Some(role) => Ok(Caller { role, who: format!("uid {uid}"), call, budget: None }),
+                Some(role) => Ok(Caller {
+                    role,
+                    who: format!("uid {uid}"),
+                    call,
+                    budget: None,
+                    identity: Identity::Unix { uid, gid },
+                    needed: Role::Observer,
+                }),
                 None => Err(Status::permission_denied(format!("uid {uid} (gid {gid}) has no access"))),
             };
         }
@@ -126,11 +165,21 @@ impl Authenticator {
         }
     }
 
+    /// The role `identity` has under these rules (`None`: no access).
+    pub(crate) fn role_of(&self, identity: &Identity) -> Option<Role> {
+        match identity {
+            Identity::Token(fp) => self.tokens.get(fp).and_then(|(role, _)| *role),
+            Identity::Certificate(fp) => self.certs.get(fp).and_then(|(role, _)| *role),
+            Identity::Unix { uid, gid } => self.unix_role(*uid, *gid),
+        }
+    }
+
     /// Identifies the caller and checks they have `needed`.
     pub(crate) fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
         let mut caller = self.identify(request)?;
         caller.budget = super::deadline(request);
         caller.call.deadline = caller.budget.map(|d| Instant::now() + d);
+        caller.needed = needed;
         if caller.role < needed {
             return Err(Status::permission_denied(format!(
                 "{} has role {}; this call needs {needed}",

@@ -52,13 +52,11 @@ pub(crate) fn slave(v: u32) -> Result<u8, Status> {
 }
 
 /// A slave position from a request that must name a slave on the ring
-/// (`count` found): the chip would only answer "refused" for one that is
-/// not there. Errors name `field`.
-pub(crate) fn existing_slave(v: u32, count: usize, field: &'static str) -> Result<u8, Status> {
+/// (see [`crate::master::Master::check_slave`]: UNAVAILABLE while the
+/// network is coming up). Errors name `field`.
+pub(crate) fn existing_slave(master: &crate::master::Master, v: u32, field: &'static str) -> Result<u8, Status> {
     let s = slave(v).map_err(|_| bad_argument(field, format!("{v} is outside 0..=127")))?;
-    if usize::from(s) >= count {
-        return Err(bad_argument(field, format!("slave {s} does not exist ({count} found)")));
-    }
+    master.check_slave(s, field).map_err(super::status::to_status)?;
     Ok(s)
 }
 

@@ -133,7 +133,7 @@ impl DiagnosticsApi for DiagnosticsService {
         &self,
         request: Request<pb::StreamEventsRequest>,
     ) -> Result<Response<Self::StreamEventsStream>, Status> {
-        self.0.authorize(&request, Role::Observer)?;
+        let caller = self.0.authorize(&request, Role::Observer)?;
         let mut events = self.0.master.events();
         let (tx, rx) = tokio::sync::mpsc::channel(64);
         tokio::spawn(async move {
@@ -153,7 +153,7 @@ impl DiagnosticsApi for DiagnosticsService {
                 }
             }
         });
-        Ok(Response::new(self.0.until_stopping(Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))))
+        Ok(Response::new(self.0.serve_stream(&caller, Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))))
     }
 
     async fn get_emergencies(

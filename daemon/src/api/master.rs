@@ -257,8 +257,8 @@ impl SlavesApi for SlavesService {
 #[derive(Debug, Clone)]
 pub(crate) struct StateService(pub Arc<Context>);
 
-fn target(slave_field: Option<u32>, count: usize) -> Result<SlaveSelector, Status> {
-    let slave = slave_field.map(|v| super::convert::existing_slave(v, count, "slave")).transpose()?;
+fn target(slave_field: Option<u32>, m: &Master) -> Result<SlaveSelector, Status> {
+    let slave = slave_field.map(|v| super::convert::existing_slave(m, v, "slave")).transpose()?;
     Ok(selector(slave))
 }
 
@@ -267,7 +267,7 @@ impl StateApi for StateService {
     async fn get_state(&self, request: Request<pb::GetStateRequest>) -> Result<Response<pb::GetStateResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let m = &self.0.master;
-        let target = target(request.get_ref().slave, m.layout().slaves.len())?;
+        let target = target(request.get_ref().slave, m)?;
         let report = bounded(&caller, m.state_report(target, caller.call)).await?;
         let slaves = report
             .slaves
@@ -291,7 +291,7 @@ impl StateApi for StateService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let m = &self.0.master;
         let r = request.get_ref();
-        let target = target(r.slave, m.layout().slaves.len())?;
+        let target = target(r.slave, m)?;
         let state = state_from_pb(r.state, "state")?;
         let call = wait_budget(&caller, r.timeout_ms, m.default_timeout);
         let wait = r.wait;

@@ -55,6 +55,10 @@ pub(crate) struct Context {
     /// Set when the daemon stops: every open server stream ends with
     /// [`status::stopping`] instead of a connection cut mid-body.
     stopping: tokio::sync::watch::Sender<bool>,
+    /// Counts reloads of the rules: open streams check their caller again.
+    rules: tokio::sync::watch::Sender<u64>,
+    /// The identity behind each lease holder's name.
+    holders: std::sync::Mutex<std::collections::HashMap<String, auth::Identity>>,
 }
 
 impl Context {
@@ -66,48 +70,111 @@ impl Context {
             sdo_latency: Arc::default(),
             stream_max_age: Duration::from_millis(config.stream_max_age_ms.into()),
             stopping: tokio::sync::watch::Sender::new(false),
+            rules: tokio::sync::watch::Sender::new(0),
+            holders: std::sync::Mutex::default(),
         })
     }
 
     /// Ends every open server stream with UNAVAILABLE "daemon stopping"
-    /// (see [`Context::until_stopping`]); called as shutdown begins.
+    /// (see [`Context::serve_stream`]); called as shutdown begins.
     pub(crate) fn stop_streams(&self) {
         self.stopping.send_replace(true);
     }
 
-    /// `inner` until the daemon stops: then one UNAVAILABLE status with
-    /// reason STOPPING, and the end, so a client (ecmxfctl events, the
-    /// Python package) tells a stopping daemon from a broken connection.
-    /// A stream that ends by itself first ends as it would.
-    pub(crate) fn until_stopping<T: Send + 'static>(&self, inner: BoxStream<T>) -> BoxStream<T> {
+    /// `inner`, for `caller`, until the daemon stops or the caller loses
+    /// the access the stream was opened with. Stopping: one UNAVAILABLE
+    /// status with reason STOPPING, and the end, so a client (ecmxfctl
+    /// events, the Python package) tells a stopping daemon from a broken
+    /// connection. Access lost (a reload revoked the token, removed the
+    /// certificate or lowered the role): PERMISSION_DENIED naming the
+    /// caller, at once, not at the stream's next item. A stream that ends
+    /// by itself first ends as it would.
+    pub(crate) fn serve_stream<T: Send + 'static>(
+        self: &Arc<Self>,
+        caller: &Caller,
+        inner: BoxStream<T>,
+    ) -> BoxStream<T> {
         use tokio_stream::StreamExt;
-        let stop = self.stopping.subscribe();
-        Box::pin(futures_util::stream::unfold(Some((inner, stop)), |state| async move {
-            let (mut inner, mut stop) = state?;
-            let next = tokio::select! {
-                biased;
-                _ = stop.wait_for(|s| *s) => None,
-                item = inner.next() => Some(item),
-            };
-            match next {
-                None => Some((Err(status::stopping()), None)),
-                Some(item) => item.map(|i| (i, Some((inner, stop)))),
+        struct Open<T> {
+            inner: BoxStream<T>,
+            stop: tokio::sync::watch::Receiver<bool>,
+            rules: tokio::sync::watch::Receiver<u64>,
+        }
+        let open = Open { inner, stop: self.stopping.subscribe(), rules: self.rules.subscribe() };
+        let (ctx, caller) = (Arc::clone(self), caller.clone());
+        Box::pin(futures_util::stream::unfold(Some(open), move |state| {
+            let (ctx, caller) = (Arc::clone(&ctx), caller.clone());
+            async move {
+                let mut open = state?;
+                enum Next<T> {
+                    Stop,
+                    Rules,
+                    Item(Option<Result<T, Status>>),
+                }
+                loop {
+                    let next = tokio::select! {
+                        biased;
+                        _ = open.stop.wait_for(|s| *s) => Next::Stop,
+                        // The sender lives in `ctx`, held here: never closed.
+                        _ = open.rules.changed() => Next::Rules,
+                        item = open.inner.next() => Next::Item(item),
+                    };
+                    match next {
+                        Next::Stop => return Some((Err(status::stopping()), None)),
+                        Next::Rules if !ctx.still_allowed(&caller) => {
+                            return Some((Err(status::access_revoked(&caller.who)), None));
+                        }
+                        Next::Rules => {}
+                        Next::Item(item) => return item.map(|i| (i, Some(open))),
+                    }
+                }
             }
         }))
+    }
+
+    /// Whether `caller` still has the role its call was authorized for
+    /// under the rules in force.
+    fn still_allowed(&self, caller: &Caller) -> bool {
+        let auth = self.auth.read().unwrap_or_else(|e| e.into_inner());
+        auth.role_of(&caller.identity).is_some_and(|r| r >= caller.needed)
+    }
+
+    /// Notes who took a lease, so that a reload that takes their access
+    /// away ends it (see [`Context::reload_roles`]).
+    pub(crate) fn note_lease_holder(&self, caller: &Caller) {
+        let mut holders = self.holders.lock().unwrap_or_else(|e| e.into_inner());
+        holders.insert(caller.who.clone(), caller.identity.clone());
     }
 
     /// A slave position from a request that must name a slave on the ring
     /// (INVALID_ARGUMENT naming `slave` otherwise: the chip would only
     /// answer "refused" for a slave that is not there).
     pub(crate) fn slave(&self, v: u32) -> Result<u8, Status> {
-        convert::existing_slave(v, self.master.layout().slaves.len(), "slave")
+        convert::existing_slave(&self.master, v, "slave")
     }
 
     /// Takes the `[api]` roles, tokens and client certificates of a reloaded
-    /// configuration; calls already authorized keep their role.
+    /// configuration; calls already authorized keep their role, but open
+    /// streams and leases of a caller who lost the access they were opened
+    /// or taken with end now (a revoked token must not keep streaming or
+    /// holding outputs).
     pub(crate) fn reload_roles(&self, config: &crate::config::ApiConfig) {
         let own_uid = nix::unistd::getuid().as_raw();
-        *self.auth.write().unwrap_or_else(|e| e.into_inner()) = Authenticator::new(config, own_uid);
+        let auth = Authenticator::new(config, own_uid);
+        {
+            let mut holders = self.holders.lock().unwrap_or_else(|e| e.into_inner());
+            // A holder this front end does not know (another front end's)
+            // keeps its lease.
+            let allowed =
+                |who: &str| holders.get(who).is_none_or(|id| auth.role_of(id).is_some_and(|r| r >= Role::Operator));
+            for (lease, who) in self.master.leases().end_unless(allowed) {
+                tracing::warn!(lease = %lease, %who, "output lease ended: its holder lost operator access on reload");
+            }
+            let held = self.master.leases().holders();
+            holders.retain(|who, _| held.contains(who));
+        }
+        *self.auth.write().unwrap_or_else(|e| e.into_inner()) = auth;
+        self.rules.send_modify(|g| *g += 1);
     }
 
     /// Authorizes a call for `role`.

@@ -166,7 +166,7 @@ impl ProcessDataApi for ProcessDataService {
         let m = &self.0.master;
         let count = m.layout().slaves.len();
         let which: Vec<u8> = match request.get_ref().slave {
-            Some(s) => vec![existing_slave(s, count, "slave")?],
+            Some(s) => vec![existing_slave(m, s, "slave")?],
             None => (0..count as u8).collect(),
         };
         let image = bounded(&caller, m.image(caller.call)).await?;
@@ -191,8 +191,8 @@ impl ProcessDataApi for ProcessDataService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let mapping = request.get_ref().mapping.clone().ok_or_else(|| bad_argument("mapping", "no mapping given"))?;
         let m = &self.0.master;
-        let count = m.layout().slaves.len();
-        let s = usize::from(existing_slave(mapping.slave, count, "mapping.slave")?);
+        let s = usize::from(existing_slave(m, mapping.slave, "mapping.slave")?);
+        let count = m.layout().slaves.len().max(s + 1);
         let rx = pdos_from_pb(&mapping.rx_pdos, "mapping.rx_pdos")?;
         let tx = pdos_from_pb(&mapping.tx_pdos, "mapping.tx_pdos")?;
         let previous = m.config();
@@ -340,7 +340,7 @@ impl ProcessDataApi for ProcessDataService {
             };
             Some(Ok(sample))
         });
-        Ok(Response::new(self.0.until_stopping(Box::pin(super::paced::Paced::new(samples)))))
+        Ok(Response::new(self.0.serve_stream(&caller, Box::pin(super::paced::Paced::new(samples)))))
     }
 
     async fn acquire_lease(&self, request: Request<pb::AcquireLeaseRequest>) -> Result<Response<pb::Lease>, Status> {
@@ -351,9 +351,10 @@ impl ProcessDataApi for ProcessDataService {
             100..=60_000 => Some(Duration::from_millis(r.ttl_ms.into())),
             v => return Err(bad_argument("ttl_ms", format!("{v} ms is outside 100..=60000"))),
         };
-        let count = self.0.master.layout().slaves.len();
-        let slaves = r.slaves.iter().map(|&s| existing_slave(s, count, "slaves")).collect::<Result<Vec<u8>, _>>()?;
+        let m = &self.0.master;
+        let slaves = r.slaves.iter().map(|&s| existing_slave(m, s, "slaves")).collect::<Result<Vec<u8>, _>>()?;
         let lease = self.0.master.acquire_lease(&slaves, ttl, &caller.who).map_err(leases::status)?;
+        self.0.note_lease_holder(&caller);
         Ok(Response::new(leases::to_pb(&lease)))
     }
 
@@ -393,8 +394,8 @@ impl ProcessDataApi for ProcessDataService {
         request: Request<Streaming<pb::FrameBatch>>,
     ) -> Result<Response<Self::StreamFramesStream>, Status> {
         let caller = self.0.authorize(&request, Role::Operator)?;
-        let frames = super::frames::serve(Arc::clone(&self.0), caller.who, request.into_inner()).await?;
-        Ok(Response::new(self.0.until_stopping(frames)))
+        let frames = super::frames::serve(Arc::clone(&self.0), caller.who.clone(), request.into_inner()).await?;
+        Ok(Response::new(self.0.serve_stream(&caller, frames)))
     }
 
     async fn stream_outputs(

@@ -130,6 +130,14 @@ pub(crate) fn stopping() -> Status {
     Status::with_error_details(Code::Unavailable, "daemon stopping: the stream ends", details)
 }
 
+/// PERMISSION_DENIED ending the stream of `who`, whose access a reload of
+/// the configuration took away.
+pub(crate) fn access_revoked(who: &str) -> Status {
+    let details = ErrorDetails::with_error_info("ACCESS_REVOKED", DOMAIN, HashMap::new());
+    let message = format!("{who} lost its access (the configuration was reloaded): the stream ends");
+    Status::with_error_details(Code::PermissionDenied, message, details)
+}
+
 /// INVALID_ARGUMENT naming `field`, for checks made in the API layer.
 pub(crate) fn bad_argument(field: &'static str, reason: impl Into<String>) -> Status {
     to_status(EngineError::BadArgument { field, reason: reason.into() })

@@ -36,7 +36,8 @@ pub(super) fn bring_up<L: Link>(core: &mut Core<L>, first: bool) -> Next {
     }
     // A stop during bring-up ends its waits at once (Port::set_abort).
     core.port.set_abort(Some(Arc::clone(&core.stop)));
-    let result = bringup::bring_up(&mut core.port, &core.config, &core.held);
+    let seen = core.telemetry.slaves_seen.load(Relaxed) as usize;
+    let result = bringup::bring_up(&mut core.port, &core.config, &core.held, seen);
     core.port.set_abort(None);
     if core.stop.load(Relaxed) {
         abandon(core, result.is_ok());

@@ -222,6 +222,7 @@ impl Master {
         slave: u8,
         call: Call,
     ) -> Result<Arc<DeviceDictionary>, DictionaryError> {
+        self.check_slave(slave, "slave").map_err(DictionaryError::Engine)?;
         let identity = self.identity(slave).ok_or_else(|| {
             DictionaryError::Engine(EngineError::BadArgument {
                 field: "slave",

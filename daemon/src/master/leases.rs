@@ -215,6 +215,26 @@ impl Leases {
         self.lock().get(id).is_some_and(|h| h.who == who && h.slaves.contains(&slave))
     }
 
+    /// Ends every lease whose holder `allowed` no longer accepts (their
+    /// writers go with them); returns (lease, holder) of each.
+    pub(crate) fn end_unless(&self, allowed: impl Fn(&str) -> bool) -> Vec<(String, String)> {
+        let mut held = self.lock();
+        let mut ended = Vec::new();
+        held.retain(|id, h| {
+            let keep = allowed(&h.who);
+            if !keep {
+                ended.push((id.clone(), h.who.clone()));
+            }
+            keep
+        });
+        ended
+    }
+
+    /// Who holds leases now.
+    pub(crate) fn holders(&self) -> std::collections::HashSet<String> {
+        self.lock().values().map(|h| h.who.clone()).collect()
+    }
+
     /// Drops expired leases (their writers go with them).
     pub(crate) fn sweep(&self) {
         let mut held = self.lock();

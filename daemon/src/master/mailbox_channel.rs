@@ -220,6 +220,7 @@ impl Master {
 
     /// Where `slave`'s mailboxes are, from its SII (read once per identity).
     pub(crate) async fn mailbox_geometry(&self, slave: u8, call: Call) -> Result<MailboxGeometry, EngineError> {
+        self.check_slave(slave, "slave")?;
         let identity = self.identity(slave).ok_or_else(|| EngineError::BadArgument {
             field: "slave",
             reason: format!("slave {slave} does not exist"),

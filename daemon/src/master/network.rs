@@ -91,6 +91,25 @@ impl Master {
         f(&self.config.lock().unwrap_or_else(|e| e.into_inner()).axes)
     }
 
+    /// Checks that slave `slave` is on the ring a request needs: the
+    /// network that runs has it. While the network is not running (coming
+    /// up, recovering) the ring is not known yet, so a slave beyond it is
+    /// [`EngineError::Unavailable`], which a client retries; once running,
+    /// a slave that is not there is a mistake in the request, naming
+    /// `field` (the chip would only answer "refused").
+    pub(crate) fn check_slave(&self, slave: u8, field: &'static str) -> Result<(), EngineError> {
+        let count = self.layout().slaves.len();
+        if usize::from(slave) < count {
+            return Ok(());
+        }
+        match self.status().phase {
+            Phase::Running => {
+                Err(EngineError::BadArgument { field, reason: format!("slave {slave} does not exist ({count} found)") })
+            }
+            phase => Err(EngineError::Unavailable(NotRunning::Phase { phase, last_error: self.last_error() })),
+        }
+    }
+
     fn running_or_unavailable(&self) -> Result<(), EngineError> {
         if self.status().phase != Phase::Running {
             let (phase, last_error) = (self.status().phase, self.last_error());

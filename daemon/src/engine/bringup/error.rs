@@ -45,6 +45,20 @@ pub enum BringUpError {
     /// CiA 402 helper would drive other bytes. Only the configuration can
     /// change that.
     AxisUnmapped(String),
+    /// Fewer slaves answer than an `[[axis]]` needs: the slaves from
+    /// `found` on are missing (a slave unplugged or powered off; the ring
+    /// ends before it).
+    SlavesMissing {
+        /// Slaves that answered (positions `0..found`).
+        found: usize,
+        /// The most slaves there were before (a run, or what the axis
+        /// needs).
+        before: usize,
+        /// The first `[[axis]]` on a missing slave.
+        axis: usize,
+        /// Its slave.
+        slave: usize,
+    },
     /// Slaves did not reach the state asked for (STATE_CHECK failed): each
     /// one not there, with its state and AL status code.
     StateRefused {
@@ -73,6 +87,23 @@ impl fmt::Display for BringUpError {
             }
             Self::Identity { position, expected, found } => {
                 write!(f, "slave {position} is {found}, the configuration expects {expected}")
+            }
+            Self::SlavesMissing { found, before, axis, slave } => {
+                let missing = match (*found, before.saturating_sub(1)) {
+                    (a, b) if a == b => format!("slave {a} is missing"),
+                    (a, b) => format!("slaves {a}-{b} are missing"),
+                };
+                let cable = match found {
+                    0 => "the cable to the first slave".to_string(),
+                    n => format!("the cable after slave {}", n - 1),
+                };
+                write!(
+                    f,
+                    "{missing}: {found} slave{} answer{}, {before} did before (unplugged, powered off, or {cable} \
+                     cut?); axis[{axis}] drives slave {slave}",
+                    if *found == 1 { "" } else { "s" },
+                    if *found == 1 { "s" } else { "" },
+                )
             }
             Self::Refused(e) => write!(f, "link budget: {e}"),
             Self::AxisUnmapped(why) => f.write_str(why),

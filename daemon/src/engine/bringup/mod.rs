@@ -45,6 +45,19 @@ fn axes_fit(axes: &[crate::config::AxisConfig], slaves: &[SlaveSummary]) -> Resu
     Ok(())
 }
 
+/// Every `[[axis]]` names a slave that answered: when one is gone (a
+/// slave unplugged, powered off, a cable cut), the slaves missing are what
+/// went wrong, and they are named before the chip's CiA 402 helper refuses
+/// an axis on one of them. `seen`: the most slaves a run had before.
+fn axes_present(axes: &[crate::config::AxisConfig], found: usize, seen: usize) -> Result<(), BringUpError> {
+    let Some((axis, slave)) =
+        axes.iter().enumerate().map(|(n, a)| (n, usize::from(a.slave))).find(|&(_, slave)| slave >= found)
+    else {
+        return Ok(());
+    };
+    Err(BringUpError::SlavesMissing { found, before: seen.max(slave + 1), axis, slave })
+}
+
 use super::layout::{NetworkLayout, SlaveSummary};
 
 mod calls;
@@ -181,12 +194,14 @@ pub(crate) fn bring_up<L: Link>(
     port: &mut Port<L>,
     config: &Config,
     held: &super::held::HeldOutputs,
+    seen: usize,
 ) -> Result<NetworkLayout, BringUpError> {
     let firmware = link_setup(port, config)?;
     // 1. Init network with DC; identity check.
     let count = init_network(port, config)?;
     let mut slaves = identify(port, count)?;
     check_identity(config, &slaves)?;
+    axes_present(&config.axes, slaves.len(), seen)?;
     if config.cycle.wkc_error_limit != 255 {
         port.call(&WkcErrorLimitSet(WkcErrorLimit(config.cycle.wkc_error_limit.max(1))))?;
     }
@@ -497,4 +512,31 @@ fn packet_time<L: Link>(port: &mut Port<L>) -> Result<Duration, PortError> {
     }
     times.sort();
     Ok(times[2])
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn axis(slave: u8) -> crate::config::AxisConfig {
+        crate::config::AxisConfig { slave, controlword_offset: 0, statusword_offset: 0, auto_fault_reset: false }
+    }
+
+    /// Slave 5 of 10 unplugged, axes on slaves 1 and 9: the missing slaves
+    /// are the error, named before any axis the helper would refuse.
+    #[test]
+    fn slaves_an_axis_needs_are_named_missing_first() {
+        let axes = [axis(1), axis(9)];
+        assert!(axes_present(&axes, 10, 10).is_ok());
+        let e = axes_present(&axes, 5, 10).unwrap_err();
+        assert!(!e.is_permanent(), "a replug brings them back");
+        assert_eq!(
+            e.to_string(),
+            "slaves 5-9 are missing: 5 slaves answer, 10 did before (unplugged, powered off, or the cable after slave \
+             4 cut?); axis[1] drives slave 9"
+        );
+        let first = axes_present(&[axis(0)], 0, 0).unwrap_err().to_string();
+        assert!(first.starts_with("slave 0 is missing: 0 slaves answer, 1 did before"), "{first}");
+        assert!(first.contains("the cable to the first slave"), "{first}");
+    }
 }
