@@ -95,6 +95,21 @@ impl Ctl {
         &self.stderr
     }
 
+    /// Whether `ecmxfctl diag` found the network healthy, or degraded only
+    /// by trouble that passes (the chip dropped input frames, the RxFIFO ran
+    /// dry, FIFO exchanges came late): what a shared, loaded test host may
+    /// cause now and then, which health reports for a while (exit 8). A
+    /// test about something else accepts that, and nothing more.
+    pub fn healthy_but_for_passing_trouble(&self) -> bool {
+        let passing = |line: &&str| {
+            ["the chip dropped", "the RxFIFO ran dry", "FIFO exchanges came later"]
+                .iter()
+                .any(|t| line.starts_with(&format!("PROBLEM: degraded: {t}")))
+        };
+        let problems: Vec<&str> = self.stdout.lines().filter(|l| l.starts_with("PROBLEM")).collect();
+        self.code == 0 || self.code == 8 && !problems.is_empty() && problems.iter().all(passing)
+    }
+
     /// Parses stdout as one JSON value.
     pub fn json(&self) -> serde_json::Value {
         serde_json::from_str(self.ok())

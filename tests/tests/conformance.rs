@@ -303,9 +303,15 @@ fn ctl_reads(d: &Daemon, devices: &[&CatalogDevice], per_slave: bool) -> Vec<Str
         &["--json", "qei", "read"],
         &["top", "--once"],
         &["events", "--for", "100ms"],
-        &["diag"],
     ] {
         run(cmd, &[0]);
+    }
+    // Hundreds of slaves at a 1 ms cycle on a shared 2-core host: the chip
+    // may drop an input frame now and then, which health reports for a
+    // while. That is what diag must say then; anything else is a failure.
+    let diag = d.ctl(&["diag"]);
+    if !diag.healthy_but_for_passing_trouble() {
+        failures.borrow_mut().push(format!("ecmxfctl diag: exit {}: {}{}", diag.code, diag.stdout, diag.stderr));
     }
     if devices.iter().any(|d| d.tx_bytes() > 0) {
         run(&["watch", "-n", "2", "-i", "10ms"], &[0]);

@@ -44,7 +44,15 @@ fn a_dry_rxfifo_degrades_health_with_its_count_until_a_quiet_window_passes() {
     run(async {
         let dir = ecmxf_e2e::temp_dir("health-flow");
         let sim = Simulator::serve(&dir, &[]);
-        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config(&sim.link(), ""));
+        // A TxFIFO deep enough for 150 ms of inputs: a shared test host
+        // that stalls the daemon for tens of ms must not make the chip drop
+        // inputs, a trouble of its own that would keep health degraded.
+        let config = ecmxf_e2e::config(&sim.link(), "").replace(
+            "fifo_rx_depth = 255\nfifo_tx_depth = 40\nfifo_low = 128\nfifo_high = 240",
+            "fifo_rx_depth = 128\nfifo_tx_depth = 160\nfifo_low = 48\nfifo_high = 96",
+        );
+        assert!(config.contains("fifo_tx_depth = 160"), "the harness configuration changed: {config}");
+        let mut d = Daemon::binary_with_config(&config);
         let ch = d.connect().await;
         let (healthy, _) =
             until(&ch, Duration::from_secs(10), "healthy at the start", |s| s.health.starts_with("healthy")).await;
@@ -68,7 +76,7 @@ fn a_dry_rxfifo_degrades_health_with_its_count_until_a_quiet_window_passes() {
 
         // Healthy again by itself, a quiet window after the last alarm.
         let (s, _) =
-            until(&ch, Duration::from_secs(20), "healthy after the window", |s| s.health.starts_with("healthy")).await;
+            until(&ch, Duration::from_secs(40), "healthy after the window", |s| s.health.starts_with("healthy")).await;
         let after = starved.elapsed();
         eprintln!("healthy again {after:?} after the starving: {}", s.health);
         assert!(after >= Duration::from_secs(9), "healed before a whole window passed ({after:?})");

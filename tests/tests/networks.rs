@@ -67,7 +67,7 @@ fn an_input_only_network_runs_and_answers_at_125_us_and_1_ms() {
             let data = d.ctl(&["--json", "data", "1.0x6000:01"]);
             assert_eq!(data.code, 0, "{at}: {}{}", data.stdout, data.stderr);
             let diag = d.ctl(&["diag"]);
-            assert_eq!(diag.code, 0, "{at}: {}{}", diag.stdout, diag.stderr);
+            assert!(diag.healthy_but_for_passing_trouble(), "{at}: {}{}", diag.stdout, diag.stderr);
             let log = d.log();
             assert!(!log.contains("ran dry"), "{at}: the log warns of a dry RxFIFO:\n{log}");
             drop(d);
@@ -140,7 +140,7 @@ fn an_output_only_network_without_coe_runs_answers_and_its_outputs_reach_the_sla
                 tokio::time::sleep(Duration::from_millis(20)).await;
             }
             let diag = d.ctl(&["diag"]);
-            assert_eq!(diag.code, 0, "{at}: {}{}", diag.stdout, diag.stderr);
+            assert!(diag.healthy_but_for_passing_trouble(), "{at}: {}{}", diag.stdout, diag.stderr);
             let log = d.log();
             assert!(!log.contains("ran dry"), "{at}: the log warns of a dry RxFIFO:\n{log}");
             drop(d);
