@@ -1,9 +1,10 @@
 //! A link that stops answering is a fault, not a RUNNING daemon waiting
 //! for ever: with the simulator's process stopped (SIGSTOP, its socket
-//! still open) the phase leaves RUNNING and the last error names the
-//! stalled link; once it goes on, data flows again; and SIGTERM stops the
-//! daemon within a second with the link frozen, and during a bring-up
-//! against a peer that accepts and never answers.
+//! still open) an event names the stall within 100 ms of its limit, the
+//! phase leaves RUNNING and the last error names the stalled link; once it
+//! goes on, data flows again; and SIGTERM stops the daemon within a second
+//! with the link frozen, during a bring-up against a peer that accepts and
+//! never answers, and during a recovery's back-off.
 
 use std::time::{Duration, Instant};
 
@@ -121,5 +122,33 @@ fn sigterm_stops_a_bring_up_against_a_peer_that_never_answers() {
         let (took, code) = stop_timed(&mut d);
         assert_eq!(code, Some(0), "{}", d.log());
         assert!(took < Duration::from_secs(1), "stop took {took:?} during bring-up\n{}", d.log());
+    });
+}
+
+/// SIGTERM while the daemon recovers (the simulator's process gone, the
+/// link reopened again and again with the back-off): out within a second.
+#[test]
+fn sigterm_stops_a_recovery_within_a_second() {
+    run(async {
+        let dir = ecmxf_e2e::temp_dir("recovering");
+        let mut sim = Simulator::serve(&dir, &[]);
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config(&sim.link(), ""));
+        let ch = d.connect().await;
+        sim.kill();
+        let gone = Instant::now();
+        loop {
+            let s = status(&ch).await;
+            if s.phase == pb::EnginePhase::Recovering as i32 {
+                break;
+            }
+            assert!(gone.elapsed() < Duration::from_secs(2), "not recovering with the chip gone: {s:?}");
+            tokio::time::sleep(Duration::from_millis(10)).await;
+        }
+        // Into the back-off between attempts.
+        tokio::time::sleep(Duration::from_millis(700)).await;
+        assert_eq!(status(&ch).await.phase, pb::EnginePhase::Recovering as i32);
+        let (took, code) = stop_timed(&mut d);
+        assert_eq!(code, Some(0), "{}", d.log());
+        assert!(took < Duration::from_secs(1), "stop took {took:?} during recovery\n{}", d.log());
     });
 }
