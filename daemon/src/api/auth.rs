@@ -129,7 +129,7 @@ impl Authenticator {
     /// Identifies the caller and checks they have `needed`.
     pub(crate) fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
         let mut caller = self.identify(request)?;
-        caller.budget = super::deadline(request);
+        caller.budget = super::deadline(request)?;
         caller.call.deadline = caller.budget.map(|d| Instant::now() + d);
         if caller.role < needed {
             return Err(Status::permission_denied(format!(
