@@ -168,7 +168,7 @@ fn a_malformed_grpc_timeout_is_refused_naming_it() {
         let upload =
             pb::SdoUploadRequest { slave: SLAVE, index: 0x1018, subindex: 1, complete_access: false, data_type: 0 };
         for timeout in ["-5S", "abcS", "5", "123456789m", "1.5S", "5s"] {
-            let mut r = tonic::Request::new(upload.clone());
+            let mut r = tonic::Request::new(upload);
             r.metadata_mut().insert("grpc-timeout", timeout.parse().unwrap());
             let e = sdo.upload(r).await.expect_err(timeout);
             assert_eq!(e.code(), Code::InvalidArgument, "{timeout}: {e:?}");
