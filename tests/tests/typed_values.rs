@@ -182,3 +182,42 @@ fn a_malformed_grpc_timeout_is_refused_naming_it() {
         sdo.upload(r).await.unwrap();
     });
 }
+
+/// An object only the slave's ESI describes (0x8000:01, UDINT, of the
+/// SOES sample): typed from there.
+#[test]
+fn an_object_only_the_esi_describes_is_typed_from_it() {
+    let Some(esi) = ecmxf_e2e::fixture("esi_soes_lan9252_evb9252_dig.xml") else { return };
+    run(async {
+        let dir = temp_dir("typed-esi");
+        let network =
+            ecmxf_e2e::sim_network(&dir, &format!("[[slave]]\nesi = \"{}\"\nproduct_code = 1234\n", esi.display()));
+        let mut d = Daemon::with_config(&config(&network, &format!("[[slave]]\nesi = \"{}\"\n", esi.display())));
+        let mut sdo = SdoClient::new(d.connect().await);
+        let at = |data_type: T, kind: Kind| pb::SdoDownloadRequest {
+            slave: 0,
+            subindex: 1,
+            ..download(0x8000, data_type, kind)
+        };
+        let read = pb::SdoUploadRequest { slave: 0, index: 0x8000, subindex: 1, complete_access: false, data_type: 0 };
+        let was = sdo.upload(read).await.unwrap().into_inner().raw;
+        for req in [
+            at(T::Unspecified, Kind::Boolean(true)),
+            at(T::Unspecified, Kind::Integer(-1)),
+            at(T::Unsigned16, Kind::Unsigned(7)),
+            at(T::Unspecified, Kind::Raw(vec![7, 0])),
+        ] {
+            let e = sdo.download(req.clone()).await.expect_err(&format!("{req:?} was written"));
+            assert_eq!(e.code(), Code::InvalidArgument, "{req:?}: {e:?}");
+            for part in ["0x8000:01 of slave 0", "UNSIGNED32"] {
+                assert!(e.message().contains(part), "{req:?}: {part:?} missing from {:?}", e.message());
+            }
+        }
+        assert_eq!(sdo.upload(read).await.unwrap().into_inner().raw, was, "a refused write changed 0x8000:01");
+        let w = sdo.download(at(T::Unspecified, Kind::Unsigned(7))).await.unwrap().into_inner();
+        assert_eq!(w.bytes_written, 4);
+        assert_eq!(sdo.upload(read).await.unwrap().into_inner().raw, vec![7, 0, 0, 0]);
+        drop(d);
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}
