@@ -42,8 +42,8 @@ fn effective_type(
 }
 
 /// Complete access transfers an object from subindex 0 or 1 on
-/// (ETG.1000.6 5.6.2.1.1, 5.6.2.2.1): any other start is refused before
-/// anything is sent.
+/// (ETG.1000.6, the SDO services' Complete Access flag): any other start
+/// is refused before anything is sent.
 fn complete_access_start(complete: bool, subindex: u8) -> Result<(), Status> {
     if complete && subindex > 1 {
         return Err(bad_argument(
