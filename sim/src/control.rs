@@ -27,7 +27,7 @@ outputs SLAVE                   the output bytes the slave holds (hex) and its s
 record SLAVE|all [MAX]          record the output frames played from now (MAX, default 100000)
 recorded [FROM [COUNT]]         the recorded frames: cycle, bytes (hex), \"repeat\" when the RxFIFO was empty
 record off                      stop recording and forget the frames
-mailbox SLAVE                   the slave's mailbox counters: requests, duplicates, answers read, repeats, waiting
+mailbox SLAVE                   the slave's mailbox counters: requests, duplicates, answers read, repeats, waiting, chip SDOs
 mailbox-lose SLAVE N            the next N answers in its mailbox are read out and lost on the way back
 mailbox-emergency SLAVE N       the next N mailbox requests are answered after a CoE emergency
 help                            this list";
@@ -271,12 +271,13 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
             let m = &chip.net.slaves[i].mailboxes;
             let s = m.stats;
             Ok(format!(
-                "ok requests={} duplicates={} answers_read={} repeats={} waiting={}",
+                "ok requests={} duplicates={} answers_read={} repeats={} waiting={} chip_sdos={}",
                 s.requests,
                 s.duplicates,
                 s.answers_read,
                 s.repeats,
-                m.waiting()
+                m.waiting(),
+                s.chip_sdos
             ))
         }
         "mailbox-lose" | "mailbox-emergency" => {

@@ -65,7 +65,7 @@ fn a_write_that_does_not_fit_its_target_is_refused_whole_and_nothing_changes() {
             (write(&word.name, Kind::Raw(vec![1, 2, 3])), "3 raw bytes given for a UNSIGNED16 object, which has 2"),
             (write(&word.name, Kind::Raw(vec![1])), "1 raw bytes given for a UNSIGNED16 object, which has 2"),
             (write(&word.name, Kind::Unsigned(70_000)), "does not fit UNSIGNED16"),
-            (write(&word.name, Kind::Text("ab".into())), "text given for a UNSIGNED16 object"),
+            (write(&word.name, Kind::Text("ab".into())), "text \"ab\" given for a UNSIGNED16 object"),
         ];
         for (w, says) in cases {
             let target = match &w.target {
@@ -90,7 +90,7 @@ fn a_write_that_does_not_fit_its_target_is_refused_whole_and_nothing_changes() {
         let upload = |index: u32| pb::SdoUploadRequest { slave: 1, index, subindex: 0, ..Default::default() };
         let accel_before = sdo.upload(upload(0x6083)).await.unwrap().into_inner().raw;
         for (index, kind, says) in [
-            (0x6083, Kind::Text("abcd".into()), "text given for a UNSIGNED32 object"),
+            (0x6083, Kind::Text("abcd".into()), "text \"abcd\" given for a UNSIGNED32 object"),
             (0x6083, Kind::Raw(vec![0; 8]), "8 raw bytes given for a UNSIGNED32 object, which has 4"),
             (0x2FFF, Kind::Text("abcd".into()), "text goes only to string objects"),
         ] {

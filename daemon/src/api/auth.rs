@@ -177,7 +177,7 @@ impl Authenticator {
     /// Identifies the caller and checks they have `needed`.
     pub(crate) fn authorize<T>(&self, request: &Request<T>, needed: Role) -> Result<Caller, Status> {
         let mut caller = self.identify(request)?;
-        caller.budget = super::deadline(request);
+        caller.budget = super::deadline(request)?;
         caller.call.deadline = caller.budget.map(|d| Instant::now() + d);
         caller.needed = needed;
         if caller.role < needed {

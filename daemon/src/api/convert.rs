@@ -7,7 +7,7 @@ use tonic::Status;
 
 use super::status::bad_argument;
 use crate::master::Phase;
-use crate::master::value::{DataType, Value};
+use crate::master::value::{DataType, Value, as_type};
 
 /// Wire state to API state.
 pub(crate) fn state_to_pb(s: EcatState) -> pb::EcatState {
@@ -146,6 +146,26 @@ pub(crate) fn encode(t: pb::DataType, value: &pb::Value) -> Result<Vec<u8>, (&'s
     }
 }
 
+/// [`encode`] for an object whose type the daemon knows (`known`, see
+/// `Master::object_type`): the value is written as that type, whatever
+/// type the request names; a request naming another kind or size
+/// (`data_type`) is refused rather than sent for the slave to abort, or
+/// worse, take as another value ([`as_type`]). A string's length is the
+/// value's: an SDO writes what it is given.
+pub(crate) fn encode_known(
+    asked: pb::DataType,
+    known: DataType,
+    value: &pb::Value,
+) -> Result<Vec<u8>, (&'static str, String)> {
+    let kind = value.kind.as_ref().ok_or(("value", "no value given".to_string()))?;
+    let own = domain_type(pb_type(known), kind).filter(|t| !t.is_fixed_size()).unwrap_or(known);
+    let t = match domain_type(asked, kind) {
+        None => own,
+        Some(a) => as_type(a, own).map_err(|e| ("data_type", e.to_string()))?,
+    };
+    domain_value(kind).encode(t, t.bits()).map_err(|e| ("value", e.to_string()))
+}
+
 /// A value for an output entry as its bytes: the entry's own type and bit
 /// length ([`Value::encode`]).
 pub(crate) fn encode_entry(
@@ -228,6 +248,33 @@ mod tests {
             assert!(e.message().contains("value"), "{}", e.message());
         }
         assert!(encode_value(T::Unspecified, &v(Kind::Integer(1))).unwrap_err().message().contains("data_type"));
+    }
+
+    #[test]
+    fn a_known_type_decides_and_another_asked_is_refused() {
+        use crate::master::value::DataType as D;
+        let known = |asked, known, k| encode_known(asked, known, &v(k));
+        assert_eq!(known(T::Unspecified, D::UInt32, Kind::Unsigned(7)).unwrap(), vec![7, 0, 0, 0]);
+        assert_eq!(known(T::Unspecified, D::UInt16, Kind::Integer(5)).unwrap(), vec![5, 0]);
+        assert_eq!(known(T::Unsigned16, D::UInt16, Kind::Integer(5)).unwrap(), vec![5, 0]);
+        assert_eq!(known(T::Unspecified, D::VisibleString(0), Kind::Text("abc".into())).unwrap(), b"abc");
+        assert_eq!(known(T::Unspecified, D::Bits(2), Kind::Unsigned(3)).unwrap(), vec![3]);
+        for (asked, t, k, field) in [
+            (T::Unspecified, D::UInt32, Kind::Boolean(true), "value"),
+            (T::Unspecified, D::Int32, Kind::Real(1.5), "value"),
+            (T::Unspecified, D::UInt16, Kind::Text("5".into()), "value"),
+            (T::Unspecified, D::UInt16, Kind::Unsigned(70000), "value"),
+            (T::Unspecified, D::UInt32, Kind::Integer(-1), "value"),
+            (T::Unspecified, D::UInt32, Kind::Raw(vec![1, 2]), "value"),
+            (T::Unspecified, D::Bits(2), Kind::Unsigned(4), "value"),
+            (T::Unsigned64, D::UInt16, Kind::Unsigned(5), "data_type"),
+            (T::Integer16, D::UInt16, Kind::Integer(5), "data_type"),
+            (T::Boolean, D::UInt8, Kind::Boolean(true), "data_type"),
+            (T::VisibleString, D::UInt32, Kind::Text("x".into()), "data_type"),
+        ] {
+            let e = known(asked, t, k.clone()).unwrap_err();
+            assert_eq!(e.0, field, "{asked:?} {t:?} {k:?}: {}", e.1);
+        }
     }
 
     #[test]

@@ -193,20 +193,37 @@ pub(crate) const NETWORK_WAIT: Duration = Duration::from_secs(30);
 /// DEADLINE_EXCEEDED: tonic's own deadline layer, which fires at the exact
 /// deadline, answers CANCELLED "Timeout expired" (it still may, when the
 /// host stalls longer than the margin). `None` when the client gave none.
-pub(crate) fn deadline<T>(request: &Request<T>) -> Option<Duration> {
-    let v = request.metadata().get("grpc-timeout")?.to_str().ok()?;
-    let (digits, unit) = v.split_at(v.len().checked_sub(1)?);
-    let n: u64 = digits.parse().ok()?;
+/// A header that is no timeout (gRPC over HTTP/2, "Timeout": 1 to 8
+/// digits and a unit) is refused naming it: tonic's layer ignores it, and
+/// a call the client meant to bound would run with the daemon's default.
+pub(crate) fn deadline<T>(request: &Request<T>) -> Result<Option<Duration>, Status> {
+    let Some(v) = request.metadata().get("grpc-timeout") else { return Ok(None) };
+    let bad = || {
+        status::bad_argument(
+            "grpc-timeout",
+            format!(
+                "{:?} is no timeout: 1 to 8 digits and a unit (H, M, S, m, u, n), e.g. 500m",
+                String::from_utf8_lossy(v.as_bytes())
+            ),
+        )
+    };
+    let v = v.to_str().map_err(|_| bad())?;
+    let Some(split) = v.len().checked_sub(1).filter(|n| (1..=8).contains(n)) else { return Err(bad()) };
+    let (digits, unit) = v.split_at(split);
+    if !digits.bytes().all(|b| b.is_ascii_digit()) {
+        return Err(bad());
+    }
+    let n: u64 = digits.parse().map_err(|_| bad())?;
     let d = match unit {
-        "H" => Duration::from_secs(n.saturating_mul(3600)),
-        "M" => Duration::from_secs(n.saturating_mul(60)),
+        "H" => Duration::from_secs(n * 3600),
+        "M" => Duration::from_secs(n * 60),
         "S" => Duration::from_secs(n),
         "m" => Duration::from_millis(n),
         "u" => Duration::from_micros(n),
         "n" => Duration::from_nanos(n),
-        _ => return None,
+        _ => return Err(bad()),
     };
-    Some(d.saturating_sub((d / 10).min(Duration::from_millis(20))))
+    Ok(Some(d.saturating_sub((d / 10).min(Duration::from_millis(20)))))
 }
 
 /// The outcome of `work`, which runs as `caller.call` (its client's
@@ -249,10 +266,22 @@ mod tests {
         for (v, ms) in [("5S", 4980), ("100m", 90), ("1M", 59_980), ("2000000u", 1980), ("10m", 9)] {
             let mut r = Request::new(());
             r.metadata_mut().insert("grpc-timeout", v.parse().unwrap());
-            assert_eq!(deadline(&r), Some(Duration::from_millis(ms)), "{v}");
+            assert_eq!(deadline(&r).unwrap(), Some(Duration::from_millis(ms)), "{v}");
+        }
+        assert_eq!(deadline(&Request::new(())).unwrap(), None);
+    }
+
+    #[test]
+    fn a_malformed_grpc_timeout_is_refused_naming_it() {
+        for v in ["x", "S", "-5S", "abcS", "5", "5s", "+5S", "123456789m", "1.5S", " 5S"] {
+            let mut r = Request::new(());
+            r.metadata_mut().insert("grpc-timeout", v.parse().unwrap());
+            let e = deadline(&r).unwrap_err();
+            assert_eq!(e.code(), tonic::Code::InvalidArgument, "{v}");
+            assert!(e.message().contains("grpc-timeout"), "{v}: {}", e.message());
         }
         let mut r = Request::new(());
-        r.metadata_mut().insert("grpc-timeout", "x".parse().unwrap());
-        assert_eq!(deadline(&r), None);
+        r.metadata_mut().insert("grpc-timeout", "99999999H".parse().unwrap());
+        assert!(deadline(&r).unwrap().is_some(), "8 digits are a timeout");
     }
 }

@@ -9,10 +9,13 @@ use tonic::{Request, Response, Status};
 use super::Context;
 use super::auth::Role;
 use super::bounded;
-use super::convert::{data_type, decode_value, encode_value, index, pb_type, subindex, type_size};
-use super::status::to_status;
+use super::convert::{
+    data_type, decode_value, domain_value, encode_known, encode_value, index, pb_type, subindex, type_size,
+};
+use super::status::{bad_argument, to_status};
 use crate::master::Master;
 use crate::master::objects::{KNOWN, axis_index, lookup};
+use crate::master::value::type_name;
 use crate::master::{Call, EngineError};
 
 /// The `Sdo` service.
@@ -38,12 +41,26 @@ fn effective_type(
     lookup(index, subindex).map_or(pb::DataType::Unspecified, |(k, _)| pb_type(k.data_type))
 }
 
+/// Complete access transfers an object from subindex 0 or 1 on
+/// (ETG.1000.6, the SDO services' Complete Access flag): any other start
+/// is refused before anything is sent.
+fn complete_access_start(complete: bool, subindex: u8) -> Result<(), Status> {
+    if complete && subindex > 1 {
+        return Err(bad_argument(
+            "subindex",
+            format!("complete access starts at subindex 0 or 1, not {subindex} ({subindex:#04x})"),
+        ));
+    }
+    Ok(())
+}
+
 #[tonic::async_trait]
 impl SdoApi for SdoService {
     async fn upload(&self, request: Request<pb::SdoUploadRequest>) -> Result<Response<pb::SdoUploadResponse>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
         let r = request.get_ref();
         let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
+        complete_access_start(r.complete_access, sub)?;
         let t = effective_type(&self.0.master, s, data_type(r.data_type)?, i, sub, r.complete_access);
         let started = std::time::Instant::now();
         let raw = bounded(&caller, self.0.master.sdo_read(s, i, sub, r.complete_access, caller.call)).await;
@@ -75,9 +92,21 @@ impl SdoApi for SdoService {
         let caller = self.0.authorize(&request, Role::Operator)?;
         let r = request.get_ref();
         let (s, i, sub) = (self.0.slave(r.slave)?, index(r.index)?, subindex(r.subindex)?);
-        let t = effective_type(&self.0.master, s, data_type(r.data_type)?, i, sub, r.complete_access);
-        let value = r.value.as_ref().ok_or_else(|| super::status::bad_argument("value", "no value given"))?;
-        let bytes = encode_value(t, value)?;
+        complete_access_start(r.complete_access, sub)?;
+        let asked = data_type(r.data_type)?;
+        let value = r.value.as_ref().ok_or_else(|| bad_argument("value", "no value given"))?;
+        // Where the object's type is known, the value must be one of it:
+        // nothing else is sent (a slave takes a boolean's 1 for a UDINT's
+        // value). Complete access writes several subindices, as given.
+        let known = if r.complete_access { None } else { self.0.master.object_type(s, i, sub).await };
+        let bytes = match known {
+            Some(k) => encode_known(asked, k, value).map_err(|(field, reason)| {
+                let given = value.kind.as_ref().map(|k| domain_value(k).shown()).unwrap_or_default();
+                let t = type_name(k);
+                bad_argument(field, format!("object {i:#06x}:{sub:02x} of slave {s} is {t}, given {given}: {reason}"))
+            })?,
+            None => encode_value(asked, value)?,
+        };
         let n = bytes.len() as u32;
         tracing::debug!(who = %caller.who, slave = s, object = format_args!("{i:#06x}:{sub:02x}"), "SDO download");
         let started = std::time::Instant::now();

@@ -140,6 +140,25 @@ pub(crate) fn lookup(index: u16, subindex: u8) -> Option<(KnownObject, u8)> {
     KNOWN.iter().find(|k| k.per_axis && k.index == base).map(|k| (*k, axis as u8))
 }
 
+impl super::Master {
+    /// The type of `index:subindex` of `slave` where the daemon knows it:
+    /// as the device described it (SDO Information, when read before),
+    /// else as its ESI's dictionary has it, else as the standard table.
+    /// A value written there is checked against it
+    /// ([`super::value::as_type`], [`super::value::Value::encode`]).
+    pub(crate) async fn object_type(&self, slave: u8, index: u16, subindex: u8) -> Option<DataType> {
+        if let Some(t) = self.known_device_dictionary(slave).and_then(|d| d.data_type(index, subindex)) {
+            return Some(t);
+        }
+        if let Some(Ok(esi)) = self.esi_device(slave).await
+            && let Some(e) = esi.device().dictionary.entry(index, subindex)
+        {
+            return Some(e.dtype);
+        }
+        lookup(index, subindex).map(|(k, _)| k.data_type)
+    }
+}
+
 /// The process-image name of an entry of `slave`: "1.statusword",
 /// "1.axis2.target_position", "2.0x6000:01".
 pub(crate) fn entry_name(slave: u8, index: u16, subindex: u8) -> String {

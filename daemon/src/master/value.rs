@@ -16,7 +16,9 @@ pub(crate) use ecmxf_devices::od::DataType;
 /// A value as the master writes and reads it.
 #[derive(Clone, Debug, PartialEq)]
 pub(crate) enum Value {
-    /// A boolean: 0 or 1 in any integer type.
+    /// A boolean: only to a BOOLEAN or a one-bit target (BIT1, or an
+    /// entry mapped one bit wide); a number of any other width is given as
+    /// a number.
     Bool(bool),
     /// A signed integer.
     Int(i64),
@@ -56,7 +58,24 @@ pub enum ValueError {
     },
     /// Text given for a type that is not a string.
     TextForNumber {
+        /// The value.
+        value: String,
         /// The type's name.
+        target: String,
+    },
+    /// A boolean given for a target wider than one bit.
+    BoolForNumber {
+        /// The value.
+        value: bool,
+        /// The type's name.
+        target: String,
+    },
+    /// A type asked for that is not the target's own (another kind or
+    /// size): written, the bytes would be read as another value.
+    OtherType {
+        /// The type asked for.
+        asked: String,
+        /// The target's type.
         target: String,
     },
     /// Raw bytes of another size than the type's.
@@ -91,7 +110,11 @@ impl fmt::Display for ValueError {
             Self::OutOfRange { value, target } => write!(f, "{value} does not fit {target}"),
             Self::NotAnInteger { value, target } => write!(f, "{value} is a real; {target} wants an integer"),
             Self::NotAString { value, target } => write!(f, "{value} is not a string or bytes ({target})"),
-            Self::TextForNumber { target } => write!(f, "text given for a {target} object"),
+            Self::TextForNumber { value, target } => write!(f, "text {value} given for a {target} object"),
+            Self::BoolForNumber { value, target } => {
+                write!(f, "boolean {value} given for a {target} object; give it as a number")
+            }
+            Self::OtherType { asked, target } => write!(f, "{asked} asked for a {target} object"),
             Self::WrongSize { given, size, target } => {
                 write!(f, "{given} raw bytes given for a {target} object, which has {size}")
             }
@@ -135,6 +158,42 @@ fn integer_width(t: DataType, bits: u32) -> Option<(u32, bool)> {
     }
 }
 
+/// What a type is, for telling whether one stands for another: strings
+/// of either kind are bytes of the value's length.
+#[derive(PartialEq, Eq)]
+enum Kind {
+    Bool,
+    Signed(u32),
+    Unsigned(u32),
+    Real(u32),
+    String,
+}
+
+fn kind(t: DataType) -> Kind {
+    match t {
+        DataType::Bool => Kind::Bool,
+        DataType::Int8 | DataType::Int16 | DataType::Int32 | DataType::Int64 => Kind::Signed(t.bits()),
+        // BITn travels as the unsigned byte the API names it.
+        DataType::Bits(_) => Kind::Unsigned(8),
+        DataType::UInt8 | DataType::UInt16 | DataType::UInt32 | DataType::UInt64 => Kind::Unsigned(t.bits()),
+        DataType::Real32 | DataType::Real64 => Kind::Real(t.bits()),
+        DataType::VisibleString(_) | DataType::OctetString(_) => Kind::String,
+    }
+}
+
+/// The type to write a target of type `target` as, when the caller named
+/// `asked`: the target's own, if `asked` is of its kind and size (a
+/// string's length is the value's), else refused. An object's type, once
+/// known, decides its bytes: INTEGER32 asked for a UNSIGNED16 object would
+/// send 4 bytes the slave refuses or, worse, takes.
+pub(crate) fn as_type(asked: DataType, target: DataType) -> Result<DataType, ValueError> {
+    match (kind(asked) == kind(target), target) {
+        (false, _) => Err(ValueError::OtherType { asked: type_name(asked).into(), target: type_name(target).into() }),
+        (true, DataType::VisibleString(_) | DataType::OctetString(_)) => Ok(asked),
+        (true, _) => Ok(target),
+    }
+}
+
 impl Value {
     /// The value as the bytes of a target of type `t` and `bits` bits
     /// (little-endian, `bits` rounded up to bytes), or why it is not one.
@@ -159,7 +218,7 @@ impl Value {
         }
         // A number: a whole one exactly, or a real.
         let number: Result<i128, f64> = match self {
-            Self::Text(_) => return Err(ValueError::TextForNumber { target: target() }),
+            Self::Text(_) => return Err(ValueError::TextForNumber { value: self.shown(), target: target() }),
             Self::Bytes(b) if b.len() != size => {
                 return Err(ValueError::WrongSize { given: b.len(), size, target: target() });
             }
@@ -169,6 +228,12 @@ impl Value {
             Self::UInt(u) => Ok(i128::from(*u)),
             Self::Real(f) => Err(*f),
         };
+        // A boolean is a bit: in a wider target it would be a number the
+        // caller did not give (true to a UNSIGNED32 writes 1).
+        let one_bit = integer_width(t, bits).is_some_and(|(width, _)| width == 1);
+        if let (Self::Bool(value), false) = (self, one_bit) {
+            return Err(ValueError::BoolForNumber { value: *value, target: target() });
+        }
         let Some((width, signed)) = integer_width(t, bits) else {
             // A real type.
             let f = number.map_or_else(|f| f, |i| i as f64);
@@ -238,7 +303,7 @@ impl Value {
     }
 
     /// The value as messages show it.
-    fn shown(&self) -> String {
+    pub(crate) fn shown(&self) -> String {
         match self {
             Self::Bool(b) => b.to_string(),
             Self::Int(i) => i.to_string(),
@@ -267,7 +332,44 @@ mod tests {
         assert!(Value::UInt(1 << 63).encode(DataType::Int64, 64).is_err());
         assert!(Value::UInt(4).encode(DataType::Bits(2), 2).is_err());
         assert!(Value::UInt(2).encode(DataType::Bool, 1).is_err());
-        assert_eq!(Value::Bool(true).encode(DataType::UInt16, 16).unwrap(), vec![1, 0]);
+    }
+
+    #[test]
+    fn a_boolean_goes_only_to_one_bit() {
+        assert_eq!(Value::Bool(true).encode(DataType::Bool, 1).unwrap(), vec![1]);
+        assert_eq!(Value::Bool(true).encode(DataType::Bits(1), 1).unwrap(), vec![1]);
+        // An unsigned entry mapped one bit wide is a bit.
+        assert_eq!(Value::Bool(true).encode(DataType::UInt8, 1).unwrap(), vec![1]);
+        let e = Value::Bool(true).encode(DataType::UInt32, 32).unwrap_err();
+        assert_eq!(e.to_string(), "boolean true given for a UNSIGNED32 object; give it as a number");
+        for t in [DataType::UInt16, DataType::Int8, DataType::Bits(2), DataType::Real32, DataType::Real64] {
+            assert!(matches!(Value::Bool(false).encode(t, t.bits()), Err(ValueError::BoolForNumber { .. })), "{t:?}");
+        }
+        assert!(Value::Bool(true).encode(DataType::VisibleString(4), 32).is_err());
+    }
+
+    #[test]
+    fn an_asked_type_stands_for_the_target_only_of_its_kind_and_size() {
+        assert_eq!(as_type(DataType::UInt32, DataType::UInt32), Ok(DataType::UInt32));
+        // BITn is named UNSIGNED8 by the API; its own width then checks.
+        assert_eq!(as_type(DataType::UInt8, DataType::Bits(2)), Ok(DataType::Bits(2)));
+        // A string's length is the value's; either string kind writes bytes.
+        assert_eq!(as_type(DataType::OctetString(3), DataType::VisibleString(0)), Ok(DataType::OctetString(3)));
+        for (asked, target) in [
+            (DataType::UInt64, DataType::UInt16),
+            (DataType::Int16, DataType::UInt16),
+            (DataType::UInt32, DataType::Int32),
+            (DataType::Real32, DataType::UInt32),
+            (DataType::UInt32, DataType::Real32),
+            (DataType::Bool, DataType::UInt8),
+            (DataType::UInt8, DataType::Bool),
+            (DataType::VisibleString(2), DataType::UInt16),
+            (DataType::UInt16, DataType::VisibleString(0)),
+        ] {
+            assert!(matches!(as_type(asked, target), Err(ValueError::OtherType { .. })), "{asked:?} for {target:?}");
+        }
+        let e = as_type(DataType::UInt64, DataType::UInt16).unwrap_err();
+        assert_eq!(e.to_string(), "UNSIGNED64 asked for a UNSIGNED16 object");
     }
 
     #[test]
@@ -277,7 +379,7 @@ mod tests {
         let e = Value::Real(1.0).encode(DataType::UInt32, 32).unwrap_err();
         assert_eq!(e.to_string(), "1 is a real; UNSIGNED32 wants an integer");
         let e = Value::Text("ab".into()).encode(DataType::UInt16, 16).unwrap_err();
-        assert_eq!(e.to_string(), "text given for a UNSIGNED16 object");
+        assert_eq!(e.to_string(), "text \"ab\" given for a UNSIGNED16 object");
         let e = Value::Bytes(vec![1, 2, 3]).encode(DataType::UInt16, 16).unwrap_err();
         assert_eq!(e.to_string(), "3 raw bytes given for a UNSIGNED16 object, which has 2");
         assert_eq!(Value::Text("ab".into()).encode(DataType::VisibleString(4), 32).unwrap(), b"ab\0\0");

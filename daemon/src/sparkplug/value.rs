@@ -106,13 +106,16 @@ pub(super) fn encode(t: DataType, bits: u32, v: &MetricValue) -> Result<Vec<u8>,
 /// Integers are read as Sparkplug hosts write them: signed ones narrower
 /// than 64 bits as two's complement of their own width (an Int8 -1 is 255,
 /// as Tahu and pysparkplug write it) or sign-extended to 32 bits (Tahu's
-/// Java `int_value`); a whole float is an integer; a boolean is 0 or 1.
+/// Java `int_value`); a whole float is an integer. A boolean stays one:
+/// the master's encoder takes it only for a bit ([`Value::encode`]).
 fn metric_value(t: DataType, v: &MetricValue) -> Result<Value, String> {
+    if let MetricValue::BooleanValue(b) = v {
+        return Ok(Value::Bool(*b));
+    }
     let int = |v: &MetricValue| -> Result<i128, String> {
         match v {
             MetricValue::IntValue(u) => Ok(i128::from(*u)),
             MetricValue::LongValue(u) => Ok(i128::from(*u)),
-            MetricValue::BooleanValue(b) => Ok(i128::from(*b)),
             MetricValue::FloatValue(f) if f.fract() == 0.0 => Ok(*f as i128),
             MetricValue::DoubleValue(f) if f.fract() == 0.0 => Ok(*f as i128),
             other => Err(format!("{} is not an integer", shown(other))),
@@ -137,10 +140,7 @@ fn metric_value(t: DataType, v: &MetricValue) -> Result<Value, String> {
         u64::try_from(raw).map(Value::UInt).map_err(|_| format!("{raw} does not fit an unsigned entry"))
     };
     match t {
-        DataType::Bool => match v {
-            MetricValue::BooleanValue(b) => Ok(Value::Bool(*b)),
-            _ => unsigned(),
-        },
+        DataType::Bool => unsigned(),
         DataType::Int8 => signed(8),
         DataType::Int16 => signed(16),
         DataType::Int32 => signed(32),
@@ -212,6 +212,9 @@ mod tests {
         assert_eq!(encode(DataType::Bool, 1, &MetricValue::IntValue(1)).unwrap(), vec![1]);
         assert!(encode(DataType::Bool, 1, &MetricValue::IntValue(2)).is_err());
         assert!(encode(DataType::Bits(2), 2, &MetricValue::IntValue(4)).is_err());
+        // A boolean is a bit, not a number: refused for a wider entry.
+        assert_eq!(encode(DataType::Bits(1), 1, &MetricValue::BooleanValue(true)).unwrap(), vec![1]);
+        assert!(encode(DataType::UInt16, 16, &MetricValue::BooleanValue(true)).unwrap_err().contains("boolean true"));
         assert_eq!(Value::decode(DataType::Real32, &1.5f32.to_le_bytes()), Value::Real(1.5));
         assert_eq!(encode(DataType::Real32, 32, &MetricValue::DoubleValue(1.5)).unwrap(), 1.5f32.to_le_bytes());
         assert_eq!(Value::decode(DataType::VisibleString(4), b"ab\0\0"), Value::Text("ab".into()));

@@ -75,6 +75,9 @@ pub struct MailboxStats {
     pub answers_read: u64,
     /// Repeat requests served.
     pub repeats: u64,
+    /// The chip's own CoE requests (SDO_REQ) run on the slave: they never
+    /// pass the receive mailbox, so `requests` does not see them.
+    pub chip_sdos: u64,
 }
 
 fn overlap(ado: u16, len: usize, start: u16, size: u16) -> Option<(usize, usize, usize)> {
@@ -173,6 +176,7 @@ impl Mailboxes {
     /// The chip ran one of its own CoE requests (SDO_REQ): it counted it
     /// in its sequence, which the slave now remembers as the last counter.
     pub fn chip_request(&mut self) {
+        self.stats.chip_sdos += 1;
         self.chip_counter = mbx::next_counter(self.chip_counter);
         self.last_counter = self.chip_counter;
     }
