@@ -138,7 +138,14 @@ impl DiagnosticsApi for DiagnosticsService {
         let (tx, rx) = tokio::sync::mpsc::channel(64);
         tokio::spawn(async move {
             loop {
-                let msg = match events.recv().await {
+                // Events can be minutes apart: a subscriber that left is
+                // noticed when it leaves, not at the next event, so its task
+                // and buffers do not outlive it in the meantime.
+                let received = tokio::select! {
+                    _ = tx.closed() => break,
+                    r = events.recv() => r,
+                };
+                let msg = match received {
                     Ok(e) => event_pb(&e),
                     Err(RecvError::Lagged(n)) => pb::Event {
                         kind: pb::EventKind::Lost as i32,
