@@ -210,6 +210,14 @@ fn a_peer_over_its_cap_is_refused_at_once_and_logged_once() {
 
 /// Opening and closing many streams leaves the daemon's resident memory
 /// near where it was. Set ECMXF_SOAK=1 to run it.
+///
+/// It does not pass yet: glibc keeps the freed memory of the closed
+/// streams in holes of its heap (below allocations that live on, such as
+/// the input frames of every cycle) and returns only the heap's top to the
+/// system. Calling `malloc_trim(0)` in the daemon brings RSS back to the
+/// figure before (measured: 34.8 MB -> 22.7 MB), but needs FFI, which the
+/// daemon's `forbid(unsafe_code)` rules out; MALLOC_ARENA_MAX does not help
+/// (the retained memory is in the main heap).
 #[test]
 fn memory_returns_after_many_streams_close() {
     if std::env::var_os("ECMXF_SOAK").is_none() {
@@ -229,11 +237,10 @@ fn memory_returns_after_many_streams_close() {
                 }
                 let mut streams = Vec::new();
                 for i in 0..n {
-                    let mut c = pb::process_data_client::ProcessDataClient::new(channels[i % 10].clone());
-                    let req = pb::StreamInputsRequest { decimation: 1000, ..Default::default() };
-                    let mut s = c.stream_inputs(req).await.unwrap().into_inner();
-                    s.message().await.unwrap();
-                    streams.push(s);
+                    // Events come seldom: the stream is open (its headers
+                    // came) and idle, as a watching client's.
+                    let mut c = pb::diagnostics_client::DiagnosticsClient::new(channels[i % 10].clone());
+                    streams.push(c.stream_events(pb::StreamEventsRequest {}).await.unwrap().into_inner());
                 }
                 drop(streams);
                 drop(channels);
