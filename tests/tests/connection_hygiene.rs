@@ -261,3 +261,37 @@ fn memory_returns_after_many_streams_close() {
         assert!(after <= before + 5 * 1024, "RSS grew from {before} kB to {after} kB");
     });
 }
+
+#[test]
+fn the_metrics_endpoint_caps_a_peer_too() {
+    run(async {
+        let port = free_port();
+        let extra = format!("[metrics]\nlisten = \"127.0.0.1:{port}\"\n");
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config("backend = \"sim\"", &extra));
+        d.connect().await;
+        // Idle peers that send no request: 8 are held (each until its
+        // request deadline), the rest are closed at once.
+        let mut held = Vec::new();
+        let mut refused = 0;
+        for _ in 0..12 {
+            let s = connect_from(Ipv4Addr::LOCALHOST, port).await.unwrap();
+            tokio::time::sleep(Duration::from_millis(20)).await;
+            let mut probe = [0u8; 1];
+            match tokio::time::timeout(Duration::from_millis(200), s.peek(&mut probe)).await {
+                Ok(Ok(0)) | Ok(Err(_)) => refused += 1,
+                _ => held.push(s),
+            }
+        }
+        assert_eq!((held.len(), refused), (8, 4), "8 per peer address");
+        // Another address still scrapes.
+        let mut other = connect_from(Ipv4Addr::new(127, 0, 0, 7), port).await.unwrap();
+        use tokio::io::AsyncWriteExt;
+        other.write_all(b"GET /metrics HTTP/1.1\r\nHost: x\r\n\r\n").await.unwrap();
+        let mut body = String::new();
+        tokio::time::timeout(Duration::from_secs(5), other.read_to_string(&mut body)).await.unwrap().unwrap();
+        assert!(body.starts_with("HTTP/1.1 200") && body.contains("ecmxf_"), "{body}");
+        let log = d.log();
+        let lines = log.lines().filter(|l| l.contains("connection refused")).count();
+        assert_eq!(lines, 1, "one line for 4 refusals:\n{log}");
+    });
+}
