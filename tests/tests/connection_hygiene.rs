@@ -210,23 +210,22 @@ fn a_peer_over_its_cap_is_refused_at_once_and_logged_once() {
 }
 
 /// Opening and closing many streams leaves the daemon's resident memory
-/// near where it was. Set ECMXF_SOAK=1 to run it.
-///
-/// It does not pass yet: glibc keeps the freed memory of the closed
-/// streams in holes of its heap (below allocations that live on, such as
-/// the input frames of every cycle) and returns only the heap's top to the
-/// system. Calling `malloc_trim(0)` in the daemon brings RSS back to the
-/// figure before (measured: 34.8 MB -> 22.7 MB), but needs FFI, which the
-/// daemon's `forbid(unsafe_code)` rules out; MALLOC_ARENA_MAX does not help
-/// (the retained memory is in the main heap).
+/// near where it was, with the malloc settings of the shipped unit
+/// (systemd/ecmxfd.service: without them glibc keeps the streams' freed
+/// buffers in holes of its heap).
 #[test]
 fn memory_returns_after_many_streams_close() {
-    if std::env::var_os("ECMXF_SOAK").is_none() {
-        eprintln!("skipped: set ECMXF_SOAK=1");
-        return;
-    }
     run(async {
-        let mut d = Daemon::binary_sim();
+        let unit = std::fs::read_to_string(ecmxf_e2e::repo().join("systemd/ecmxfd.service")).unwrap();
+        let env: Vec<(String, std::ffi::OsString)> = unit
+            .lines()
+            .filter_map(|l| l.strip_prefix("Environment=MALLOC_"))
+            .filter_map(|kv| kv.split_once('='))
+            .map(|(k, v)| (format!("MALLOC_{k}"), v.into()))
+            .collect();
+        assert!(!env.is_empty(), "the unit sets malloc's thresholds");
+        let config = ecmxf_e2e::config("backend = \"sim\"", "");
+        let mut d = Daemon::binary_with_config_on(&ecmxf_e2e::daemon_binary(), &config, &env);
         let unix = d.connect().await;
         let pid = d.pid();
         let round = |n: usize| {
