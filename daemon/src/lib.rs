@@ -33,6 +33,7 @@
 #![warn(missing_docs)]
 #![warn(unreachable_pub)]
 
+mod admission;
 mod api;
 mod check_config;
 pub mod config;

@@ -73,7 +73,9 @@ impl DaemonError {
         match self {
             Self::NetworkRefused(_) => EXIT_REFUSED,
             Self::Start(StartError::Network(_)) | Self::Sparkplug(_) => crate::EXIT_CONFIG,
-            Self::Api(ServeError::TlsNotSet(_) | ServeError::TlsFile { .. }) => crate::EXIT_CONFIG,
+            Self::Api(ServeError::TlsNotSet(_) | ServeError::TlsFile { .. } | ServeError::TlsContent(..)) => {
+                crate::EXIT_CONFIG
+            }
             _ => 1,
         }
     }
@@ -151,6 +153,13 @@ pub async fn run(config: Config, shutdown: impl Future<Output = ()>) -> Result<(
 pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Output = ()>) -> Result<(), DaemonError> {
     let notifier = options.notifier.unwrap_or_else(Notifier::disabled);
     let api = config.api.clone();
+    // Every listener's connections at their caps, plus what the daemon
+    // opens besides: the limit must cover the sum, or a full listener
+    // fails accepts (and starves the others) instead of refusing cleanly.
+    let connections = u64::from(api.max_socket_connections)
+        + api.tcp.map_or(0, |_| u64::from(api.max_connections))
+        + config.metrics.listen.map_or(0, |_| crate::metrics::MAX_CONNECTIONS as u64);
+    crate::admission::ensure_fd_budget(connections + crate::admission::FD_RESERVE);
     let metrics_listener = match config.metrics.listen {
         Some(addr) => Some(crate::metrics::bind(addr).await.map_err(|source| DaemonError::Metrics { addr, source })?),
         None => None,

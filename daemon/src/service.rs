@@ -208,6 +208,15 @@ impl ReloadPlan {
             "api.tcp/tls",
         );
         restart(a.lease_ttl_ms != b.lease_ttl_ms, "api.lease_ttl_ms");
+        // The listeners' caps and deadlines are fixed when they start.
+        restart(
+            a.handshake_timeout_ms != b.handshake_timeout_ms
+                || a.keepalive_s != b.keepalive_s
+                || a.max_connections != b.max_connections
+                || a.max_connections_per_peer != b.max_connections_per_peer
+                || a.max_socket_connections != b.max_socket_connections,
+            "api connection caps",
+        );
         p
     }
 }
@@ -262,6 +271,9 @@ mod tests {
         let p = ReloadPlan::between(&old, &new);
         assert!(p.sparkplug);
         assert_eq!(p.needs_restart, vec!["[gateway]"]);
+        let mut new = old.clone();
+        new.api.max_connections_per_peer = 4;
+        assert_eq!(ReloadPlan::between(&old, &new).needs_restart, vec!["api connection caps"]);
     }
 
     #[test]

@@ -5,7 +5,6 @@ use std::sync::Arc;
 
 use ecmxf_proto::v1 as pb;
 use ecmxf_proto::v1::diagnostics_server::Diagnostics as DiagnosticsApi;
-use tokio::sync::broadcast::error::RecvError;
 use tonic::{Request, Response, Status};
 
 use super::auth::Role;
@@ -134,26 +133,23 @@ impl DiagnosticsApi for DiagnosticsService {
         request: Request<pb::StreamEventsRequest>,
     ) -> Result<Response<Self::StreamEventsStream>, Status> {
         let caller = self.0.authorize(&request, Role::Observer)?;
-        let mut events = self.0.master.events();
-        let (tx, rx) = tokio::sync::mpsc::channel(64);
-        tokio::spawn(async move {
-            loop {
-                let msg = match events.recv().await {
-                    Ok(e) => event_pb(&e),
-                    Err(RecvError::Lagged(n)) => pb::Event {
-                        kind: pb::EventKind::Lost as i32,
-                        counter: n,
-                        text: format!("{n} events missed"),
-                        ..Default::default()
-                    },
-                    Err(RecvError::Closed) => break,
-                };
-                if tx.send(Ok(msg)).await.is_err() {
-                    break;
-                }
-            }
+        // Read straight from the engine's broadcast: no task or buffer per
+        // subscriber, so a subscriber that leaves (even on a quiet bus, with
+        // no event to notice it by) leaves nothing behind.
+        use tokio_stream::StreamExt as _;
+        use tokio_stream::wrappers::errors::BroadcastStreamRecvError;
+        let events = tokio_stream::wrappers::BroadcastStream::new(self.0.master.events()).map(|received| {
+            Ok(match received {
+                Ok(e) => event_pb(&e),
+                Err(BroadcastStreamRecvError::Lagged(n)) => pb::Event {
+                    kind: pb::EventKind::Lost as i32,
+                    counter: n,
+                    text: format!("{n} events missed"),
+                    ..Default::default()
+                },
+            })
         });
-        Ok(Response::new(self.0.serve_stream(&caller, Box::pin(tokio_stream::wrappers::ReceiverStream::new(rx)))))
+        Ok(Response::new(self.0.serve_stream(&caller, Box::pin(events))))
     }
 
     async fn get_emergencies(

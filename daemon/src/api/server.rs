@@ -2,19 +2,24 @@
 //! a stale socket file from a crash is replaced, a live one is an error),
 //! optional TCP with TLS, health and reflection, and the background tasks
 //! the services rely on (the newest inputs for CiA 402 values, gRPC health
-//! from the bus state).
+//! from the bus state). Both listeners accept through
+//! [`crate::admission`]: capped, each with a budget of its own, and a
+//! handshake deadline; the TLS handshake runs there, under the deadline.
 
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
 use ecmxf_proto::v1 as pb;
-use tokio::net::UnixListener;
-use tokio::sync::watch;
-use tokio_stream::wrappers::UnixListenerStream;
+use rustls::pki_types::pem::PemObject;
+use rustls::pki_types::{CertificateDer, PrivateKeyDer};
+use tokio::net::{TcpListener, UnixListener};
+use tokio::sync::{mpsc, watch};
+use tokio_stream::StreamExt as _;
+use tokio_stream::wrappers::ReceiverStream;
 use tonic::server::NamedService;
 use tonic::service::Routes;
-use tonic::transport::{Certificate, Identity, Server, ServerTlsConfig};
+use tonic::transport::Server;
 use tonic_health::ServingStatus;
 use tonic_health::server::HealthReporter;
 
@@ -28,6 +33,7 @@ use super::pdo::ProcessDataService;
 use super::peripherals::PeripheralsService;
 use super::sdo::SdoService;
 use super::sii::SiiService;
+use crate::admission::{self, Cap, Gate};
 use crate::config::api::ApiConfig;
 use crate::master::Master;
 
@@ -47,6 +53,11 @@ pub enum ServeError {
         /// Why.
         source: std::io::Error,
     },
+    /// A TLS file does not hold what its key needs (a certificate, a
+    /// private key), or rustls refused them: the key and why.
+    TlsContent(&'static str, String),
+    /// The TCP port could not be bound.
+    Bind(std::net::SocketAddr, std::io::Error),
     /// The reflection service could not be built.
     Reflection(tonic_reflection::server::Error),
     /// The server (or its TLS configuration) failed.
@@ -59,6 +70,8 @@ impl std::fmt::Display for ServeError {
             Self::Socket(p, why) => write!(f, "API socket {}: {why}", p.display()),
             Self::TlsNotSet(key) => write!(f, "API TLS: api.{key} is not set"),
             Self::TlsFile { key, path, source } => write!(f, "API TLS: api.{key} {}: {source}", path.display()),
+            Self::TlsContent(key, why) => write!(f, "API TLS: api.{key}: {why}"),
+            Self::Bind(addr, e) => write!(f, "api.tcp {addr}: cannot bind: {e}"),
             Self::Reflection(e) => write!(f, "API server: reflection: {e}"),
             Self::Transport(e) => write!(f, "API server: {e}"),
         }
@@ -69,10 +82,10 @@ impl std::error::Error for ServeError {
     fn source(&self) -> Option<&(dyn std::error::Error + 'static)> {
         match self {
             Self::Socket(_, p) => p.source(),
-            Self::TlsFile { source, .. } => Some(source),
+            Self::TlsFile { source, .. } | Self::Bind(_, source) => Some(source),
             Self::Reflection(e) => Some(e),
             Self::Transport(e) => Some(e),
-            Self::TlsNotSet(_) => None,
+            Self::TlsNotSet(_) | Self::TlsContent(..) => None,
         }
     }
 }
@@ -247,18 +260,47 @@ fn describe(t: &std::fs::FileType) -> &'static str {
     }
 }
 
-fn tls(config: &ApiConfig) -> Result<ServerTlsConfig, ServeError> {
+/// The TLS acceptor of `api.tcp`: the server's chain and key, client
+/// certificates verified against `api.client_ca` when set but optional (a
+/// caller may bring a token instead; daemon/src/api/auth.rs decides), and
+/// HTTP/2 by ALPN (gRPC needs it).
+fn tls(config: &ApiConfig) -> Result<tokio_rustls::TlsAcceptor, ServeError> {
     let read = |p: &Option<PathBuf>, what: &'static str| -> Result<Vec<u8>, ServeError> {
         let p = p.as_ref().ok_or(ServeError::TlsNotSet(what))?;
         std::fs::read(p).map_err(|source| ServeError::TlsFile { key: what, path: p.clone(), source })
     };
-    let mut tls = ServerTlsConfig::new()
-        .identity(Identity::from_pem(read(&config.tls_cert, "tls_cert")?, read(&config.tls_key, "tls_key")?));
-    if config.client_ca.is_some() {
-        tls =
-            tls.client_ca_root(Certificate::from_pem(read(&config.client_ca, "client_ca")?)).client_auth_optional(true);
-    }
-    Ok(tls)
+    let certs = |pem: &[u8], what: &'static str| -> Result<Vec<CertificateDer<'static>>, ServeError> {
+        let certs = CertificateDer::pem_slice_iter(pem)
+            .collect::<Result<Vec<_>, _>>()
+            .map_err(|e| ServeError::TlsContent(what, format!("not PEM certificates: {e}")))?;
+        if certs.is_empty() {
+            return Err(ServeError::TlsContent(what, "no PEM certificate in the file".into()));
+        }
+        Ok(certs)
+    };
+    let chain = certs(&read(&config.tls_cert, "tls_cert")?, "tls_cert")?;
+    let key = PrivateKeyDer::from_pem_slice(&read(&config.tls_key, "tls_key")?)
+        .map_err(|e| ServeError::TlsContent("tls_key", format!("no PEM private key: {e}")))?;
+    let provider = Arc::new(rustls::crypto::ring::default_provider());
+    let builder = rustls::ServerConfig::builder_with_provider(Arc::clone(&provider))
+        .with_safe_default_protocol_versions()
+        .map_err(|e| ServeError::TlsContent("tls_cert", e.to_string()))?;
+    let builder = if config.client_ca.is_some() {
+        let mut roots = rustls::RootCertStore::empty();
+        for ca in certs(&read(&config.client_ca, "client_ca")?, "client_ca")? {
+            roots.add(ca).map_err(|e| ServeError::TlsContent("client_ca", e.to_string()))?;
+        }
+        let verifier = rustls::server::WebPkiClientVerifier::builder_with_provider(Arc::new(roots), provider)
+            .allow_unauthenticated()
+            .build()
+            .map_err(|e| ServeError::TlsContent("client_ca", e.to_string()))?;
+        builder.with_client_cert_verifier(verifier)
+    } else {
+        builder.with_no_client_auth()
+    };
+    let mut tls = builder.with_single_cert(chain, key).map_err(|e| ServeError::TlsContent("tls_key", e.to_string()))?;
+    tls.alpn_protocols = vec![b"h2".to_vec()];
+    Ok(tokio_rustls::TlsAcceptor::from(Arc::new(tls)))
 }
 
 /// Health follows the bus: SERVING while the engine runs, the network is in
@@ -320,22 +362,57 @@ pub(crate) async fn serve(
         }
     });
 
+    let deadline = Duration::from_millis(config.handshake_timeout_ms.into());
+    let keepalive = Duration::from_secs(config.keepalive_s.into());
+    // HTTP/2 PINGs find peers that vanished without a FIN (a cable pulled,
+    // a host powered off) and close their connections.
+    let server = || {
+        Server::builder()
+            .http2_keepalive_interval(Some(keepalive))
+            .http2_keepalive_timeout(Some(keepalive))
+            .layer(ErrorDetailsLayer)
+    };
+    let unix_gate = Gate::new(
+        "api.socket",
+        Cap { limit: config.max_socket_connections as usize, key: "api.max_socket_connections" },
+        None,
+    );
+    let (unix_tx, unix_rx) = mpsc::channel(16);
+    tasks.spawn(admission::admit_loop(listener, unix_gate, deadline, |io| async move { Ok(io) }, unix_tx));
     let mut stop = shutdown.clone();
-    let unix = Server::builder().layer(ErrorDetailsLayer).add_routes(routes.clone()).serve_with_incoming_shutdown(
-        UnixListenerStream::new(listener),
+    let unix = server().add_routes(routes.clone()).serve_with_incoming_shutdown(
+        ReceiverStream::new(unix_rx).map(Ok::<_, std::io::Error>),
         async move {
             let _ = stop.changed().await;
         },
     );
     let result = if let Some(addr) = config.tcp {
-        let tcp = Server::builder()
-            .tls_config(tls(&config)?)
-            .map_err(ServeError::Transport)?
-            .layer(ErrorDetailsLayer)
-            .add_routes(routes)
-            .serve_with_shutdown(addr, async move {
+        let acceptor = tls(&config)?;
+        let listener = TcpListener::bind(addr).await.map_err(|e| ServeError::Bind(addr, e))?;
+        let gate = Gate::new(
+            "api.tcp",
+            Cap { limit: config.max_connections as usize, key: "api.max_connections" },
+            Some(Cap { limit: config.max_connections_per_peer as usize, key: "api.max_connections_per_peer" }),
+        );
+        let (tcp_tx, tcp_rx) = mpsc::channel(16);
+        let handshake = move |io: tokio::net::TcpStream| {
+            let acceptor = acceptor.clone();
+            async move {
+                let _ = io.set_nodelay(true);
+                // TCP keepalive closes what HTTP/2 PINGs cannot reach: a
+                // connection whose peer went away before its first frame.
+                let probes = socket2::TcpKeepalive::new().with_time(keepalive).with_interval(keepalive);
+                let _ = socket2::SockRef::from(&io).set_tcp_keepalive(&probes);
+                acceptor.accept(io).await
+            }
+        };
+        tasks.spawn(admission::admit_loop(listener, gate, deadline, handshake, tcp_tx));
+        let tcp = server().add_routes(routes).serve_with_incoming_shutdown(
+            ReceiverStream::new(tcp_rx).map(Ok::<_, std::io::Error>),
+            async move {
                 let _ = shutdown.changed().await;
-            });
+            },
+        );
         tracing::info!(%addr, "API listening on TCP (TLS)");
         tokio::try_join!(unix, tcp).map(|_| ())
     } else {

@@ -75,6 +75,22 @@ pub struct ApiConfig {
     /// transport, ms (10..=60000): older samples of a subscriber that
     /// reads slower than the cycle are dropped and counted in `lost`.
     pub stream_max_age_ms: u32,
+    /// Time a new connection has to finish its TLS handshake (TCP) and send
+    /// the HTTP/2 preface, ms (100..=60000); a slower peer is closed, so
+    /// idle connections cannot hold file descriptors.
+    pub handshake_timeout_ms: u32,
+    /// HTTP/2 PING interval on idle connections, s (1..=3600); a peer that
+    /// does not answer within the same time is closed. TCP keepalive
+    /// probes start after the same idle time.
+    pub keepalive_s: u32,
+    /// Connections the TCP listener holds at once (1..=65536); more are
+    /// closed as they come.
+    pub max_connections: u32,
+    /// Connections one TCP peer address holds at once (1..=max_connections).
+    pub max_connections_per_peer: u32,
+    /// Connections the Unix socket holds at once (1..=65536): a budget of
+    /// its own, which TCP peers cannot consume.
+    pub max_socket_connections: u32,
 }
 
 impl Default for ApiConfig {
@@ -94,6 +110,11 @@ impl Default for ApiConfig {
             client_certs: Vec::new(),
             lease_ttl_ms: 2000,
             stream_max_age_ms: 100,
+            handshake_timeout_ms: 5000,
+            keepalive_s: 30,
+            max_connections: 256,
+            max_connections_per_peer: 32,
+            max_socket_connections: 64,
         }
     }
 }
@@ -189,6 +210,28 @@ impl ApiConfig {
         }
         if !(10..=60_000).contains(&self.stream_max_age_ms) {
             return bad("api.stream_max_age_ms", format!("{} ms is outside 10..=60000", self.stream_max_age_ms));
+        }
+        if !(100..=60_000).contains(&self.handshake_timeout_ms) {
+            return bad("api.handshake_timeout_ms", format!("{} ms is outside 100..=60000", self.handshake_timeout_ms));
+        }
+        if !(1..=3600).contains(&self.keepalive_s) {
+            return bad("api.keepalive_s", format!("{} s is outside 1..=3600", self.keepalive_s));
+        }
+        for (key, n) in
+            [("api.max_connections", self.max_connections), ("api.max_socket_connections", self.max_socket_connections)]
+        {
+            if !(1..=65_536).contains(&n) {
+                return bad(key, format!("{n} is outside 1..=65536"));
+            }
+        }
+        if !(1..=self.max_connections).contains(&self.max_connections_per_peer) {
+            return bad(
+                "api.max_connections_per_peer",
+                format!(
+                    "{} is outside 1..=api.max_connections ({})",
+                    self.max_connections_per_peer, self.max_connections
+                ),
+            );
         }
         Ok(())
     }

@@ -308,15 +308,40 @@ pub(crate) async fn bind(addr: SocketAddr) -> std::io::Result<TcpListener> {
     Ok(l)
 }
 
-/// Serves `/metrics` until `shutdown` changes.
+/// Connections the endpoint holds at once: a scraper needs one, a few
+/// people with curl a few more.
+pub(crate) const MAX_CONNECTIONS: usize = 32;
+
+/// Connections one peer address holds at once.
+const MAX_PER_PEER: usize = 8;
+
+/// Time a client has to send its request head.
+const HEAD_DEADLINE: Duration = Duration::from_secs(5);
+
+/// Serves `/metrics` until `shutdown` changes. Connections are admitted
+/// as the API's are (daemon/src/admission.rs), with caps of their own.
 pub(crate) async fn serve(sources: Sources, listener: TcpListener, mut shutdown: watch::Receiver<()>) {
+    use crate::admission::{Cap, Gate};
+    let gate = Gate::new(
+        "metrics",
+        Cap { limit: MAX_CONNECTIONS, key: "the metrics endpoint's connection cap" },
+        Some(Cap { limit: MAX_PER_PEER, key: "the metrics endpoint's per-peer cap" }),
+    );
     loop {
         tokio::select! {
             _ = shutdown.changed() => return,
             accepted = listener.accept() => {
-                let Ok((stream, _)) = accepted else { continue };
+                let (stream, peer) = match accepted {
+                    Ok(c) => c,
+                    Err(e) => {
+                        gate.accept_failed(&e).await;
+                        continue;
+                    }
+                };
+                let Ok(ticket) = gate.admit(Some(peer.ip())) else { continue };
                 let sources = sources.clone();
                 tokio::spawn(async move {
+                    let _ticket = ticket;
                     // A client that never finishes its request is dropped.
                     let _ = tokio::time::timeout(Duration::from_secs(10), answer(&sources, stream)).await;
                 });
@@ -329,8 +354,12 @@ pub(crate) async fn serve(sources: Sources, listener: TcpListener, mut shutdown:
 async fn answer(sources: &Sources, mut stream: TcpStream) -> std::io::Result<()> {
     let mut head = Vec::with_capacity(1024);
     let mut buf = [0u8; 1024];
+    let by = tokio::time::Instant::now() + HEAD_DEADLINE;
     while !head.windows(4).any(|w| w == b"\r\n\r\n") {
-        let n = stream.read(&mut buf).await?;
+        let n = match tokio::time::timeout_at(by, stream.read(&mut buf)).await {
+            Ok(n) => n?,
+            Err(_) => return Ok(()),
+        };
         if n == 0 {
             return Ok(());
         }
