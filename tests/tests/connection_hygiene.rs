@@ -172,24 +172,31 @@ fn idle_tcp_peers_are_closed_and_the_socket_stays_answered() {
     });
 }
 
+/// `n` connections from 127.0.0.1 that send nothing: those the daemon
+/// kept open, and how many it closed at once.
+async fn idle_peers(port: u16, n: usize) -> (Vec<tokio::net::TcpStream>, usize) {
+    let mut held = Vec::new();
+    let mut refused = 0;
+    for _ in 0..n {
+        let s = connect_from(Ipv4Addr::LOCALHOST, port).await.unwrap();
+        // Give the daemon time to accept, then see whether it closed.
+        tokio::time::sleep(Duration::from_millis(20)).await;
+        let mut probe = [0u8; 1];
+        match tokio::time::timeout(Duration::from_millis(200), s.peek(&mut probe)).await {
+            Ok(Ok(0)) | Ok(Err(_)) => refused += 1,
+            _ => held.push(s),
+        }
+    }
+    (held, refused)
+}
+
 #[test]
 fn a_peer_over_its_cap_is_refused_at_once_and_logged_once() {
     assert!(raise_own_fd_limit() >= 256);
     run(async {
         let (mut d, port) = daemon_with_tcp("handshake_timeout_ms = 5000\nmax_connections_per_peer = 4\n");
         d.connect().await;
-        let mut held = Vec::new();
-        let mut refused = 0;
-        for _ in 0..20 {
-            let s = connect_from(Ipv4Addr::LOCALHOST, port).await.unwrap();
-            // Give the daemon time to accept, then see whether it closed.
-            tokio::time::sleep(Duration::from_millis(20)).await;
-            let mut probe = [0u8; 1];
-            match tokio::time::timeout(Duration::from_millis(200), s.peek(&mut probe)).await {
-                Ok(Ok(0)) | Ok(Err(_)) => refused += 1,
-                _ => held.push(s),
-            }
-        }
+        let (held, refused) = idle_peers(port, 20).await;
         assert_eq!(held.len(), 4, "the per-peer cap holds 4");
         assert_eq!(refused, 16, "the rest are closed at once, well before the 5 s deadline");
         // Another peer address is not affected by this one's cap.
@@ -270,17 +277,7 @@ fn the_metrics_endpoint_caps_a_peer_too() {
         d.connect().await;
         // Idle peers that send no request: 8 are held (each until its
         // request deadline), the rest are closed at once.
-        let mut held = Vec::new();
-        let mut refused = 0;
-        for _ in 0..12 {
-            let s = connect_from(Ipv4Addr::LOCALHOST, port).await.unwrap();
-            tokio::time::sleep(Duration::from_millis(20)).await;
-            let mut probe = [0u8; 1];
-            match tokio::time::timeout(Duration::from_millis(200), s.peek(&mut probe)).await {
-                Ok(Ok(0)) | Ok(Err(_)) => refused += 1,
-                _ => held.push(s),
-            }
-        }
+        let (held, refused) = idle_peers(port, 12).await;
         assert_eq!((held.len(), refused), (8, 4), "8 per peer address");
         // Another address still scrapes.
         let mut other = connect_from(Ipv4Addr::new(127, 0, 0, 7), port).await.unwrap();
