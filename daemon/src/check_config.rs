@@ -110,6 +110,7 @@ fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError
 #[cfg(feature = "sim")]
 fn simulated_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
     let Some((net, chip)) = crate::config::sim_network::load(c, path)? else { return Ok(None) };
+    crate::config::sim_network::check_count(c, &net, path)?;
     crate::config::sim_network::check_axes(c, &net, path)?;
     let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
     let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();

@@ -5,7 +5,7 @@
 
 use roxmltree::Node;
 
-use crate::xml::parse_number;
+use crate::xml::{TextPos, parse_number};
 
 /// A state transition an init command belongs to (ETG.2100 `Transition`:
 /// two letters, from and to: I INIT, P PRE-OP, S SAFE-OP, O OP, B BOOT).
@@ -86,29 +86,29 @@ pub struct CoeInitCmd {
     /// `Disabled` is true, or (ESI) the data is `AdaptAutomatically`: a
     /// value the configuration tool computes, which a master cannot.
     pub disabled: bool,
-    /// Its line in the file.
-    pub line: u32,
+    /// Where it is in the file.
+    pub at: TextPos,
 }
 
 /// Why an ENI file was refused: what, and where.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct EniError {
-    /// Line in the file (1-based; 0 when unknown).
-    pub line: u32,
+    /// Where in the file (line 0 when unknown).
+    pub at: TextPos,
     /// What is wrong, naming the element.
     pub message: String,
 }
 
 impl std::fmt::Display for EniError {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        if self.line > 0 { write!(f, "line {}: {}", self.line, self.message) } else { f.write_str(&self.message) }
+        if self.at.line > 0 { write!(f, "{}: {}", self.at, self.message) } else { f.write_str(&self.message) }
     }
 }
 
 impl std::error::Error for EniError {}
 
-pub(crate) fn line_of(node: Node<'_, '_>) -> u32 {
-    node.document().text_pos_at(node.range().start).row
+pub(crate) fn pos_of(node: Node<'_, '_>) -> TextPos {
+    TextPos::of(node)
 }
 
 pub(crate) fn child<'a, 'i>(n: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
@@ -120,7 +120,7 @@ pub(crate) fn children<'a, 'i: 'a>(n: Node<'a, 'i>, name: &'a str) -> impl Itera
 }
 
 pub(crate) fn fail(node: Node<'_, '_>, message: String) -> EniError {
-    EniError { line: line_of(node), message }
+    EniError { at: pos_of(node), message }
 }
 
 /// A number in element `name` of `parent`, at most `max`.
@@ -196,6 +196,6 @@ pub(crate) fn coe_init_cmd(cmd: Node<'_, '_>, path: &str, ccs_default: Option<u6
         comment: child(cmd, "Comment").and_then(|c| c.text()).unwrap_or("").trim().to_string(),
         disabled: flag(child(cmd, "Disabled").and_then(|d| d.text()))
             || flag(child(cmd, "Data").and_then(|d| d.attribute("AdaptAutomatically"))),
-        line: line_of(cmd),
+        at: pos_of(cmd),
     })
 }

@@ -30,3 +30,4 @@ pub mod od;
 pub mod pdo;
 pub mod sii;
 mod xml;
+pub use xml::TextPos;

@@ -39,7 +39,7 @@ fn every_eni_fixture_parses() {
         for s in &eni.slaves {
             assert!(s.vendor_id != 0 || s.product_code != 0, "{name}: slave {:?} has no identity", s.name);
             for c in &s.coe_init_cmds {
-                assert!(!c.transitions.is_empty(), "{name}: {:?} line {}", s.name, c.line);
+                assert!(!c.transitions.is_empty(), "{name}: {:?} {}", s.name, c.at);
             }
         }
         seen += 1;
@@ -68,7 +68,7 @@ fn the_twincat_export_reads_as_twincat_means_it() {
         );
         let mode = cmds.iter().find(|c| c.index == 0x6060).expect("modes of operation");
         assert_eq!(mode.access, CoeAccess::Download(vec![8]));
-        assert!(cmds.windows(2).all(|w| w[0].line < w[1].line), "file order");
+        assert!(cmds.windows(2).all(|w| w[0].at < w[1].at), "file order");
         let registers = elmo.elements.iter().find(|(e, _)| e.starts_with("InitCmds")).map(|(_, n)| *n);
         assert_eq!(registers, Some(49), "{:?}", elmo.elements);
         assert_eq!(elmo.register_init_cmds.len(), 49);

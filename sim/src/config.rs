@@ -66,6 +66,37 @@ pub struct ChipSection {
     pub strict_lengths: bool,
 }
 
+/// Which slave entry of an ENI file a simulated slave is: `eni_slave =
+/// 2` (position from 1) or `eni_slave = "Imu"` (its `Info/Name`; a name
+/// of digits only is a position too).
+#[derive(Clone, Debug, Deserialize, PartialEq, Eq)]
+#[serde(untagged)]
+pub enum EniSlaveRef {
+    /// Position from 1.
+    Position(u64),
+    /// Name, or position written as text.
+    Name(String),
+}
+
+impl EniSlaveRef {
+    fn find<'a>(&self, slaves: &'a [ecmxf_devices::eni::EniSlave]) -> Option<&'a ecmxf_devices::eni::EniSlave> {
+        let at = |n: u64| slaves.get(usize::try_from(n).ok()?.checked_sub(1)?);
+        match self {
+            Self::Position(n) => at(*n),
+            Self::Name(name) => slaves.iter().find(|s| s.name == *name).or_else(|| at(name.parse().ok()?)),
+        }
+    }
+}
+
+impl std::fmt::Display for EniSlaveRef {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match self {
+            Self::Position(n) => write!(f, "at position {n}"),
+            Self::Name(name) => write!(f, "{name:?}"),
+        }
+    }
+}
+
 /// `[[slave]]`.
 #[derive(Clone, Debug, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -79,8 +110,9 @@ pub struct SlaveSection {
     /// An ENI file whose slave entry (`eni_slave`) describes the device
     /// (a device known only from a configuration tool's export).
     pub eni: Option<PathBuf>,
-    /// The ENI slave entry by name (`Info/Name`), or by position from 1.
-    pub eni_slave: Option<String>,
+    /// The ENI slave entry by name (`Info/Name`), or by position from 1
+    /// (a number, or a name that is all digits).
+    pub eni_slave: Option<EniSlaveRef>,
     /// Product code of the ESI device.
     pub product_code: Option<u32>,
     /// Revision of the ESI device.
@@ -234,19 +266,19 @@ impl SlaveSection {
             let path = base.join(eni);
             let file =
                 ecmxf_devices::eni::Eni::load(&path).map_err(|e| invalid("eni", format!("{}: {e}", path.display())))?;
-            let wanted = self.eni_slave.as_deref().unwrap_or("1");
-            let entry = file
-                .slaves
-                .iter()
-                .find(|s| s.name == wanted)
-                .or_else(|| wanted.parse::<usize>().ok().and_then(|n| file.slaves.get(n.checked_sub(1)?)))
-                .ok_or_else(|| {
-                    let names: Vec<&str> = file.slaves.iter().map(|s| s.name.as_str()).collect();
-                    invalid(
-                        "eni_slave",
-                        format!("{} has no slave {wanted:?} (its slaves: {})", path.display(), names.join(", ")),
-                    )
-                })?;
+            let wanted = self.eni_slave.clone().unwrap_or(EniSlaveRef::Position(1));
+            let entry = wanted.find(&file.slaves).ok_or_else(|| {
+                let names: Vec<&str> = file.slaves.iter().map(|s| s.name.as_str()).collect();
+                invalid(
+                    "eni_slave",
+                    format!(
+                        "{} has no slave {wanted} (its {} slaves: {})",
+                        path.display(),
+                        file.slaves.len(),
+                        names.join(", ")
+                    ),
+                )
+            })?;
             return Ok(crate::net::eni_slave::slave_from_eni(entry, self.alias));
         }
         if self.eni_slave.is_some() {
@@ -390,5 +422,32 @@ mod tests {
         let e = NetworkFile::load(&p).unwrap_err().to_string();
         assert!(e.contains("line 2") && e.contains("not UTF-8"), "{e}");
         let _ = std::fs::remove_dir_all(&dir);
+    }
+
+    /// `eni_slave` takes the position as a number (from 1) as well as a
+    /// name or the position as text.
+    #[test]
+    fn an_eni_slave_is_named_or_numbered() {
+        #[derive(Deserialize)]
+        struct One {
+            eni_slave: EniSlaveRef,
+        }
+        let pick = |t: &str| toml::from_str::<One>(t).unwrap().eni_slave;
+        assert_eq!(pick("eni_slave = 2"), EniSlaveRef::Position(2));
+        assert_eq!(pick("eni_slave = \"Imu\""), EniSlaveRef::Name("Imu".into()));
+        let eni = ecmxf_devices::eni::Eni::parse(
+            r#"<EtherCATConfig><Config>
+              <Slave><Info><Name>Imu</Name><VendorId>1</VendorId><ProductCode>2</ProductCode></Info></Slave>
+              <Slave><Info><Name>Drive</Name><VendorId>1</VendorId><ProductCode>3</ProductCode></Info></Slave>
+            </Config></EtherCATConfig>"#,
+        )
+        .unwrap();
+        let name = |r: EniSlaveRef| r.find(&eni.slaves).map(|s| s.name.clone());
+        assert_eq!(name(EniSlaveRef::Position(2)), Some("Drive".into()));
+        assert_eq!(name(EniSlaveRef::Name("2".into())), Some("Drive".into()));
+        assert_eq!(name(EniSlaveRef::Name("Imu".into())), Some("Imu".into()));
+        assert_eq!(name(EniSlaveRef::Position(0)), None);
+        assert_eq!(name(EniSlaveRef::Position(3)), None);
+        assert_eq!(EniSlaveRef::Position(3).to_string(), "at position 3");
     }
 }

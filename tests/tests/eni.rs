@@ -92,12 +92,13 @@ fn the_demo_networks_eni_brings_it_up_with_its_init_commands_in_order() {
 
 #[test]
 fn check_config_says_what_an_eni_applies_and_what_it_does_not() {
-    let Some(twincat) = ecmxf_e2e::fixture("eni_twincat_elmo4_imu.xml") else { return };
-    let (code, text) =
-        check_config(&format!("version = 1\neni = \"{}\"\n[link]\nbackend = \"sim\"\n", twincat.display()));
+    let dir = temp_dir("eni-check-nets");
+    let Some((twincat, link)) = ecmxf_e2e::twincat_network(&dir) else { return };
+    let (code, text) = check_config(&format!("version = 1\neni = \"{}\"\n[link]\n{link}\n", twincat.display()));
     assert_eq!(code, 0, "{text}");
     assert!(text.contains("5 expected slaves"), "{text}");
-    assert!(text.contains(r#"slave 1 "WheelRearLeft" (line 784): 12 CoE init commands written"#), "{text}");
+    assert!(text.contains(r#"slave 1 "WheelRearLeft" (line 784:"#), "{text}");
+    assert!(text.contains(r#"): 12 CoE init commands written"#), "{text}");
     assert!(
         text.contains(
             "InitCmds (register) (49): 3 replayed by raw datagram (watchdogs: 0x0400 at IP, 0x0410 at IP, 0x0420 at IP)"
@@ -106,10 +107,24 @@ fn check_config_says_what_an_eni_applies_and_what_it_does_not() {
     );
     assert!(text.contains("9 sync managers: the chip's ECAT_INIT"), "{text}");
     assert!(text.contains("eni: ProcessImage (1) applied as names"), "{text}");
-    assert!(text.contains(r#"slave 0 "Imu" (line 159): no DC block: runs without DC"#), "{text}");
+    assert!(text.contains(r#"slave 0 "Imu" (line 159:"#) && text.contains("): no DC block: runs without DC"), "{text}");
     assert!(text.contains("5 expected slaves, 10000 us cycle"), "the ENI's DC cycle: {text}");
+    // The ENI's 5 slaves on the demo network's 3: bring-up would refuse
+    // it for ever, so the check does, naming both counts and the source.
+    let (code, text) =
+        check_config(&format!("version = 1\neni = \"{}\"\n[link]\nbackend = \"sim\"\n", twincat.display()));
+    assert_eq!(code, 2, "{text}");
+    assert!(text.contains(&format!("the ENI {} lists 5", twincat.display())), "{text}");
+    assert!(text.contains("the demo network (no link.network given) has 3"), "{text}");
+    // SOEM's sample on a simulated network of its own two slaves, each
+    // taken from the ENI by position.
     let Some(soem) = ecmxf_e2e::fixture("eni_soem_sample.xml") else { return };
-    let (code, text) = check_config(&format!("version = 1\neni = \"{}\"\n[link]\nbackend = \"sim\"\n", soem.display()));
+    let net = dir.join("soem");
+    std::fs::create_dir_all(&net).unwrap();
+    let slaves =
+        format!("[[slave]]\neni = \"{0}\"\neni_slave = 1\n[[slave]]\neni = \"{0}\"\neni_slave = 2\n", soem.display());
+    let link = ecmxf_e2e::sim_network(&net, &slaves);
+    let (code, text) = check_config(&format!("version = 1\neni = \"{}\"\n[link]\n{link}\n", soem.display()));
     assert_eq!(code, 0, "{text}");
     assert!(text.contains("has Ccs 2 with data: written, as SOEM's files mean it"), "{text}");
 }
@@ -329,7 +344,7 @@ fn a_refused_init_command_is_named_by_its_line_in_the_eni() {
         let e = &status.last_error;
         assert!(e.contains("slave 1 0x5fff:01 (transition PS, ENI line"), "{e}");
         // The command element starts a few lines above its Index.
-        let named: usize = e.split("ENI line ").nth(1).and_then(|r| r.split(',').next()).unwrap().parse().unwrap();
+        let named: usize = e.split("ENI line ").nth(1).and_then(|r| r.split(':').next()).unwrap().parse().unwrap();
         assert!((line.saturating_sub(6)..=line).contains(&named), "line {named}, Index on {line}: {e}");
         assert!(e.contains("\"Cycle time\""), "{e}");
         assert_ne!(status.ecat_state, pb::EcatState::Op as i32);

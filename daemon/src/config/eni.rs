@@ -85,9 +85,9 @@ fn startup_sdos(cmds: &[CoeInitCmd], source: &str) -> Vec<StartupSdo> {
                 transition,
                 timeout_ms: (c.timeout_ms > 0).then_some(c.timeout_ms),
                 origin: if c.comment.is_empty() {
-                    format!("{source} line {}", c.line)
+                    format!("{source} {}", c.at)
                 } else {
-                    format!("{source} line {}, {:?}", c.line, c.comment)
+                    format!("{source} {}, {:?}", c.at, c.comment)
                 },
             });
         }
@@ -136,7 +136,7 @@ fn startup_registers(cmds: &[RegisterInitCmd]) -> Vec<StartupRegister> {
                 transition,
                 ado: c.ado,
                 data: c.data.clone(),
-                origin: format!("ENI line {}, {:?}", c.line, c.comment),
+                origin: format!("ENI {}, {:?}", c.at, c.comment),
             })
         })
         .collect()
@@ -200,8 +200,8 @@ impl Config {
                         return Err((
                             format!("slave[{i}].{key}"),
                             format!(
-                                "{g:#010x}, but the ENI's slave {i} ({:?}, line {}) has {e:#010x}",
-                                theirs.name, theirs.line
+                                "{g:#010x}, but the ENI's slave {i} ({:?}, {}) has {e:#010x}",
+                                theirs.name, theirs.at
                             ),
                         ));
                     }
@@ -285,7 +285,7 @@ impl Config {
                     bits: v.variable.bit_size,
                     data_type: Some(ecmxf_devices::esi::data_type(&v.variable.data_type, v.variable.bit_size))
                         .filter(|t| !v.variable.data_type.is_empty() && t.bits() == v.variable.bit_size),
-                    line: v.variable.line,
+                    at: v.variable.at,
                 });
             }
         }
@@ -435,14 +435,14 @@ fn register_notes(who: &str, cmds: &[RegisterInitCmd]) -> String {
 pub(super) fn eni_notes(eni: &Eni) -> Vec<String> {
     let mut notes = Vec::new();
     for (i, s) in eni.slaves.iter().enumerate() {
-        let who = format!("eni: slave {i} {:?} (line {})", s.name, s.line);
+        let who = format!("eni: slave {i} {:?} ({})", s.name, s.at);
         let applied =
             s.coe_init_cmds.iter().filter(|c| !c.disabled && matches!(c.access, CoeAccess::Download(_))).count();
         if applied > 0 {
             notes.push(format!("{who}: {applied} CoE init commands written at their transitions"));
         }
         for c in &s.coe_init_cmds {
-            let at = format!("{who}: CoE init command {:#06x}:{:02x} (line {})", c.index, c.subindex, c.line);
+            let at = format!("{who}: CoE init command {:#06x}:{:02x} ({})", c.index, c.subindex, c.at);
             if c.disabled {
                 notes.push(format!("{at} is disabled: skipped"));
             } else if c.access == CoeAccess::Upload {

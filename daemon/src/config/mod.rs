@@ -579,7 +579,7 @@ pub struct StartupRegister {
     pub ado: u16,
     /// Bytes written.
     pub data: Vec<u8>,
-    /// Where it came from, for errors (`ENI line 2157, "set watchdog divider"`).
+    /// Where it came from, for errors (`ENI line 2157:5, "set watchdog divider"`).
     pub origin: String,
 }
 
@@ -599,8 +599,8 @@ pub struct SlaveVariable {
     /// that size (`INT` for the IMU's 16-bit values, which the slave's
     /// CoE mapping alone would call unsigned).
     pub data_type: Option<ecmxf_devices::od::DataType>,
-    /// Its line in the ENI.
-    pub line: u32,
+    /// Where it is in the ENI.
+    pub at: ecmxf_devices::TextPos,
 }
 
 fn yes() -> bool {
@@ -642,7 +642,7 @@ pub struct StartupSdo {
     pub transition: InitTransition,
     /// How long the slave may take, ms (default 1000).
     pub timeout_ms: Option<u32>,
-    /// Where it came from, for errors: `ENI line 1170 "download pdo
+    /// Where it came from, for errors: `ENI line 1170:9 "download pdo
     /// 0x1C13:01 index"`, `ESI ... init command`; "" for a `[[slave.sdo]]`
     /// entry. Not a TOML key.
     #[serde(skip)]
@@ -721,6 +721,17 @@ impl Default for RecoveryConfig {
 }
 
 impl Config {
+    /// Where the slaves the configuration expects come from, with their
+    /// number, for messages: "the ENI machine.xml lists 7" reads better
+    /// than "[[slave]] entries" to someone who never wrote one.
+    pub(crate) fn expected_slaves(&self) -> String {
+        let n = self.slaves.len();
+        match &self.eni {
+            Some(eni) => format!("the ENI {} lists {n}", eni.display()),
+            None => format!("the configuration lists {n} ([[slave]] entries)"),
+        }
+    }
+
     /// The configuration `--sim` runs: the in-process simulator with the demo
     /// network, 125 us cycle, normal scheduling (the simulator needs no
     /// real-time priority and a trial run should not lock memory).

@@ -26,6 +26,22 @@ pub(crate) fn load(
     }))
 }
 
+/// The slaves the configuration expects against those the simulated
+/// network has: bring-up would refuse a network of another size for ever,
+/// so `--check-config` says so first, naming both counts.
+pub(crate) fn check_count(c: &Config, net: &ecmxf_sim::Network, path: &Path) -> Result<(), ConfigError> {
+    if c.slaves.is_empty() || c.slaves.len() == net.slaves.len() {
+        return Ok(());
+    }
+    let which = match &c.link {
+        LinkConfig::Sim { network: Some(p) } => format!("the simulated network {}", p.display()),
+        _ => "the demo network (no link.network given)".to_string(),
+    };
+    let key = if c.eni.is_some() { "eni" } else { "slave" };
+    let message = format!("{}, {which} has {}", c.expected_slaves(), net.slaves.len());
+    Err(ConfigError::Invalid { file: path.into(), key: key.into(), message })
+}
+
 /// Each `[[axis]]` against the simulated network `net`: the first axis
 /// whose slave or CiA 402 words are not there, named by its key.
 pub(crate) fn check_axes(c: &Config, net: &ecmxf_sim::Network, path: &Path) -> Result<(), ConfigError> {

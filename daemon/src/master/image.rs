@@ -142,9 +142,9 @@ impl Image {
                     None => {
                         let slave = self.entries.get(first).map_or(0, |e| e.slave);
                         self.notes.push(format!(
-                            "ENI variable {:?} (line {}): slave {slave}'s {dir} have no {}-bit entry at bit {}: the \
+                            "ENI variable {:?} ({}): slave {slave}'s {dir} have no {}-bit entry at bit {}: the \
                              network's mapping is not the file's",
-                            v.name, v.line, v.bits, v.bit
+                            v.name, v.at, v.bits, v.bit
                         ));
                     }
                 }

@@ -16,8 +16,9 @@
 use roxmltree::{Document, Node};
 
 pub use crate::init_cmd::{CcsConvention, CoeAccess, CoeInitCmd, EniError, Transition};
-pub(crate) use crate::init_cmd::{child, children, fail, line_of, number};
+pub(crate) use crate::init_cmd::{child, children, fail, number, pos_of};
 use crate::init_cmd::{coe_init_cmd, hex_bytes, required, transitions};
+use crate::xml::TextPos;
 
 mod process;
 
@@ -44,8 +45,8 @@ pub struct RegisterInitCmd {
     pub validates: bool,
     /// `Comment`.
     pub comment: String,
-    /// Its line in the file.
-    pub line: u32,
+    /// Where it is in the file.
+    pub at: TextPos,
 }
 
 impl RegisterInitCmd {
@@ -81,8 +82,8 @@ pub struct EniSlave {
     /// Elements of this slave the reader's caller may not apply, with a
     /// count: `("InitCmds (register)", 49)`, `("ProcessData", 1)`, ...
     pub elements: Vec<(&'static str, usize)>,
-    /// Its line in the file.
-    pub line: u32,
+    /// Where it is in the file.
+    pub at: TextPos,
 }
 
 /// An ENI file.
@@ -110,7 +111,7 @@ fn register_init_cmd(cmd: Node<'_, '_>, path: &str) -> Result<RegisterInitCmd, E
         data: child(cmd, "Data").map(|d| hex_bytes(d, path)).transpose()?.unwrap_or_default(),
         validates: child(cmd, "Validate").is_some(),
         comment: child(cmd, "Comment").and_then(|c| c.text()).unwrap_or("").trim().to_string(),
-        line: line_of(cmd),
+        at: pos_of(cmd),
     })
 }
 
@@ -170,7 +171,7 @@ fn slave(node: Node<'_, '_>, position: usize) -> Result<EniSlave, EniError> {
         phys_addr: number(info, "PhysAddr", &info_path, 0xFFFF)?.map(|v| v as u16),
         coe_init_cmds,
         elements,
-        line: line_of(node),
+        at: pos_of(node),
     })
 }
 
@@ -179,7 +180,7 @@ impl Eni {
     pub fn parse(xml: &str) -> Result<Self, EniError> {
         let doc = Document::parse(xml).map_err(|e| {
             let pos = e.pos();
-            EniError { line: pos.row, message: format!("not well-formed XML: {e}") }
+            EniError { at: TextPos { line: pos.row, column: pos.col }, message: format!("not well-formed XML: {e}") }
         })?;
         let root = doc.root_element();
         if !root.has_tag_name("EtherCATConfig") {
@@ -220,7 +221,7 @@ impl Eni {
     /// Reads and parses a file (lossy UTF-8, as ESI files are read).
     pub fn load(path: &std::path::Path) -> Result<Self, EniError> {
         let text = crate::esi::read_xml(path)
-            .map_err(|e| EniError { line: 0, message: format!("{}: {e}", path.display()) })?;
+            .map_err(|e| EniError { at: TextPos::default(), message: format!("{}: {e}", path.display()) })?;
         Self::parse(&text)
     }
 }
@@ -255,13 +256,13 @@ mod tests {
         assert_eq!(c[1].access, CoeAccess::Download(vec![1, 0, 0, 0x1A]));
         assert_eq!(c[2].transitions, vec![Transition::SafeOpOp]);
         assert!(c[2].disabled);
-        assert_eq!(c[2].line, 7);
+        assert_eq!(c[2].at.line, 7);
     }
 
     #[test]
     fn mistakes_name_the_element_and_the_line() {
         let e = Eni::parse(&SMALL.replace("<Ccs>1</Ccs><Index>24672", "<Ccs>7</Ccs><Index>24672")).unwrap_err();
-        assert_eq!(e.line, 5, "{e}");
+        assert_eq!(e.at.line, 5, "{e}");
         assert!(e.message.contains("InitCmd[0]/Ccs 7"), "{e}");
         let e = Eni::parse(&SMALL.replace("#x9a", "#xZZ")).unwrap_err();
         assert!(e.to_string().contains("line 3") && e.message.contains("Info/VendorId \"#xZZ\""), "{e}");
@@ -272,6 +273,22 @@ mod tests {
         let e = Eni::parse(&SMALL[..SMALL.len() / 2]).unwrap_err();
         assert!(e.message.contains("not well-formed"), "{e}");
         let e = Eni::parse(&SMALL.replace("<Transition>SO</Transition>", "<Transition>XY</Transition>")).unwrap_err();
-        assert!(e.message.contains("Transition \"XY\"") && e.line == 7, "{e}");
+        assert!(e.message.contains("Transition \"XY\"") && e.at.line == 7, "{e}");
+    }
+
+    /// Exports often hold the whole file on one line: the column tells
+    /// the element apart.
+    #[test]
+    fn a_one_line_file_names_the_column() {
+        let one_line: String = SMALL.lines().map(str::trim).collect();
+        let e = Eni::parse(&one_line.replace("<Ccs>1</Ccs><Index>24672", "<Ccs>7</Ccs><Index>24672")).unwrap_err();
+        assert_eq!(e.at.line, 1, "{e}");
+        let bad = one_line.replace("<Ccs>1</Ccs><Index>24672", "<Ccs>7</Ccs><Index>24672");
+        let column = bad.find("<Ccs>7").unwrap() as u32 + 1;
+        assert_eq!(e.at.column, column, "{e}");
+        assert!(e.to_string().starts_with(&format!("line 1:{column}: ")), "{e}");
+        let eni = Eni::parse(&one_line).unwrap();
+        let c = &eni.slaves[0].coe_init_cmds;
+        assert!(c[0].at < c[1].at && c[1].at < c[2].at && c[2].at.line == 1, "file order by column");
     }
 }

@@ -12,7 +12,7 @@
 
 use roxmltree::Node;
 
-use super::{Eni, EniError, child, children, fail, line_of, number};
+use super::{Eni, EniError, child, children, fail, number, pos_of};
 use crate::esi::{EsiDevice, EsiPdo, EsiSm, parse_pdo};
 use crate::od::ObjectDictionary;
 use crate::sii::{protocol, sm_type};
@@ -78,8 +78,8 @@ pub struct EniVariable {
     pub bit_size: u32,
     /// `DataType`, as written ("UINT"), "" when absent.
     pub data_type: String,
-    /// Its line in the file.
-    pub line: u32,
+    /// Where it is in the file.
+    pub at: crate::xml::TextPos,
 }
 
 fn u32_of(parent: Node<'_, '_>, name: &str, path: &str) -> Result<Option<u32>, EniError> {
@@ -194,7 +194,7 @@ pub(super) fn process_image(node: Node<'_, '_>) -> Result<Vec<EniVariable>, EniE
                 bit_offset: required("BitOffs")?,
                 bit_size: required("BitSize")?,
                 data_type: child(v, "DataType").and_then(|n| n.text()).unwrap_or("").trim().to_string(),
-                line: line_of(v),
+                at: pos_of(v),
                 name,
             });
         }

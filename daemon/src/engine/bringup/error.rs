@@ -24,8 +24,9 @@ pub enum BringUpError {
     Count {
         /// Slaves found.
         found: usize,
-        /// Entries configured.
-        expected: usize,
+        /// How many the configuration expects and where it says so ("the
+        /// ENI machine.xml lists 7").
+        expected: String,
     },
     /// The network differs from the configured one.
     Identity {
@@ -82,9 +83,7 @@ impl fmt::Display for BringUpError {
         match self {
             Self::Port(e) => write!(f, "{e}"),
             Self::Step { step, detail } => write!(f, "{step}: {detail}"),
-            Self::Count { found, expected } => {
-                write!(f, "{found} slaves answer, the configuration lists {expected} ([[slave]] entries)")
-            }
+            Self::Count { found, expected } => write!(f, "{found} slaves answer, {expected}"),
             Self::Identity { position, expected, found } => {
                 write!(f, "slave {position} is {found}, the configuration expects {expected}")
             }

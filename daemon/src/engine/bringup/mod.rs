@@ -158,7 +158,7 @@ pub fn identify<L: Link>(port: &mut Port<L>, count: u8) -> Result<Vec<SlaveSumma
 /// network is accepted; an entry's absent ids match anything).
 pub fn check_identity(config: &Config, slaves: &[SlaveSummary]) -> Result<(), BringUpError> {
     if !config.slaves.is_empty() && config.slaves.len() != slaves.len() {
-        return Err(BringUpError::Count { found: slaves.len(), expected: config.slaves.len() });
+        return Err(BringUpError::Count { found: slaves.len(), expected: config.expected_slaves() });
     }
     for (i, (want, got)) in config.slaves.iter().zip(slaves).enumerate() {
         let differs = want.vendor_id.is_some_and(|v| v != got.vendor_id)
