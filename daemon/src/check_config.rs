@@ -57,7 +57,11 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
             b.frames_per_packet,
             b.min_exchanges_per_s()
         ),
-        _ => writeln!(out, "link budget: checked at bring-up (the frame sizes come from the slaves)"),
+        _ => writeln!(
+            out,
+            "link budget: not known offline (no ENI or simulated network describes the frames: the slaves' own \
+             mapping is read at bring-up, which checks it)"
+        ),
     };
     0
 }
@@ -99,27 +103,63 @@ fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError
             message: e.to_string(),
         })?;
     }
-    let budget = simulated_budget(c, path)?;
+    let budget = link_budget(c, path)?;
     Ok((notes, budget))
 }
 
-/// The link budget of a simulator configuration, from its network file
-/// (or the demo network) with each slave's default mapping and the packet
-/// time its SPI clock gives: what bring-up would refuse, said offline. The
-/// `[[axis]]` entries are checked against the same network.
+/// The link budget of the network the configuration describes: the frame
+/// sizes of its ENI (which lists every slave's PDOs), else of the simulated
+/// network it runs on (its file, or the demo network `--sim` runs), with
+/// the packet time its link gives; `None` where only the slaves can tell
+/// (a chip with no ENI: their mapping is read at bring-up). A simulated
+/// network is checked against the configuration too: the slave count and
+/// each `[[axis]]`. What bring-up would refuse, said offline.
+fn link_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
+    let simulated = simulated_frames(c, path)?;
+    let Some((rx, tx)) = described_frames(c).or(simulated.map(|(rx, tx, _)| (rx, tx))) else { return Ok(None) };
+    let data_size = c.chip.data_size;
+    let packet_ns = match (&c.link, simulated) {
+        (_, Some((_, _, packet_ns))) => packet_ns,
+        // The bits on the wire: a lower bound, the chip's processing on top.
+        (LinkConfig::Spidev { spi_hz, .. }, None) => {
+            crate::master::link_budget::clocked_ns(data_size, u64::from(*spi_hz))
+        }
+        _ => return Ok(None),
+    };
+    Ok(Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
+}
+
+/// The output and input frame sizes an ENI describes: each slave's
+/// `ProcessData` `Send` and `Recv` lengths, in whole bytes per slave as the
+/// chip places them. `None` without an ENI, or when a slave with a mailbox
+/// has no `ProcessData` (SOEM's samples, the demo's drive): its frames are
+/// the mapping the slave itself reports at bring-up. A slave with neither
+/// (a coupler) has no process data.
+fn described_frames(c: &Config) -> Option<(usize, usize)> {
+    let eni = ecmxf_devices::eni::Eni::load(c.eni.as_ref()?).ok()?;
+    let bytes = |r: Option<ecmxf_devices::eni::BitRange>| r.map_or(0, |r| r.len.div_ceil(8) as usize);
+    eni.slaves.iter().try_fold((0, 0), |(rx, tx), s| match (&s.process_data, &s.mailbox) {
+        (Some(p), _) => Some((rx + bytes(p.outputs), tx + bytes(p.inputs))),
+        (None, Some(_)) => None,
+        (None, None) => Some((rx, tx)),
+    })
+}
+
+/// The simulated network's frame sizes (each slave's default mapping) and
+/// the packet time its SPI clock gives, after checking it against the
+/// configuration; `None` when the link is not the in-process simulator.
 #[cfg(feature = "sim")]
-fn simulated_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
+fn simulated_frames(c: &Config, path: &Path) -> Result<Option<(usize, usize, u64)>, ConfigError> {
     let Some((net, chip)) = crate::config::sim_network::load(c, path)? else { return Ok(None) };
     crate::config::sim_network::check_count(c, &net, path)?;
     crate::config::sim_network::check_axes(c, &net, path)?;
     let rx: usize = net.slaves.iter().map(|s| s.rx.bytes()).sum();
     let tx: usize = net.slaves.iter().map(|s| s.tx.bytes()).sum();
-    let data_size = c.chip.data_size;
-    let packet_ns = crate::master::link_budget::clocked_ns(data_size, chip.spi_hz) + chip.processing_ns;
-    Ok(Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
+    let packet_ns = crate::master::link_budget::clocked_ns(c.chip.data_size, chip.spi_hz) + chip.processing_ns;
+    Ok(Some((rx, tx, packet_ns)))
 }
 
 #[cfg(not(feature = "sim"))]
-fn simulated_budget(_: &Config, _: &Path) -> Result<Budget, ConfigError> {
+fn simulated_frames(_: &Config, _: &Path) -> Result<Option<(usize, usize, u64)>, ConfigError> {
     Ok(None)
 }

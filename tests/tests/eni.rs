@@ -126,6 +126,28 @@ fn check_config_says_what_an_eni_applies_and_what_it_does_not() {
     let link = ecmxf_e2e::sim_network(&net, &slaves);
     let (code, text) = check_config(&format!("version = 1\neni = \"{}\"\n[link]\n{link}\n", soem.display()));
     assert_eq!(code, 0, "{text}");
+    // The link budget is the ENI's own frames on the link it names: two
+    // networks, two budgets, on a chip as on the simulator.
+    let budget = |eni: &std::path::Path| {
+        let spidev = "backend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nspi_hz = 20000000\n";
+        let (code, text) = check_config(&format!("version = 1\neni = \"{}\"\n[link]\n{spidev}", eni.display()));
+        assert_eq!(code, 0, "{text}");
+        let line = text.lines().find(|l| l.starts_with("link budget: the process data needs")).map(str::to_owned);
+        line.unwrap_or_else(|| panic!("no budget for {}: {text}", eni.display()))
+    };
+    // An ENI of the IMU and two drives only: fewer frames, another budget.
+    let fewer = dir.join("fewer.xml");
+    let xml = std::fs::read_to_string(&twincat).unwrap();
+    let (head, rest) = xml.split_at(xml.find("<Slave>").expect("a Slave element"));
+    let slaves: Vec<&str> = rest.split_inclusive("</Slave>").collect();
+    let tail = rest[rest.rfind("</Slave>").unwrap() + "</Slave>".len()..].to_string();
+    std::fs::write(&fewer, format!("{head}{}{tail}", slaves[..3].concat())).unwrap();
+    assert_ne!(budget(&twincat), budget(&fewer), "budgets from each ENI's own frames");
+    // SOEM's sample describes mailboxes only: its frames are the slaves'.
+    let spidev = "backend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nspi_hz = 20000000\n";
+    let (code, text) = check_config(&format!("version = 1\neni = \"{}\"\n[link]\n{spidev}", soem.display()));
+    assert_eq!(code, 0, "{text}");
+    assert!(text.contains("link budget: not known offline"), "{text}");
     assert!(text.contains("has Ccs 2 with data: written, as SOEM's files mean it"), "{text}");
 }
 
