@@ -167,7 +167,16 @@ fn idle_tcp_peers_are_closed_and_the_socket_stays_answered() {
             cpu * 100.0,
             cpu_idle * 100.0
         );
-        assert!(cpu < 0.15, "daemon CPU {:.1} % over {wall:.1} s", cpu * 100.0);
+        // What the peers cost on top of the engine's own work: this is a
+        // debug build sharing 2 cores with other tests, whose idle figure
+        // alone is 5-10 % (the release build's is under 7 %, ecmxfd-bench).
+        // The fault this guards against took it from 12 % to 39-100 %.
+        assert!(
+            cpu - cpu_idle < 0.10,
+            "2000 idle peers cost {:.1} % of a core on top of {:.1} % idle, over {wall:.1} s",
+            (cpu - cpu_idle) * 100.0,
+            cpu_idle * 100.0
+        );
         assert_eq!(d.stop(), Some(0), "stops cleanly:\n{}", d.log());
     });
 }
