@@ -116,7 +116,7 @@ fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError
 /// each `[[axis]]`. What bring-up would refuse, said offline.
 fn link_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
     let simulated = simulated_frames(c, path)?;
-    let Some((rx, tx)) = described_frames(c).or(simulated.map(|(rx, tx, _)| (rx, tx))) else { return Ok(None) };
+    let Some((rx, tx)) = c.eni_frames.or(simulated.map(|(rx, tx, _)| (rx, tx))) else { return Ok(None) };
     let data_size = c.chip.data_size;
     let packet_ns = match (&c.link, simulated) {
         (_, Some((_, _, packet_ns))) => packet_ns,
@@ -127,22 +127,6 @@ fn link_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
         _ => return Ok(None),
     };
     Ok(Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
-}
-
-/// The output and input frame sizes an ENI describes: each slave's
-/// `ProcessData` `Send` and `Recv` lengths, in whole bytes per slave as the
-/// chip places them. `None` without an ENI, or when a slave with a mailbox
-/// has no `ProcessData` (SOEM's samples, the demo's drive): its frames are
-/// the mapping the slave itself reports at bring-up. A slave with neither
-/// (a coupler) has no process data.
-fn described_frames(c: &Config) -> Option<(usize, usize)> {
-    let eni = ecmxf_devices::eni::Eni::load(c.eni.as_ref()?).ok()?;
-    let bytes = |r: Option<ecmxf_devices::eni::BitRange>| r.map_or(0, |r| r.len.div_ceil(8) as usize);
-    eni.slaves.iter().try_fold((0, 0), |(rx, tx), s| match (&s.process_data, &s.mailbox) {
-        (Some(p), _) => Some((rx + bytes(p.outputs), tx + bytes(p.inputs))),
-        (None, Some(_)) => None,
-        (None, None) => Some((rx, tx)),
-    })
 }
 
 /// The simulated network's frame sizes (each slave's default mapping) and

@@ -95,38 +95,44 @@ impl Context {
         inner: BoxStream<T>,
     ) -> BoxStream<T> {
         use tokio_stream::StreamExt;
+        // Everything the stream needs travels in its state: nothing is
+        // copied per item.
         struct Open<T> {
             inner: BoxStream<T>,
             stop: tokio::sync::watch::Receiver<bool>,
             rules: tokio::sync::watch::Receiver<u64>,
+            ctx: Arc<Context>,
+            caller: Caller,
         }
-        let open = Open { inner, stop: self.stopping.subscribe(), rules: self.rules.subscribe() };
-        let (ctx, caller) = (Arc::clone(self), caller.clone());
-        Box::pin(futures_util::stream::unfold(Some(open), move |state| {
-            let (ctx, caller) = (Arc::clone(&ctx), caller.clone());
-            async move {
-                let mut open = state?;
-                enum Next<T> {
-                    Stop,
-                    Rules,
-                    Item(Option<Result<T, Status>>),
-                }
-                loop {
-                    let next = tokio::select! {
-                        biased;
-                        _ = open.stop.wait_for(|s| *s) => Next::Stop,
-                        // The sender lives in `ctx`, held here: never closed.
-                        _ = open.rules.changed() => Next::Rules,
-                        item = open.inner.next() => Next::Item(item),
-                    };
-                    match next {
-                        Next::Stop => return Some((Err(status::stopping()), None)),
-                        Next::Rules if !ctx.still_allowed(&caller) => {
-                            return Some((Err(status::access_revoked(&caller.who)), None));
-                        }
-                        Next::Rules => {}
-                        Next::Item(item) => return item.map(|i| (i, Some(open))),
+        enum Next<T> {
+            Stop,
+            Rules,
+            Item(Option<Result<T, Status>>),
+        }
+        let open = Open {
+            inner,
+            stop: self.stopping.subscribe(),
+            rules: self.rules.subscribe(),
+            ctx: Arc::clone(self),
+            caller: caller.clone(),
+        };
+        Box::pin(futures_util::stream::unfold(Some(open), |state| async move {
+            let mut open = state?;
+            loop {
+                let next = tokio::select! {
+                    biased;
+                    _ = open.stop.wait_for(|s| *s) => Next::Stop,
+                    // The sender lives in `ctx`, held here: never closed.
+                    _ = open.rules.changed() => Next::Rules,
+                    item = open.inner.next() => Next::Item(item),
+                };
+                match next {
+                    Next::Stop => return Some((Err(status::stopping()), None)),
+                    Next::Rules if !open.ctx.still_allowed(&open.caller) => {
+                        return Some((Err(status::access_revoked(&open.caller.who)), None));
                     }
+                    Next::Rules => {}
+                    Next::Item(item) => return item.map(|i| (i, Some(open))),
                 }
             }
         }))

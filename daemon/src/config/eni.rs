@@ -150,6 +150,7 @@ impl Config {
         self.take_assignments(eni);
         self.take_variables(eni);
         self.take_dc(eni, sync0_given);
+        self.eni_frames = eni_frames(eni);
         Ok(())
     }
 
@@ -496,4 +497,19 @@ pub(super) fn eni_notes(eni: &Eni) -> Vec<String> {
         notes.push(format!("eni: {element} ({n}) {why}"));
     }
     notes
+}
+
+/// The output and input frame sizes an ENI describes: each slave's
+/// `ProcessData` `Send` and `Recv` lengths, in whole bytes per slave as the
+/// chip places them. `None` when a slave with a mailbox has no
+/// `ProcessData` (SOEM's samples, the demo's drive): its frames are the
+/// mapping the slave itself reports at bring-up. A slave with neither (a
+/// coupler) has no process data.
+fn eni_frames(eni: &Eni) -> Option<(usize, usize)> {
+    let bytes = |r: Option<ecmxf_devices::eni::BitRange>| r.map_or(0, |r| r.len.div_ceil(8) as usize);
+    eni.slaves.iter().try_fold((0, 0), |(rx, tx), s| match (&s.process_data, &s.mailbox) {
+        (Some(p), _) => Some((rx + bytes(p.outputs), tx + bytes(p.inputs))),
+        (None, Some(_)) => None,
+        (None, None) => Some((rx, tx)),
+    })
 }

@@ -56,6 +56,11 @@ pub struct Config {
     /// the one given (config/eni.rs).
     #[serde(default)]
     pub eni: Option<PathBuf>,
+    /// The output and input frame sizes the ENI describes, bytes, when it
+    /// describes every slave's (config/eni.rs, `eni_frames`): the offline
+    /// link budget. Not a TOML key.
+    #[serde(skip)]
+    pub eni_frames: Option<(usize, usize)>,
     /// The expected network, in ring order (empty: accept what is found).
     #[serde(default, rename = "slave")]
     pub slaves: Vec<SlaveConfig>,
@@ -744,6 +749,7 @@ impl Config {
             // so wait longer for "ready" before calling it one.
             chip: ChipSettings { ready_timeout_ms: 1000, ..ChipSettings::default() },
             eni: None,
+            eni_frames: None,
             // No spinning: the in-process simulator already keeps a core
             // busy, and on a small machine a yielding engine thread takes
             // the CPU the API needs (ecmxf-api-bench on 2 cores: stream p99
