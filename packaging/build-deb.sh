@@ -20,12 +20,12 @@ for a in "$@"; do
 done
 
 if [ -n "$target" ]; then
-    cargo build --release --target "$target" -p ecmxfd -p ecmxfctl
+    cargo build --release --target "$target" -p ecmxfd -p ecmxfctl -p ecmxf-sim --bins
     # Completions and man pages are the same on every architecture: make
-    # them with a binary that runs here.
-    cargo build --release -p ecmxfctl
+    # them with binaries that run here.
+    cargo build --release -p ecmxfctl -p ecmxfd -p ecmxf-sim --bins
 else
-    cargo build --release -p ecmxfd -p ecmxfctl
+    cargo build --release -p ecmxfd -p ecmxfctl -p ecmxf-sim --bins
 fi
 
 assets=packaging/generated
@@ -36,6 +36,8 @@ ctl=target/release/ecmxfctl
 "$ctl" completions zsh >"$assets/completions/_ecmxfctl"
 "$ctl" completions fish >"$assets/completions/ecmxfctl.fish"
 "$ctl" man "$assets/man" >/dev/null
-gzip -9n "$assets"/man/*.1
+target/release/ecmxfd man "$assets/man" >/dev/null
+target/release/ecmxf-sim man "$assets/man" >/dev/null
+gzip -9n "$assets"/man/*.1 "$assets"/man/*.5 "$assets"/man/*.8
 
 cargo deb -p ecmxfd --no-build "$@"

@@ -17,9 +17,11 @@ export DEBIAN_FRONTEND=noninteractive
 apt-get install -y -q "./$deb" >/dev/null
 
 fail() { echo "deb smoke test: $*" >&2; exit 1; }
-for f in /usr/bin/ecmxfd /usr/bin/ecmxfctl /usr/lib/systemd/system/ecmxfd.service \
+for f in /usr/bin/ecmxfd /usr/bin/ecmxfctl /usr/bin/ecmxf-sim /usr/lib/systemd/system/ecmxfd.service \
          /lib/udev/rules.d/60-ecmxfd.rules /etc/ecmxfd/ecmxfd.toml /etc/ecmxfd/demo-network.toml \
-         /usr/share/doc/ecmxfd/examples/ecmxfd-rpi.toml /usr/share/man/man1/ecmxfctl.1.gz \
+         /usr/share/doc/ecmxfd/examples/ecmxfd-rpi.toml /usr/share/man/man1/ecmxfctl.1.gz /usr/share/man/man8/ecmxfd.8.gz \
+         /usr/share/man/man5/ecmxfd.toml.5.gz /usr/share/man/man1/ecmxf-sim.1.gz \
+         /usr/share/ecmxfd/proto/google/rpc/error_details.proto \
          /usr/share/bash-completion/completions/ecmxfctl; do
     [ -e "$f" ] || fail "$f not installed"
 done

@@ -1,6 +1,7 @@
 //! Compiles the .proto files with protox (pure Rust: no system `protoc`),
 //! generates the tonic services and prost messages, and writes the encoded
-//! file descriptor set that the daemon's reflection service serves.
+//! file descriptor sets that the daemon's reflection service serves (the
+//! API's, and the google.rpc error model's).
 #![forbid(unsafe_code)]
 
 use std::path::PathBuf;
@@ -19,6 +20,12 @@ const FILES: [&str; 7] = [
 
 /// The Sparkplug B payload schema (Eclipse Sparkplug 3.0, 6.4).
 const SPARKPLUG: &str = "sparkplug/sparkplug_b.proto";
+
+/// The error model's messages (the status and the details the daemon
+/// sends): served by reflection so that clients decode error details
+/// with nothing but the daemon; no Rust code is generated from them
+/// (the daemon builds them with tonic-types).
+const ERROR_MODEL: [&str; 2] = ["google/rpc/status.proto", "google/rpc/error_details.proto"];
 
 fn main() -> Result<(), Box<dyn std::error::Error>> {
     for f in FILES {
@@ -45,5 +52,10 @@ fn main() -> Result<(), Box<dyn std::error::Error>> {
     println!("cargo:rerun-if-changed={SPARKPLUG}");
     let sparkplug = protox::compile([SPARKPLUG], ["."])?;
     tonic_prost_build::configure().build_client(false).build_server(false).compile_fds(sparkplug)?;
+    for f in ERROR_MODEL {
+        println!("cargo:rerun-if-changed={f}");
+    }
+    let errors = protox::compile(ERROR_MODEL, ["."])?;
+    std::fs::write(out.join("error_model_descriptor.bin"), errors.encode_to_vec())?;
     Ok(())
 }

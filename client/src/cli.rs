@@ -124,6 +124,9 @@ pub enum Command {
         /// A slave position, a state, or both (position first).
         #[arg(value_name = "SLAVE|STATE", num_args = 0..=2)]
         args: Vec<String>,
+        /// The slave, as IgH's `ethercat states -p 1 SAFEOP` names it.
+        #[arg(short, long = "position", value_name = "POS")]
+        position: Option<u32>,
         /// Return once requested instead of waiting until reached.
         #[arg(long)]
         no_wait: bool,
@@ -237,6 +240,23 @@ pub enum Command {
         #[arg(long)]
         reset: bool,
     },
+    /// PDO configuration as C arrays for IgH's ecrt.h (IgH `cstruct`): ec_pdo_entry_info_t, ec_pdo_info_t, ec_sync_info_t.
+    Cstruct {
+        /// Only this slave.
+        #[arg(short, long = "position", value_name = "POS")]
+        position: Option<u32>,
+    },
+    /// The process image as one domain (IgH `domains`): sizes, frames flowing, WKC errors, FIFO levels.
+    Domains {
+        /// Each slave's part of the image and the data now.
+        #[arg(short, long)]
+        verbose: bool,
+    },
+    /// The daemon's log filter (IgH `debug`): show it, or set it until the next reload: `debug 1`, `debug warn,ecmxfd::engine=debug` (admin).
+    Debug {
+        /// 0 (info), 1 (the daemon's debug), 2 (its trace), or a filter in tracing's syntax.
+        level: Option<String>,
+    },
     /// Versions: this tool, the daemon, the chip's firmware, the API.
     Version,
     /// Live view: slaves, states, FIFO, counters and a plot of process data.
@@ -251,6 +271,20 @@ pub enum Command {
         /// Folder to write into.
         #[arg(default_value = ".")]
         dir: PathBuf,
+    },
+    /// IgH's `ethercat eoe`, `soe`, `ip`: protocols the ECM-XF does not
+    /// carry (it speaks CoE and FoE); said so, exit 2.
+    #[command(name = "eoe", hide = true, aliases = ["soe", "ip"])]
+    NotCarried {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        rest: Vec<String>,
+    },
+    /// IgH's `ethercat xml`: the slaves' descriptions are `config --format
+    /// eni` here (an ETG.2100 file ecmxfd takes back); said so, exit 2.
+    #[command(hide = true)]
+    Xml {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true, hide = true)]
+        rest: Vec<String>,
     },
     /// The JSON schema of a command's --json output (all commands without one).
     JsonSchema {
@@ -269,8 +303,9 @@ pub struct Upload {
     /// Subindex.
     #[arg(value_parser = values::parse_subindex, default_value = "0")]
     pub subindex: u32,
-    /// Decode as this type [default: the type the object dictionary says].
-    #[arg(short, long = "type", value_parser = values::parse_type, value_name = "TYPE")]
+    /// Decode as this type [default: the type the object dictionary says]
+    /// (`-t` as IgH spells it; `-d` too).
+    #[arg(short = 't', long = "type", short_alias = 'd', value_parser = values::parse_type, value_name = "TYPE")]
     pub data_type: Option<ecmxf_proto::v1::DataType>,
     /// CoE complete access: the whole object from the subindex on.
     #[arg(long)]
@@ -291,8 +326,9 @@ pub struct Download {
     /// octet_string and complete access.
     #[arg(allow_hyphen_values = true)]
     pub value: String,
-    /// Encode as this type [default: the type the object dictionary says].
-    #[arg(short, long = "type", value_parser = values::parse_type, value_name = "TYPE")]
+    /// Encode as this type [default: the type the object dictionary says]
+    /// (`-t` as IgH spells it; `-d` too).
+    #[arg(short = 't', long = "type", short_alias = 'd', value_parser = values::parse_type, value_name = "TYPE")]
     pub data_type: Option<ecmxf_proto::v1::DataType>,
     /// CoE complete access (the value is hex bytes).
     #[arg(long)]
@@ -326,7 +362,7 @@ pub enum SiiCommand {
         /// First word address.
         #[arg(long, default_value = "0", value_parser = values::parse_address)]
         word: u32,
-        /// Where to save the previous contents [default: sii-backup-<POS>-<unix time>.bin].
+        /// Where to save the previous contents [default: sii-backup-<POS>-<UTC time, 20261128T195300Z>.bin].
         #[arg(long, value_name = "FILE")]
         backup: Option<PathBuf>,
     },

@@ -24,8 +24,8 @@ use clap::CommandFactory;
 
 use cli::{Cli, Command};
 use commands::{
-    alias, cia402, config, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states,
-    version,
+    alias, cia402, config, crc, cstruct, data, debug, diag, domains, foe, graph, master, pdo, peripherals, reg, sdo,
+    sii, slaves, states, version,
 };
 use error::CliError;
 // Defined beside the errors it reports; named here by the binary.
@@ -42,6 +42,22 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
             return Ok(());
         }
         Command::Man { dir } => return write_man_pages(dir),
+        Command::NotCarried { .. } => {
+            let verb = std::env::args().skip(1).find(|a| ["eoe", "soe", "ip"].contains(&a.as_str()));
+            return Err(CliError::Usage(format!(
+                "`{}`: the ECM-XF speaks the CoE and FoE mailbox protocols only: no EoE (so no `ip` \
+                 settings) and no SoE; reach a slave's mailbox with upload, download and sdos (CoE) or foe",
+                verb.unwrap_or_else(|| "eoe".into())
+            )));
+        }
+        Command::Xml { .. } => {
+            return Err(CliError::Usage(
+                "`xml`: the network's description as an ETG.2100 file ecmxfd takes back is `ecmxfctl config \
+                 --format eni` (slaves, PDOs, init commands, DC, process image); `ecmxfctl config` writes it as an \
+                 ecmxfd configuration"
+                    .into(),
+            ));
+        }
         Command::JsonSchema { command } => {
             let doc = schema::document();
             let v = if command.is_empty() {
@@ -66,7 +82,10 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
             r.verbose = *verbose;
             out.report(&r)?;
         }
-        Command::States { args, no_wait } => out.report(&states::run(&api, args, *no_wait).await?)?,
+        Command::States { args, position, no_wait } => {
+            let args: Vec<String> = position.iter().map(u32::to_string).chain(args.iter().cloned()).collect();
+            out.report(&states::run(&api, &args, *no_wait).await?)?
+        }
         Command::Upload(u) => out.report(&sdo::upload(&api, u).await?)?,
         Command::Download(d) => out.report(&sdo::download(&api, d).await?)?,
         Command::Sdos { slave, source } => out.report(&sdo::sdos(&api, slave.position, *source).await?)?,
@@ -99,8 +118,15 @@ pub async fn run(cli: Cli) -> Result<(), CliError> {
         Command::Config { format } => out.report(&config::fetch(&api, *format).await?)?,
         Command::Crc { position, reset } => out.report(&crc::run(&api, *position, *reset).await?)?,
         Command::Alias { position, set } => out.report(&alias::run(&api, *position, *set).await?)?,
+        Command::Cstruct { position } => out.report(&cstruct::fetch(&api, *position).await?)?,
+        Command::Domains { verbose } => out.report(&domains::fetch(&api, *verbose).await?)?,
+        Command::Debug { level } => out.report(&debug::run(&api, level.as_deref()).await?)?,
         Command::Version => out.report(&version::fetch(&api).await?)?,
-        Command::Completions { .. } | Command::Man { .. } | Command::JsonSchema { .. } => {}
+        Command::Completions { .. }
+        | Command::Man { .. }
+        | Command::JsonSchema { .. }
+        | Command::NotCarried { .. }
+        | Command::Xml { .. } => {}
     }
     Ok(())
 }

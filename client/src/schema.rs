@@ -7,8 +7,8 @@
 use schemars::{JsonSchema, Schema, schema_for};
 
 use crate::commands::{
-    alias, cia402, config, crc, data, diag, foe, graph, master, pdo, peripherals, reg, sdo, sii, slaves, states,
-    version,
+    alias, cia402, config, crc, cstruct, data, debug, diag, domains, foe, graph, master, pdo, peripherals, reg, sdo,
+    sii, slaves, states, version,
 };
 
 fn s<T: JsonSchema>() -> Schema {
@@ -26,6 +26,9 @@ pub fn all() -> Vec<(&'static str, Schema)> {
         ("crc", s::<crc::CrcReport>()),
         ("alias", s::<alias::AliasReport>()),
         ("version", s::<version::VersionReport>()),
+        ("cstruct", s::<cstruct::CStructReport>()),
+        ("domains", s::<domains::DomainsReport>()),
+        ("debug", s::<debug::DebugReport>()),
         ("states", s::<states::StatesReport>()),
         ("upload", s::<sdo::UploadReport>()),
         ("download", s::<sdo::DownloadReport>()),

@@ -63,6 +63,12 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
              mapping is read at bring-up, which checks it)"
         ),
     };
+    if let Some(w) = &c.web {
+        let _ = writeln!(out, "web: {}", w.summary(c.api.tokens.len(), c.api.client_certs.len()));
+    }
+    if let Some(o) = &c.opcua {
+        let _ = writeln!(out, "opcua: {}", o.summary());
+    }
     0
 }
 
@@ -103,20 +109,44 @@ fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError
             message: e.to_string(),
         })?;
     }
-    let budget = link_budget(c, path)?;
+    let simulated = simulated_frames(c, path)?;
+    let budget = link_budget(c, simulated);
+    latency_fits(c, path, simulated.map(|(_, _, packet_ns)| packet_ns))?;
     Ok((notes, budget))
+}
+
+/// `cycle.output_latency_us` against the link's floor
+/// ([`crate::master::link_budget::min_output_latency_ns`]) where the packet
+/// time is known offline: the bits at the configured SPI clock (the
+/// chip's processing and the host come on top, so what is refused here
+/// can never hold), or the simulated chip's clock and processing time.
+fn latency_fits(c: &Config, path: &Path, simulated_packet_ns: Option<u64>) -> Result<(), ConfigError> {
+    let Some(budget_us) = c.cycle.output_latency_us else { return Ok(()) };
+    let packet_ns = match (&c.link, simulated_packet_ns) {
+        (LinkConfig::Spidev { spi_hz, .. }, _) => {
+            crate::master::link_budget::clocked_ns(c.chip.data_size, u64::from(*spi_hz))
+        }
+        (_, Some(ns)) => ns,
+        _ => return Ok(()),
+    };
+    let cycle_ns = u64::from(c.cycle.sync0_us) * 1000;
+    match crate::master::link_budget::latency_refusal(budget_us, packet_ns, cycle_ns) {
+        None => Ok(()),
+        Some(message) => {
+            Err(ConfigError::Invalid { file: path.into(), key: "cycle.output_latency_us".into(), message })
+        }
+    }
 }
 
 /// The link budget of the network the configuration describes: the frame
 /// sizes of its ENI (which lists every slave's PDOs), else of the simulated
-/// network it runs on (its file, or the demo network `--sim` runs), with
-/// the packet time its link gives; `None` where only the slaves can tell
-/// (a chip with no ENI: their mapping is read at bring-up). A simulated
-/// network is checked against the configuration too: the slave count and
-/// each `[[axis]]`. What bring-up would refuse, said offline.
-fn link_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
-    let simulated = simulated_frames(c, path)?;
-    let Some((rx, tx)) = c.eni_frames.or(simulated.map(|(rx, tx, _)| (rx, tx))) else { return Ok(None) };
+/// network it runs on (its file, or the demo network `--sim` runs:
+/// `simulated`, checked against the configuration by
+/// [`simulated_frames`]), with the packet time its link gives; `None` where
+/// only the slaves can tell (a chip with no ENI: their mapping is read at
+/// bring-up). What bring-up would refuse, said offline.
+fn link_budget(c: &Config, simulated: Option<(usize, usize, u64)>) -> Budget {
+    let (rx, tx) = c.eni_frames.or(simulated.map(|(rx, tx, _)| (rx, tx)))?;
     let data_size = c.chip.data_size;
     let packet_ns = match (&c.link, simulated) {
         (_, Some((_, _, packet_ns))) => packet_ns,
@@ -124,9 +154,9 @@ fn link_budget(c: &Config, path: &Path) -> Result<Budget, ConfigError> {
         (LinkConfig::Spidev { spi_hz, .. }, None) => {
             crate::master::link_budget::clocked_ns(data_size, u64::from(*spi_hz))
         }
-        _ => return Ok(None),
+        _ => return None,
     };
-    Ok(Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000)))
+    Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
 }
 
 /// The simulated network's frame sizes (each slave's default mapping) and

@@ -43,12 +43,14 @@ mod lifecycle;
 pub mod link;
 pub mod master;
 mod metrics;
+pub mod opcua;
 pub mod port;
 pub mod probe;
 pub mod realtime;
 mod service;
 mod signals;
 pub mod sparkplug;
+pub mod web;
 
 pub use api::status::debug_looking_messages;
 pub use check_config::{EXIT_CONFIG, check_config, preflight};

@@ -37,6 +37,10 @@ pub enum DaemonError {
     },
     /// The mailbox gateway could not listen (`gateway.listen`).
     Gateway(crate::gateway::GatewayError),
+    /// The OPC UA server could not listen (`opcua.listen`).
+    Opcua(crate::opcua::OpcuaError),
+    /// The dashboard could not listen (`web.listen`).
+    Web(crate::web::WebError),
     /// The Sparkplug node's TLS files or credentials did not load.
     Sparkplug(crate::sparkplug::SparkplugError),
     /// The engine could not start: the link, the simulator's network file.
@@ -86,6 +90,8 @@ impl std::fmt::Display for DaemonError {
         match self {
             Self::Metrics { addr, source } => write!(f, "metrics.listen {addr}: {source}"),
             Self::Gateway(e) => write!(f, "{e}"),
+            Self::Opcua(e) => write!(f, "{e}"),
+            Self::Web(e) => write!(f, "{e}"),
             Self::Sparkplug(e) => write!(f, "{e}"),
             Self::Start(e) => write!(f, "{e}"),
             Self::Api(e) => write!(f, "{e}"),
@@ -107,6 +113,8 @@ impl std::error::Error for DaemonError {
         match self {
             Self::Metrics { source, .. } => Some(source),
             Self::Gateway(e) => Some(e),
+            Self::Opcua(e) => Some(e),
+            Self::Web(e) => Some(e),
             Self::Sparkplug(e) => Some(e),
             Self::Start(e) => Some(e),
             Self::Api(e) => Some(e),
@@ -158,7 +166,11 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     // fails accepts (and starves the others) instead of refusing cleanly.
     let connections = u64::from(api.max_socket_connections)
         + api.tcp.map_or(0, |_| u64::from(api.max_connections))
-        + config.metrics.listen.map_or(0, |_| crate::metrics::MAX_CONNECTIONS as u64);
+        + config.metrics.listen.map_or(0, |_| crate::metrics::MAX_CONNECTIONS as u64)
+        // An OPC UA connection holds three: the peer's, and both ends of
+        // its splice to the server on loopback.
+        + config.opcua.as_ref().map_or(0, |o| 3 * u64::from(o.max_connections))
+        + config.web.as_ref().map_or(0, |w| u64::from(w.max_connections));
     crate::admission::ensure_fd_budget(connections + crate::admission::FD_RESERVE);
     let metrics_listener = match config.metrics.listen {
         Some(addr) => Some(crate::metrics::bind(addr).await.map_err(|source| DaemonError::Metrics { addr, source })?),
@@ -166,6 +178,32 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     };
     let gateway = match &config.gateway {
         Some(g) => Some((g.clone(), crate::gateway::bind(g).await.map_err(DaemonError::Gateway)?)),
+        None => None,
+    };
+    let opcua = match &config.opcua {
+        Some(o) => match crate::opcua::bind(o).await {
+            Ok(l) => Some((o.clone(), l)),
+            // `ecmxfd --sim`'s own server on loopback is a convenience: a
+            // port another daemon holds does not stop this one.
+            Err(e) if o.best_effort => {
+                warn!("{e}: serving no OPC UA");
+                None
+            }
+            Err(e) => return Err(DaemonError::Opcua(e)),
+        },
+        None => None,
+    };
+    let web = match &config.web {
+        Some(w) => match crate::web::bind(w).await {
+            Ok(l) => Some((w.clone(), l)),
+            // `ecmxfd --sim`'s own dashboard on loopback is a convenience:
+            // a port another program holds does not stop this daemon.
+            Err(e) if w.best_effort => {
+                warn!("{e}: serving no dashboard");
+                None
+            }
+            Err(e) => return Err(DaemonError::Web(e)),
+        },
         None => None,
     };
     let sparkplug = match &config.sparkplug {
@@ -192,6 +230,20 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     if let Some((g, socket)) = gateway {
         front_ends.spawn(crate::gateway::serve(Arc::clone(&master), g, socket, api_stopped.clone()));
     }
+    if let Some((o, listener)) = opcua {
+        front_ends.spawn(crate::opcua::serve(Arc::clone(&master), o, listener, api_stopped.clone()));
+    }
+    if let Some((w, listener)) = web {
+        let (tokens, certificates) = (api.tokens.clone(), api.client_certs.clone());
+        front_ends.spawn(crate::web::serve(
+            Arc::clone(&master),
+            w,
+            tokens,
+            certificates,
+            listener,
+            api_stopped.clone(),
+        ));
+    }
     let mut sparkplug_node = crate::sparkplug::Runner::new(Arc::clone(&master));
     if let Some(prepared) = sparkplug {
         sparkplug_node.start(prepared);
@@ -210,6 +262,9 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     let mut event_log = crate::master::EventLog::default();
     let mut reloads = options.reloads;
     let logging = options.logging;
+    if let Some(l) = &logging {
+        let _ = ctx.log_filter.set(Arc::new(l.clone()));
+    }
     info!(logs = logging.as_ref().map_or("(embedded)", |l| l.sink), systemd = notifier.enabled(), watchdog = ?watchdog_every, "service");
     tokio::pin!(shutdown);
     loop {

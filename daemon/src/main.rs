@@ -59,10 +59,93 @@ enum Command {
         #[arg(long)]
         force: bool,
     },
+    /// Write the ecmxfd(8) and ecmxfd.toml(5) manual pages into DIR (for
+    /// packaging)
+    #[command(hide = true)]
+    Man {
+        /// The folder to write ecmxfd.8 and ecmxfd.toml.5 into.
+        dir: PathBuf,
+    },
+}
+
+/// What ecmxfd(8) says beyond the options: how it runs, its signals,
+/// files and exit statuses.
+const MAN_MORE: &str = r#".SH DESCRIPTION
+ecmxfd owns an ECM\-XF EtherCAT master chip on an SPI bus: one real\-time
+thread runs the cyclic exchange and keeps the chip's PDO FIFO fed, and the
+daemon serves the network over gRPC (the ecmxf.v1 API, on a Unix socket and
+optionally TLS over TCP), a Prometheus endpoint, MQTT Sparkplug B, the
+ETG.8200 mailbox gateway and OPC UA, as the configuration file says
+(ecmxfd.toml, see the examples in /usr/share/doc/ecmxfd/examples).
+.PP
+ecmxfctl(1) is its command\-line client; ecmxfd.toml(5) documents every
+key of the configuration file.
+.SH SIGNALS
+.TP
+.B SIGTERM, SIGINT
+Stop: the outputs are made safe as outputs.on_last_writer_gone says, the
+network is left in a defined state, and the daemon exits within a second.
+.TP
+.B SIGHUP
+Read the configuration file again and apply what can change while the bus
+runs (roles, log level, Sparkplug). Started without \-\-config (\-\-sim in a
+terminal), SIGHUP stops it, as for any foreground program.
+.SH FILES
+.TP
+.I /etc/ecmxfd/ecmxfd.toml
+The configuration (systemd unit: ecmxfd.service).
+.TP
+.I /run/ecmxfd/ecmxfd.sock
+The API socket when run as root (else $XDG_RUNTIME_DIR/ecmxfd.sock or
+/tmp/ecmxfd\-UID.sock); api.socket or \-\-socket set another.
+.TP
+.I /var/lib/ecmxfd
+The state directory (systemd StateDirectory=): object dictionaries read
+from devices (sdo\-info/), the OPC UA server's certificates (pki/).
+.SH EXIT STATUS
+0 after a stop by signal; 2 for a configuration mistake (as
+\-\-check\-config reports it); another status when the network can never run
+as configured or the chip cannot be reached (the message says which).
+.SH SEE ALSO
+ecmxfd.toml(5), ecmxfctl(1), ecmxf\-sim(1), systemd.service(5)
+"#;
+
+/// Writes ecmxfd(8) and ecmxfd.toml(5) into `dir`.
+fn write_man_pages(dir: &std::path::Path) -> std::io::Result<[PathBuf; 2]> {
+    use clap::CommandFactory;
+    std::fs::create_dir_all(dir)?;
+    let man = clap_mangen::Man::new(Cli::command()).section("8");
+    let mut page = Vec::new();
+    man.render_title(&mut page)?;
+    man.render_name_section(&mut page)?;
+    man.render_synopsis_section(&mut page)?;
+    page.extend_from_slice(MAN_MORE.as_bytes());
+    man.render_options_section(&mut page)?;
+    man.render_subcommands_section(&mut page)?;
+    man.render_version_section(&mut page)?;
+    let path = dir.join("ecmxfd.8");
+    std::fs::write(&path, page)?;
+    let config = dir.join("ecmxfd.toml.5");
+    std::fs::write(&config, ecmxfd::config::manual_page(env!("CARGO_PKG_VERSION")))?;
+    Ok([path, config])
 }
 
 fn main() -> ExitCode {
     let cli = Cli::parse();
+    if let Some(Command::Man { dir }) = &cli.command {
+        return match write_man_pages(dir) {
+            Ok(paths) => {
+                for path in paths {
+                    println!("{}", path.display());
+                }
+                ExitCode::SUCCESS
+            }
+            Err(e) => {
+                eprintln!("ecmxfd: cannot write the manual pages into {}: {e}", dir.display());
+                ExitCode::FAILURE
+            }
+        };
+    }
     if let Some(path) = &cli.check_config {
         let status = ecmxfd::check_config(path, &mut std::io::stdout(), &mut std::io::stderr());
         return ExitCode::from(status);
@@ -70,6 +153,10 @@ fn main() -> ExitCode {
     let mut config = if cli.sim {
         let mut c = Config::simulator();
         c.link = LinkConfig::Sim { network: cli.network.clone() };
+        // What a new user tries next: an OPC UA client on loopback.
+        c.opcua = Some(ecmxfd::config::OpcuaConfig::loopback());
+        // And a browser: the dashboard on loopback.
+        c.web = Some(ecmxfd::config::WebConfig::loopback());
         c
     } else if let Some(path) = &cli.config {
         match Config::load(path) {

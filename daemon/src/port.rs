@@ -12,9 +12,13 @@
 //!   and never ran, so resending it is safe too. Every command whose answer
 //!   matters goes this way.
 //! - **Once** ([`Port::send_once`]): send, and look at the answer when the
-//!   next exchange brings it ([`Port::previous`]); a lost one is asked
+//!   next exchange brings it ([`Port::answer_to`]); a lost one is asked
 //!   again later. Only for what costs nothing to repeat: questions, polls,
-//!   and the start of a read (`engine::slot::transaction`). Cyclic FIFO
+//!   and the start of a read (`engine::slot::transaction`). The answers to
+//!   the last [`ONCE_KEPT`] packets sent once are kept as they arrive,
+//!   whatever exchange brings them: a FIFO call (two exchanges) or two
+//!   between a read and its next look must not take its answer away, or
+//!   the read runs again, and again while the FIFO keeps pressing. Cyclic FIFO
 //!   data goes guarded: its reads are destructive (v049 PDO_DATA_FIFO_OP
 //!   takes the input frames out of the TxFIFO), so a lost answer would
 //!   lose its input frames.
@@ -145,6 +149,19 @@ impl<'a> Answer<'a> {
     }
 }
 
+/// How many packets sent once have their answers kept (a transaction's
+/// read or poll, and the emergency question beside it).
+pub const ONCE_KEPT: usize = 3;
+
+/// A packet sent once and, when it came, its answer (data copied into a
+/// buffer of the largest data section: nothing is allocated once running).
+#[derive(Debug)]
+struct OnceAnswer {
+    sent: Option<(u8, CommandCode)>,
+    header: Option<ResponseHeader>,
+    data: Vec<u8>,
+}
+
 /// The chip's packet port over a link.
 #[derive(Debug)]
 pub struct Port<L> {
@@ -155,6 +172,10 @@ pub struct Port<L> {
     rx: Vec<u8>,
     prev_rx: Vec<u8>,
     prev_header: Option<ResponseHeader>,
+    /// The answers to the last packets sent once (see [`Port::answer_to`]),
+    /// the newest at `once_next - 1`.
+    once: [OnceAnswer; ONCE_KEPT],
+    once_next: usize,
     next_index: u8,
     last_sent: Option<(u8, CommandCode)>,
     /// Control bits to send with the next packet (error clears).
@@ -181,6 +202,8 @@ impl<L: Link> Port<L> {
             rx: Vec::with_capacity(DATA_MAX + 32),
             prev_rx: Vec::with_capacity(DATA_MAX + 32),
             prev_header: None,
+            once: std::array::from_fn(|_| OnceAnswer { sent: None, header: None, data: Vec::with_capacity(DATA_MAX) }),
+            once_next: 0,
             next_index: 0,
             last_sent: None,
             pending_control: ControlFlags::empty(),
@@ -334,9 +357,11 @@ impl<L: Link> Port<L> {
         };
         Ok(match decode_response(&self.rx, decode_as) {
             Ok(p) => {
-                self.status = p.header;
+                let header = p.header;
+                self.status = header;
                 self.status_exchange = self.stats.exchanges;
-                Received::Answer(p.header)
+                self.keep_once_answer(header);
+                Received::Answer(header)
             }
             Err(DecodeError::ChipNotReady) => {
                 self.stats.not_ready += 1;
@@ -347,6 +372,30 @@ impl<L: Link> Port<L> {
                 Received::Corrupt(e)
             }
         })
+    }
+
+    /// Keeps `header`'s answer (in `self.rx`) if it answers a packet sent
+    /// once that has no answer yet: the first intact one (a packet is
+    /// answered once; a NOP carries no answer).
+    fn keep_once_answer(&mut self, header: ResponseHeader) {
+        if header.is_nop() {
+            return;
+        }
+        let sent = Some((header.index, header.code));
+        if let Some(slot) = self.once.iter_mut().find(|o| o.sent == sent && o.header.is_none()) {
+            let n = usize::from(header.data_len);
+            slot.data.clear();
+            slot.data.extend_from_slice(self.rx.get(HEADER_LEN..HEADER_LEN + n).unwrap_or(&[]));
+            slot.header = Some(header);
+        }
+    }
+
+    /// The answer to the packet sent once with `index` and `code`, if it
+    /// arrived intact (whichever exchange brought it) and that packet is
+    /// among the last [`ONCE_KEPT`] sent once.
+    pub fn answer_to(&self, index: u8, code: CommandCode) -> Option<Answer<'_>> {
+        let o = self.once.iter().find(|o| o.sent == Some((index, code)))?;
+        Some(Answer { header: o.header?, data: &o.data })
     }
 
     fn keep_prev(&mut self, header: Option<ResponseHeader>) {
@@ -434,6 +483,9 @@ impl<L: Link> Port<L> {
                 Received::Corrupt(_) => self.keep_prev(None),
             }
             self.last_sent = Some((index, R::CODE));
+            let slot = &mut self.once[self.once_next];
+            (slot.sent, slot.header) = (Some((index, R::CODE)), None);
+            self.once_next = (self.once_next + 1) % ONCE_KEPT;
             return Ok(index);
         }
     }

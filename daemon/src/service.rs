@@ -5,6 +5,7 @@
 //! may apply while the bus runs.
 
 use std::os::unix::net::UnixDatagram;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use tracing_subscriber::layer::SubscriberExt;
@@ -110,11 +111,14 @@ impl Liveness {
     }
 }
 
-/// The log filter in force, replaceable on SIGHUP.
-#[derive(Debug)]
+/// The log filter in force, replaceable on SIGHUP and through the API
+/// (`Master.SetLogFilter`); clones control the same filter.
+#[derive(Debug, Clone)]
 pub struct Logging {
     handle: reload::Handle<EnvFilter, Registry>,
     from_env: bool,
+    /// The filter's text as given (`RUST_LOG`'s, or the level set last).
+    current: Arc<Mutex<String>>,
     /// Where logs go: "journald" or "stderr".
     pub sink: &'static str,
 }
@@ -124,10 +128,11 @@ pub struct Logging {
 /// filter is `RUST_LOG` if set, else `level`.
 pub fn init_logging(level: &str) -> Logging {
     let from_env = std::env::var_os("RUST_LOG").is_some();
+    let current = if from_env { std::env::var("RUST_LOG").unwrap_or_default() } else { level.to_owned() };
     let filter = if from_env {
         EnvFilter::try_from_default_env().unwrap_or_else(|_| EnvFilter::new("info"))
     } else {
-        EnvFilter::try_new(level).unwrap_or_else(|_| EnvFilter::new("info"))
+        quiet_libraries(EnvFilter::try_new(level).unwrap_or_else(|_| EnvFilter::new("info")))
     };
     let (filter, handle) = reload::Layer::new(filter);
     let journald = if std::env::var_os("JOURNAL_STREAM").is_some() {
@@ -142,7 +147,27 @@ pub fn init_logging(level: &str) -> Logging {
         tracing_subscriber::fmt::layer().with_writer(std::io::stderr).with_ansi(std::io::stderr().is_terminal())
     });
     let _ = tracing_subscriber::registry().with(filter).with(journald).with(stderr).try_init();
-    Logging { handle, from_env, sink }
+    Logging { handle, from_env, current: Arc::new(Mutex::new(current)), sink }
+}
+
+/// What libraries say at `info` is theirs, not the daemon's: the OPC UA
+/// stack logs each connection it accepts (a peer could fill the journal),
+/// so it says warnings and errors only; its certificate store and secure
+/// channel, whose errors are about the certificate the unsecured endpoint
+/// never uses, nothing.
+/// `RUST_LOG` overrides all of it.
+fn quiet_libraries(mut filter: EnvFilter) -> EnvFilter {
+    for directive in [
+        "opcua_server=warn",
+        "opcua_core=warn",
+        "opcua_crypto::certificate_store=off",
+        "opcua_core::comms::secure_channel=off",
+    ] {
+        if let Ok(d) = directive.parse() {
+            filter = filter.add_directive(d);
+        }
+    }
+    filter
 }
 
 impl Logging {
@@ -152,9 +177,24 @@ impl Logging {
         if self.from_env {
             return Ok(false);
         }
-        let f = EnvFilter::try_new(level).map_err(|e| e.to_string())?;
+        let f = quiet_libraries(EnvFilter::try_new(level).map_err(|e| e.to_string())?);
         self.handle.reload(f).map_err(|e| e.to_string())?;
+        *self.current.lock().unwrap_or_else(|e| e.into_inner()) = level.to_owned();
         Ok(true)
+    }
+}
+
+impl crate::api::LogFilter for Logging {
+    fn current(&self) -> (String, bool) {
+        (self.current.lock().unwrap_or_else(|e| e.into_inner()).clone(), self.from_env)
+    }
+
+    fn set(&self, filter: &str) -> Result<(), crate::api::LogFilterRefusal> {
+        match self.set_level(filter) {
+            Ok(true) => Ok(()),
+            Ok(false) => Err(crate::api::LogFilterRefusal::FromEnv),
+            Err(why) => Err(crate::api::LogFilterRefusal::Invalid(why)),
+        }
     }
 }
 
@@ -199,6 +239,8 @@ impl ReloadPlan {
         restart(old.outputs != new.outputs, "[outputs]");
         restart(old.metrics != new.metrics, "[metrics]");
         restart(old.gateway != new.gateway, "[gateway]");
+        restart(old.opcua != new.opcua, "[opcua]");
+        restart(old.web != new.web, "[web]");
         restart(
             a.socket != b.socket || a.socket_mode != b.socket_mode || a.socket_group != b.socket_group,
             "api.socket*",

@@ -55,6 +55,17 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
             "version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 1000\noutput_latency_us = 1500\n",
             "cycle.output_latency_us",
         ),
+        // The demo's 248 us packets at 125 us: a refill behind a
+        // transaction takes 8 cycles, so nothing under 17 holds.
+        (
+            "version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 125\noutput_latency_us = 1000\n",
+            "the smallest budget this link holds is 2125 us",
+        ),
+        (
+            "version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/null\"\nspi_hz = 20000000\n\
+             [cycle]\nsync0_us = 125\noutput_latency_us = 1000\n",
+            "cycle.output_latency_us",
+        ),
     ] {
         std::fs::write(&bad, text).unwrap();
         let out = Command::new(BIN).args(["--check-config", bad.to_str().unwrap()]).output().unwrap();
@@ -156,4 +167,78 @@ fn runs_on_the_simulator_until_sigterm() {
         log.iter().any(|l| l.contains("safe stop")) && log.iter().any(|l| l.contains("engine stopped")),
         "{log:#?}"
     );
+}
+
+/// `ecmxfd man DIR` writes ecmxfd(8), which `man -l` renders with its
+/// options, signals, files and exit statuses (when man is installed; the
+/// .deb's smoke test checks the page is installed), and ecmxfd.toml(5)
+/// (checked below).
+#[test]
+fn the_manual_page_renders_with_options_signals_and_files() {
+    let dir = std::env::temp_dir().join(format!("ecmxfd-man-{}", std::process::id()));
+    let out = Command::new(BIN).args(["man", dir.to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let page = dir.join("ecmxfd.8");
+    let roff = std::fs::read_to_string(&page).unwrap();
+    assert!(roff.contains(".TH ecmxfd 8"), "section 8: {}", &roff[..roff.len().min(200)]);
+    if let Ok(rendered) = Command::new("man").env("MANWIDTH", "100").arg("-l").arg(&page).output() {
+        let text = String::from_utf8_lossy(&rendered.stdout);
+        for heading in ["SYNOPSIS", "DESCRIPTION", "SIGNALS", "FILES", "EXIT STATUS", "OPTIONS", "--check-config"] {
+            assert!(text.contains(heading), "no {heading} in:\n{text}");
+        }
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
+
+/// ecmxfd.toml(5) documents every key the example configurations use (and
+/// the schema it is made from holds every key the parser takes), under the
+/// table the file has it in; `man -l` renders it.
+#[test]
+fn the_configuration_page_documents_every_key_of_the_examples() {
+    let dir = std::env::temp_dir().join(format!("ecmxfd-man5-{}", std::process::id()));
+    let out = Command::new(BIN).args(["man", dir.to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let roff = std::fs::read_to_string(dir.join("ecmxfd.toml.5")).unwrap();
+    assert!(roff.contains(".TH ecmxfd.toml 5"), "section 5: {}", &roff[..roff.len().min(200)]);
+    let documented = ecmxfd::config::documented_keys();
+
+    fn keys(prefix: &str, table: &toml::Table, out: &mut Vec<String>) {
+        for (k, v) in table {
+            let path = if prefix.is_empty() { k.clone() } else { format!("{prefix}.{k}") };
+            match v {
+                toml::Value::Table(t) => keys(&path, t, out),
+                toml::Value::Array(items) if items.iter().all(toml::Value::is_table) && !items.is_empty() => {
+                    for t in items.iter().filter_map(toml::Value::as_table) {
+                        keys(&path, t, out);
+                    }
+                }
+                _ => {}
+            }
+            out.push(path);
+        }
+    }
+    for file in
+        ["config/ecmxfd-sim.toml", "config/ecmxfd-rpi.toml", "config/ecmxfd-gateway.toml", "config/ecmxfd-eni.toml"]
+    {
+        let table: toml::Table = std::fs::read_to_string(repo(file)).unwrap().parse().unwrap();
+        let mut used = Vec::new();
+        keys("", &table, &mut used);
+        for key in used {
+            assert!(documented.contains(&key), "{file}: {key} is not in ecmxfd.toml(5)");
+        }
+    }
+    // Each key is in the page (its last word), each table heads a section.
+    for key in &documented {
+        let word = key.rsplit('.').next().unwrap().replace('-', "\\-");
+        assert!(roff.contains(&format!(".B {word}\n")) || roff.contains(&format!("{key}]")), "{key} not in the page");
+    }
+    if let Ok(rendered) = Command::new("man").env("MANWIDTH", "100").arg("-l").arg(dir.join("ecmxfd.toml.5")).output() {
+        let text = String::from_utf8_lossy(&rendered.stdout);
+        for heading in ["SYNOPSIS", "DESCRIPTION", "[link]", "[cycle]", "[[slave]]", "sync0_us", "SEE ALSO"] {
+            assert!(text.contains(heading), "no {heading} in:\n{text}");
+        }
+        let err = String::from_utf8_lossy(&rendered.stderr);
+        assert!(!err.contains("warning"), "man warns: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
 }

@@ -461,7 +461,7 @@ fn foe_files_go_to_a_slave_and_come_back() {
         assert!(e.to_string().contains("nothing.bin") && e.to_string().contains("slave 1"), "{e}");
         sim.with_chip(|c| c.net.slaves[1].foe_password = 0x1234);
         let e = m.foe_write(1, "x.bin", 0, vec![1, 2, 3], None, long()).await.unwrap_err();
-        assert!(matches!(e, EngineError::Failed(_)), "{e}");
+        assert!(matches!(e, EngineError::FoeRefused { slave: 1, write: true, .. }), "{e}");
         m.foe_write(1, "x.bin", 0x1234, vec![1, 2, 3], None, long()).await.unwrap();
         // Bad arguments.
         let e = m.foe_write(1, "", 0, vec![1], None, long()).await.unwrap_err();

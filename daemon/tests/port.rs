@@ -91,3 +91,31 @@ fn a_stuck_int0_is_an_error_not_a_hang() {
     h.control("int0 stuck off").unwrap();
     assert!(p.call(&InfoUpdate).is_ok());
 }
+
+/// A packet sent once keeps its answer whatever exchanges bring it: two
+/// guarded calls after it (a FIFO exchange or two, as the running loop
+/// makes them while the FIFO presses) used to leave only their own answers
+/// to look at, so a read started once looked lost and ran again, and again
+/// while the FIFO kept pressing (a layout read took seconds). The three
+/// newest packets sent once are kept; an older one is not.
+#[test]
+fn answers_to_packets_sent_once_outlive_the_calls_after_them() {
+    let (mut p, _h) = port();
+    p.set_check(CheckType::Crc32).unwrap();
+    let asked = p.send_once(&FwVersionGet).unwrap();
+    for _ in 0..2 {
+        p.call(&SlaveCountGet).unwrap();
+    }
+    assert_ne!(p.previous().map(|a| a.header.code), Some(CommandCode::FwVersionGet), "the previous answer moved on");
+    let a = p.answer_to(asked, CommandCode::FwVersionGet).expect("the answer kept");
+    assert_eq!(a.header.return_value, 0x24);
+    assert!(p.answer_to(asked, CommandCode::SlaveCountGet).is_none(), "an index answers its own command only");
+
+    // Only the newest packets sent once are remembered.
+    let first = p.send_once(&InfoUpdate).unwrap();
+    for _ in 0..ecmxfd::port::ONCE_KEPT {
+        p.send_once(&InfoUpdate).unwrap();
+    }
+    p.call(&SlaveCountGet).unwrap();
+    assert!(p.answer_to(first, CommandCode::InfoUpdate).is_none(), "pushed out by newer ones");
+}

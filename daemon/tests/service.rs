@@ -109,6 +109,7 @@ fn notifies_systemd_feeds_the_watchdog_serves_metrics_and_reloads() {
     assert!(m.starts_with("HTTP/1.1 200 OK") && m.contains("text/plain; version=0.0.4"), "{m}");
     for want in [
         "ecmxf_engine_phase{phase=\"ENGINE_PHASE_RUNNING\"} 1",
+        concat!("ecmxf_build_info{version=\"", env!("CARGO_PKG_VERSION"), "\",firmware=\"0x"),
         "ecmxf_network_state 8",
         "# TYPE ecmxf_exchanges_total counter",
         "ecmxf_crc_errors_total ",

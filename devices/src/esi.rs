@@ -248,6 +248,30 @@ impl EsiFile {
             .max_by_key(|d| d.revision)
             .ok_or(EsiError::NoSuchDevice { product_code, revision })
     }
+
+    /// The device a slave reporting this product code and revision runs
+    /// as: of that product's devices, the one with the [`nearest_revision`].
+    /// `None` when the file has no device of that product (devices it could
+    /// not read, e.g. without a ProductCode, match nothing).
+    pub fn for_identity(&self, product_code: u32, revision: u32) -> Option<&EsiDevice> {
+        let of_product = || self.devices.iter().filter(move |d| d.product_code == product_code);
+        let chosen = nearest_revision(of_product().map(|d| d.revision), revision)?;
+        of_product().find(|d| d.revision == chosen)
+    }
+}
+
+/// Which of a product's described revisions a device reporting `scanned`
+/// runs as, the way TwinCAT and the IgH master match a scanned slave to
+/// its description: the same revision; else the highest one below it (a
+/// newer revision keeps what older ones offered: ETG.2000's
+/// `CheckRevisionNo="EQ_OR_G"` says a description applies to that revision
+/// and later ones); else, a device older than every description, the
+/// highest one (the file's current device).
+pub fn nearest_revision(described: impl Iterator<Item = u32> + Clone, scanned: u32) -> Option<u32> {
+    if described.clone().any(|r| r == scanned) {
+        return Some(scanned);
+    }
+    described.clone().filter(|&r| r < scanned).max().or_else(|| described.max())
 }
 
 /// The CoE type of an ESI type name (`DINT`, `UINT`, `BIT3`, `STRING(8)`),
@@ -897,6 +921,20 @@ mod tests {
         // covers the image instead.
         assert!(bytes.len() > 128);
         assert_eq!((usize::from(image.size_word) + 1) * 128, bytes.len());
+    }
+
+    #[test]
+    fn a_scanned_revision_picks_its_own_description_else_the_nearest_lower_else_the_highest() {
+        let revisions = [0x0010_0000u32, 0x0012_0000, 0x0014_0000];
+        let pick = |scanned| nearest_revision(revisions.iter().copied(), scanned);
+        assert_eq!(pick(0x0012_0000), Some(0x0012_0000), "the same revision");
+        assert_eq!(pick(0x0013_0005), Some(0x0012_0000), "the nearest lower");
+        assert_eq!(pick(0x0020_0000), Some(0x0014_0000), "newer than every description");
+        assert_eq!(pick(0x0001_0000), Some(0x0014_0000), "older than every description: the highest");
+        assert_eq!(nearest_revision(std::iter::empty(), 1), None);
+        let f = EsiFile::parse(TERMINAL).unwrap();
+        assert_eq!(f.for_identity(1, 7).map(|d| d.revision), Some(1));
+        assert!(f.for_identity(2, 1).is_none(), "another product");
     }
 
     #[test]

@@ -315,6 +315,39 @@ pub struct ObjectDictionary {
     /// device maps them all the same, and its description says what the
     /// file says.
     pub mapped_anyway: std::collections::BTreeSet<(u16, u8)>,
+    /// Entries a simulated device has beyond its file's dictionary, and
+    /// why: what its own init commands write (an ESI's
+    /// `Mailbox/CoE/InitCmd`: the vendor ships those commands, so the real
+    /// device takes them) where the dictionary lacks the entry or declares
+    /// it read-only, and what its device profile requires (a CiA 402
+    /// drive's modes of operation). Kept so the device can say so.
+    pub beyond_file: std::collections::BTreeMap<(u16, u8), BeyondFile>,
+}
+
+/// Why a simulated device has an entry its file does not give it so.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum BeyondFile {
+    /// Written by its own init commands, not in the dictionary: added,
+    /// typed by the data's size.
+    InitCmdAdded,
+    /// Written by its own init commands, read-only in the dictionary: made
+    /// writable.
+    InitCmdOpened,
+    /// Required by its device profile (CiA 301 0x1000/0x1001/0x1018 of a
+    /// CoE device, CiA 402 0x6060/0x6061/0x6502 of a drive), not in the
+    /// dictionary: added.
+    ProfileAdded,
+}
+
+impl BeyondFile {
+    /// What `ecmxf-sim check` says of it.
+    pub fn says(self) -> &'static str {
+        match self {
+            Self::InitCmdAdded => "written by its own init commands, not in its dictionary: added",
+            Self::InitCmdOpened => "written by its own init commands, read-only in its dictionary: made writable",
+            Self::ProfileAdded => "required by its device profile, not in its dictionary: added",
+        }
+    }
 }
 
 impl ObjectDictionary {
@@ -326,6 +359,11 @@ impl ObjectDictionary {
     /// Adds or replaces an object.
     pub fn insert(&mut self, index: u16, object: Object) {
         self.objects.insert(index, object);
+    }
+
+    /// Takes an object out.
+    pub fn remove(&mut self, index: u16) -> Option<Object> {
+        self.objects.remove(&index)
     }
 
     /// An object.

@@ -7,19 +7,10 @@
 //! When the fixtures folder is absent the tests say so and pass, unless
 //! ECMXF_REQUIRE_FIXTURES is set (CI sets it), where they fail.
 
-use std::path::PathBuf;
-
 use ecmxf_devices::eni::{BitRange, CcsConvention, CoeAccess, Eni, Transition};
 
-fn fixtures() -> Option<PathBuf> {
-    let dir = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../../shared/fixtures");
-    if dir.is_dir() {
-        return Some(dir);
-    }
-    assert!(std::env::var_os("ECMXF_REQUIRE_FIXTURES").is_none(), "fixtures missing: {}", dir.display());
-    eprintln!("skipped: {} not present", dir.display());
-    None
-}
+mod common;
+use common::fixtures;
 
 fn load(name: &str) -> Option<Eni> {
     let path = fixtures()?.join(name);

@@ -14,6 +14,12 @@ pub mod v1 {
     pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/ecmxf_descriptor.bin"));
 }
 
+/// The encoded `FileDescriptorSet` of `google/rpc/status.proto` and
+/// `google/rpc/error_details.proto` (the messages of every error's
+/// `grpc-status-details-bin`), for gRPC reflection: a client decodes error
+/// details by asking the daemon alone.
+pub const ERROR_MODEL_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/error_model_descriptor.bin"));
+
 /// The Sparkplug B payload (`sparkplug/sparkplug_b.proto`, Eclipse
 /// Sparkplug 3.0 section 6.4): what the daemon's MQTT edge node publishes.
 pub mod sparkplug {

@@ -286,30 +286,116 @@ fn resize(h: &mut Host, data_size: u16) {
 }
 
 /// The PDO configuration in the 156-byte shape of the vendor's header 1.52
-/// (`PDO_CONFIG_HEAD`: vendor id u32, product code u32, then v049's fields
-/// with four PDO slots of eight entries), written field by field from that
-/// description: slave, PDO count, assignment, 4 mapping indices, 4 entry
-/// counts, 32 entries of `index << 16 | subindex << 8 | bits`.
+/// (`PDO_CONFIG_HEAD`: vendor id u32, product code u32, then slave, PDO
+/// count, assignment, 4 mapping indices, 4 entry counts and `Table[32]`
+/// of `index << 16 | subindex << 8 | bits`, packed as its v1.60 code fills
+/// it: PDO j's entries after the earlier PDOs' entries).
 fn vendor_pdo_config(vendor: u32, product: u32, slave: u8, assign: u16, pdos: &[(u16, &[u32])]) -> Vec<u8> {
     let mut d = Vec::new();
     d.extend(vendor.to_le_bytes());
     d.extend(product.to_le_bytes());
-    d.extend([slave, pdos.len() as u8]);
-    d.extend(assign.to_le_bytes());
-    for i in 0..4 {
-        d.extend(pdos.get(i).map_or(0u16, |p| p.0).to_le_bytes());
-    }
-    for i in 0..4 {
-        d.extend(pdos.get(i).map_or(0u16, |p| p.1.len() as u16).to_le_bytes());
-    }
-    for i in 0..4 {
-        for k in 0..8 {
-            let e = pdos.get(i).and_then(|p| p.1.get(k)).copied().unwrap_or(0);
-            d.extend(e.to_le_bytes());
-        }
+    d.extend(pdo_fields(slave, assign, pdos, 4));
+    let packed: Vec<u32> = pdos.iter().flat_map(|p| p.1.iter().copied()).collect();
+    for k in 0..32 {
+        d.extend(packed.get(k).copied().unwrap_or(0).to_le_bytes());
     }
     assert_eq!(d.len(), 156);
     d
+}
+
+/// Slave, PDO count, assignment, `slots` mapping indices and entry counts.
+fn pdo_fields(slave: u8, assign: u16, pdos: &[(u16, &[u32])], slots: usize) -> Vec<u8> {
+    let mut d = vec![slave, pdos.len() as u8];
+    d.extend(assign.to_le_bytes());
+    for i in 0..slots {
+        d.extend(pdos.get(i).map_or(0u16, |p| p.0).to_le_bytes());
+    }
+    for i in 0..slots {
+        d.extend(pdos.get(i).map_or(0u16, |p| p.1.len() as u16).to_le_bytes());
+    }
+    d
+}
+
+/// The slotted forms: v049's 112 bytes (3 slots) and the older vendor
+/// headers' 148 (4 slots), each slot 8 entries wide.
+fn slotted_pdo_config(slave: u8, assign: u16, pdos: &[(u16, &[u32])], slots: usize) -> Vec<u8> {
+    let mut d = pdo_fields(slave, assign, pdos, slots);
+    for i in 0..slots {
+        for k in 0..8 {
+            d.extend(pdos.get(i).and_then(|p| p.1.get(k)).copied().unwrap_or(0).to_le_bytes());
+        }
+    }
+    d
+}
+
+/// Each form of the PDO table the evidence supports (v049's 112-byte
+/// slots; the vendor headers' 148-byte slots and 156-byte packed table with
+/// vendor id and product code), at 144- and 544-byte packets: applied
+/// exactly, read back over CoE, or refused whole; never applied otherwise.
+/// Two PDOs of 3 and 2 entries: slotted and packed readings differ.
+#[test]
+fn every_pdo_table_form_is_applied_exactly_or_refused() {
+    use ecmxf_wire::payload::pdo::RX_PDO_ASSIGN;
+    use ecmxf_wire::payload::state::StateSet;
+    let first = [0x6040_0010u32, 0x607A_0020, 0x60FF_0020];
+    let second = [0x6071_0010u32, 0x6060_0008];
+    let pdos: [(u16, &[u32]); 2] = [(0x1600, &first), (0x1601, &second)];
+    for data_size in [112u16, 512] {
+        for (form, declared) in [("v049", 112u16), ("four slots", 148), ("packed", 156)] {
+            let config = ecmxf_sim::ChipConfig { strict_lengths: false, ..Default::default() };
+            let mut h = Host::with_config(Network::demo(), config);
+            bring_up_to_op(&mut h, 4);
+            resize(&mut h, data_size);
+            h.blocking(&StateSet { target: SlaveSelector::All, state: EcatState::PreOp });
+            let (vendor, product) = (h.chip.net.slaves[1].sii().vendor_id, h.chip.net.slaves[1].sii().product_code);
+            let table = match declared {
+                112 => slotted_pdo_config(1, RX_PDO_ASSIGN, &pdos, 3),
+                148 => slotted_pdo_config(1, RX_PDO_ASSIGN, &pdos, 4),
+                _ => vendor_pdo_config(vendor, product, 1, RX_PDO_ASSIGN, &pdos),
+            };
+            assert_eq!(table.len(), usize::from(declared));
+            let label = format!("{form} ({declared} bytes) in {data_size}-byte data");
+            let before: Vec<i64> = (0..=3).map(|k| h.chip.net.slaves[1].od.int(0x1600, k)).collect();
+            // A packet carries what fits; the length still says the whole.
+            let sent = &table[..table.len().min(usize::from(data_size))];
+            let a = send_declaring(&mut h, CommandCode::PdoConfigSet, 90, sent, declared);
+            let refused = a.header.errors.contains(ErrorFlags::COMMAND_ERROR) || {
+                let after = h.wait_idle();
+                after.errors.contains(ErrorFlags::BLOCKING_FAILED)
+            };
+            let od = &h.chip.net.slaves[1].od;
+            let read = |index: u16, n: usize| (1..=n as u8).map(|k| od.int(index, k) as u32).collect::<Vec<_>>();
+            if declared > data_size {
+                assert!(refused, "{label}: a table longer than the packet's data");
+                let now: Vec<i64> = (0..=3).map(|k| od.int(0x1600, k)).collect();
+                assert_eq!(now, before, "{label}: nothing applied");
+                continue;
+            }
+            assert!(!refused, "{label}: refused");
+            assert_eq!(
+                (od.int(RX_PDO_ASSIGN, 0), od.int(RX_PDO_ASSIGN, 1), od.int(RX_PDO_ASSIGN, 2)),
+                (2, 0x1600, 0x1601)
+            );
+            assert_eq!((od.int(0x1600, 0), read(0x1600, 3)), (3, first.to_vec()), "{label}");
+            assert_eq!((od.int(0x1601, 0), read(0x1601, 2)), (2, second.to_vec()), "{label}");
+        }
+    }
+    // A packed table whose counts it cannot hold (9 entries in a PDO) is
+    // refused whole, the mapping left as it was.
+    let config = ecmxf_sim::ChipConfig { strict_lengths: false, ..Default::default() };
+    let mut h = Host::with_config(Network::demo(), config);
+    bring_up_to_op(&mut h, 4);
+    resize(&mut h, 512);
+    h.blocking(&StateSet { target: SlaveSelector::All, state: EcatState::PreOp });
+    let mut table = vendor_pdo_config(0, 0, 1, RX_PDO_ASSIGN, &pdos);
+    table[20] = 9;
+    let before: Vec<i64> = (0..=3).map(|k| h.chip.net.slaves[1].od.int(0x1600, k)).collect();
+    let a = send_declaring(&mut h, CommandCode::PdoConfigSet, 91, &table, 156);
+    let refused = a.header.errors.contains(ErrorFlags::COMMAND_ERROR)
+        || h.wait_idle().errors.contains(ErrorFlags::BLOCKING_FAILED);
+    assert!(refused, "9 entries in one PDO of the packed table");
+    let now: Vec<i64> = (0..=3).map(|k| h.chip.net.slaves[1].od.int(0x1600, k)).collect();
+    assert_eq!(now, before);
 }
 
 /// v049 gives each command's data length ("資料長度") but never says the

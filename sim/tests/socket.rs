@@ -133,3 +133,54 @@ fn check_and_ctl_commands() {
     assert!(String::from_utf8_lossy(&out.stdout).contains("drive-fault"));
     assert!(String::from_utf8_lossy(&out.stdout).contains("tx-fifo"));
 }
+
+/// `ecmxf-sim check FILE | head -1`: a reader that stops early ends the
+/// listing, never in a panic.
+#[test]
+fn check_ends_quietly_when_its_reader_stops() {
+    use std::process::Stdio;
+    let net = std::env::temp_dir().join(format!("ecmxf-many-{}.toml", std::process::id()));
+    std::fs::write(&net, format!("version = 1\n{}", "[[slave]]\nprofile = \"digital-io\"\n".repeat(128))).unwrap();
+    let mut child = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim"))
+        .args(["check", net.to_str().unwrap()])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Closed before the first line is written: every write finds no reader.
+    drop(child.stdout.take());
+    let out = child.wait_with_output().unwrap();
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(!stderr.contains("panicked"), "{stderr}");
+    assert!(out.status.success(), "{:?} {stderr}", out.status);
+    let _ = std::fs::remove_file(&net);
+}
+
+/// `ecmxf-sim man DIR` writes ecmxf-sim(1): its commands, the network
+/// file and every control command `ctl help` lists, which `man -l`
+/// renders (when man is installed; the .deb's smoke test checks the page
+/// is installed).
+#[test]
+fn the_manual_page_has_the_commands_the_network_file_and_the_control_language() {
+    let dir = std::env::temp_dir().join(format!("ecmxf-sim-man-{}", std::process::id()));
+    let out = Command::new(env!("CARGO_BIN_EXE_ecmxf-sim")).args(["man", dir.to_str().unwrap()]).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let page = dir.join("ecmxf-sim.1");
+    let roff = std::fs::read_to_string(&page).unwrap();
+    assert!(roff.contains(".TH ecmxf-sim 1"), "section 1: {}", &roff[..roff.len().min(200)]);
+    if let Ok(rendered) = Command::new("man").env("MANWIDTH", "120").arg("-l").arg(&page).output() {
+        let text = String::from_utf8_lossy(&rendered.stdout);
+        for heading in ["SYNOPSIS", "DESCRIPTION", "NETWORK FILE", "CONTROL COMMANDS", "EXIT STATUS", "serve", "check"]
+        {
+            assert!(text.contains(heading), "no {heading} in:\n{text}");
+        }
+        // Every control command, as `ctl help` names it.
+        for line in ecmxf_sim::control::HELP.lines() {
+            let command = line.split_whitespace().next().unwrap();
+            assert!(text.contains(command), "control command {command} not in:\n{text}");
+        }
+        let err = String::from_utf8_lossy(&rendered.stderr);
+        assert!(!err.contains("warning"), "man warns: {err}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}

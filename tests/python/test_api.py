@@ -91,10 +91,9 @@ class ApiFromPython(unittest.TestCase):
         import grpc
         from ecmxf.v1 import master_pb2, master_pb2_grpc
 
-        # grpc-core sends the socket path as :authority, which the
-        # daemon's HTTP/2 stack (h2) rejects as not RFC 9113 conformant
-        # (hyperium/h2#487): name "localhost" like grpc-go and grpcurl do.
-        cls.channel = grpc.insecure_channel("unix:" + cls.socket, options=[("grpc.default_authority", "localhost")])
+        # Default options: grpc-core sends the socket path as :authority,
+        # which the daemon takes (daemon/src/api/authority.rs).
+        cls.channel = grpc.insecure_channel("unix:" + cls.socket)
         master = master_pb2_grpc.MasterStub(cls.channel)
         deadline = time.time() + 30
         while True:
@@ -247,6 +246,70 @@ class ApiFromPython(unittest.TestCase):
             self.assertEqual(mismatched, 0, "each frame's input frame loops back its own value")
             self.assertGreaterEqual(len(paired), total * 0.99, "inputs for (almost) every frame")
         self.assertEqual(last.dry, 0, "the queue never ran dry")
+
+
+    def test_6_any_authority_a_client_sends_on_the_socket(self):
+        """unix:PATH and unix:///PATH with no options (grpc-core sends the
+        path percent-encoded), and the raw path as grpc-java sends it: every
+        service answers, a stream too."""
+        import grpc
+        from ecmxf.v1 import master_pb2, master_pb2_grpc, pdo_pb2, pdo_pb2_grpc
+
+        targets = [
+            ("unix:" + self.socket, []),
+            ("unix://" + self.socket, []),
+            ("unix:" + self.socket, [("grpc.default_authority", self.socket)]),
+        ]
+        for target, options in targets:
+            with grpc.insecure_channel(target, options=options) as channel:
+                info = master_pb2_grpc.MasterStub(channel).GetInfo(master_pb2.GetInfoRequest(), timeout=5)
+                self.assertGreater(info.slave_count, 0, target)
+                stream = pdo_pb2_grpc.ProcessDataStub(channel).StreamInputs(
+                    pdo_pb2.StreamInputsRequest(), timeout=5
+                )
+                frames = 0
+                for _ in stream:
+                    frames += 1
+                    if frames == 3:
+                        stream.cancel()
+                        break
+                self.assertEqual(frames, 3, (target, options))
+
+    def test_7_error_details_decode_through_reflection_alone(self):
+        """A client with no stubs and no .proto files (as grpcurl and
+        Postman work): it learns Sdo.Upload's request type by reflection,
+        and the google.rpc.Status and ErrorInfo of the error it gets the
+        same way."""
+        import grpc
+        from google.protobuf import descriptor_pool, json_format, message_factory
+        from grpc_reflection.v1alpha.proto_reflection_descriptor_database import ProtoReflectionDescriptorDatabase
+
+        with grpc.insecure_channel("unix:" + self.socket) as channel:
+            pool = descriptor_pool.DescriptorPool(ProtoReflectionDescriptorDatabase(channel))
+            method = pool.FindServiceByName("ecmxf.v1.Sdo").FindMethodByName("Upload")
+            request_type = message_factory.GetMessageClass(method.input_type)
+            response_type = message_factory.GetMessageClass(method.output_type)
+            upload = channel.unary_unary(
+                "/ecmxf.v1.Sdo/Upload",
+                request_serializer=request_type.SerializeToString,
+                response_deserializer=response_type.FromString,
+            )
+            with self.assertRaises(grpc.RpcError) as caught:
+                upload(request_type(slave=1, index=0x2FFF, subindex=0), timeout=5)
+            e = caught.exception
+            self.assertEqual(e.code(), grpc.StatusCode.ABORTED)
+            raw = dict(e.trailing_metadata())["grpc-status-details-bin"]
+            status = message_factory.GetMessageClass(pool.FindMessageTypeByName("google.rpc.Status")).FromString(raw)
+            self.assertEqual(status.message, e.details())
+            details = []
+            for any_detail in status.details:
+                name = any_detail.type_url.split("/")[-1]
+                detail = message_factory.GetMessageClass(pool.FindMessageTypeByName(name)).FromString(any_detail.value)
+                details.append((name, json_format.MessageToDict(detail)))
+        self.assertEqual(details[0][0], "google.rpc.ErrorInfo", details)
+        info = details[0][1]
+        self.assertEqual((info["reason"], info["domain"]), ("SDO_ABORT", "ecmxf"), info)
+        self.assertEqual(info["metadata"]["abort_code"], "0x06020000", info)
 
 
 if __name__ == "__main__":

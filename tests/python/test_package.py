@@ -189,7 +189,11 @@ class EniVariables(unittest.TestCase):
                     time.sleep(0.1)
                 with c:
                     out, inp = "IO.Outputs.Outputs 1-8", "IO.Inputs.Inputs 1-8"
-                    layout = c.layout()
+                    try:
+                        layout = c.layout()
+                    except ecmxf.Error as e:
+                        # What the daemon did meanwhile says why.
+                        raise AssertionError("%s; the daemon's log:\n%s" % (e, open(os.path.join(tmp, "log")).read()))
                     self.assertEqual(layout.entry(inp).name, IN)
                     self.assertEqual(layout.entry(out).variable, out)
                     with c.lease([IO]) as lease:
@@ -203,6 +207,29 @@ class EniVariables(unittest.TestCase):
             finally:
                 daemon.terminate()
                 daemon.wait(10)
+
+
+class Unreachable(unittest.TestCase):
+    """Nothing listens: the error at once, in ecmxfctl's words."""
+
+    def test_7_a_missing_socket_fails_at_once(self):
+        with tempfile.TemporaryDirectory(prefix="ecmxf-none-") as tmp:
+            missing = os.path.join(tmp, "ecmxfd.sock")
+            start = time.monotonic()
+            with self.assertRaises(ecmxf.Unreachable) as caught:
+                ecmxf.connect(missing)
+            took = time.monotonic() - start
+            self.assertLess(took, 0.2, "failed after %.3f s" % took)
+            self.assertIn("cannot reach ecmxfd at %s: no socket there" % missing, str(caught.exception))
+            # A file nobody listens on: a stale socket.
+            import socket as sk
+
+            stale = sk.socket(sk.AF_UNIX, sk.SOCK_STREAM)
+            stale.bind(missing)
+            stale.close()
+            with self.assertRaises(ecmxf.Unreachable) as caught:
+                ecmxf.connect(missing)
+            self.assertIn("nothing listens on the socket (stale file)", str(caught.exception))
 
 
 if __name__ == "__main__":

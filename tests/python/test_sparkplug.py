@@ -400,6 +400,14 @@ class Sparkplug(unittest.TestCase):
         for n in range(3):
             h.wait_for(lambda k, d, p, n=n: k == "DBIRTH" and d == "slave-%d" % n, 10, i)
         self.__class__.first_birth = i
+        # The births hold: no device dies and is born again once the node
+        # is back (a host would see every device flap).
+        time.sleep(4)
+        with h.lock:
+            flaps = [(m[1], m[2]) for m in h.messages[i + 1:] if m[1] in ("DDEATH", "NBIRTH", "NDEATH")]
+            rebirths = [m[2] for m in h.messages[i + 1:] if m[1] == "DBIRTH"]
+        self.assertEqual(flaps, [], "after the reconnect's births")
+        self.assertEqual(sorted(rebirths), ["slave-%d" % n for n in range(3)], "one DBIRTH per device")
         after = self.ctl("master")["counters"]
         for key in ("fifo_alarms", "recoveries"):
             self.assertEqual(after.get(key, 0), before.get(key, 0), "%s: %s -> %s" % (key, before, after))

@@ -10,6 +10,7 @@
 
 pub mod frames;
 pub mod hardware;
+pub mod opcua;
 pub mod probe_report;
 
 use std::path::{Path, PathBuf};
@@ -281,6 +282,25 @@ pub fn twincat_network(dir: &Path) -> Option<(PathBuf, String)> {
     Some((eni, sim_network(dir, &slaves)))
 }
 
+/// A simulated network of these catalogue devices (the simulator's network
+/// file in `dir`) and the daemon's `[[slave]]` entries for it, each naming
+/// its device's ESI file where it has one (so the daemon names and types
+/// its objects as the file does): the `[link]` lines and the entries.
+pub fn catalog_network(dir: &Path, devices: &[&ecmxf_devices::catalog::CatalogDevice]) -> (String, String) {
+    use ecmxf_devices::config_file::toml_path;
+    let tables: String = devices.iter().map(|d| ecmxf_sim::config::SlaveSection::table_for(d)).collect();
+    let network = dir.join("net.toml");
+    std::fs::write(&network, format!("version = 1\n{tables}")).expect("write the network file");
+    let slaves = devices
+        .iter()
+        .map(|d| match d.origin.esi() {
+            Some(f) => format!("[[slave]]\nesi = {}\n", toml_path(f)),
+            None => "[[slave]]\n".to_string(),
+        })
+        .collect();
+    (format!("backend = \"sim\"\nnetwork = {}", toml_path(&network)), slaves)
+}
+
 /// ../shared/fixtures itself, if there (else as [`fixture`]).
 pub fn fixtures_dir() -> Option<PathBuf> {
     present(repo().join("../shared/fixtures"))
@@ -383,6 +403,25 @@ fn write_config(dir: &Path, text: &str) -> PathBuf {
 }
 
 impl Daemon {
+    /// For a daemon whose engine never runs (bring-up fails for good):
+    /// waits for its API, then for the engine's last error in its status
+    /// (up to 10 s); the status as it last read.
+    pub async fn status_with_an_error(&self) -> pb::MasterStatus {
+        let mut status = pb::MasterStatus::default();
+        for _ in 0..500 {
+            if let Ok(ch) = ecmxf_proto::connect_unix(&self.socket).await {
+                if let Ok(s) = pb::master_client::MasterClient::new(ch).get_status(pb::GetStatusRequest {}).await {
+                    status = s.into_inner();
+                    if !status.last_error.is_empty() {
+                        break;
+                    }
+                }
+            }
+            tokio::time::sleep(Duration::from_millis(20)).await;
+        }
+        status
+    }
+
     /// The daemon embedded, on the demo simulator (as `ecmxfd --sim`), with
     /// a private socket.
     pub fn sim() -> Self {
@@ -510,6 +549,22 @@ impl Daemon {
         match &self.running {
             Running::Process(_) => std::fs::read_to_string(&self.log).unwrap_or_default(),
             Running::Embedded { .. } => "(embedded daemon: its log is not captured)".into(),
+        }
+    }
+
+    /// Whether the daemon's log says `text` within `within` (a spawned
+    /// daemon's; an embedded one's log is not captured: false). For work
+    /// the daemon does on its own after it runs, that no call waits for.
+    pub async fn logged(&self, text: &str, within: std::time::Duration) -> bool {
+        let end = std::time::Instant::now() + within;
+        loop {
+            if self.log().contains(text) {
+                return true;
+            }
+            if std::time::Instant::now() > end {
+                return false;
+            }
+            tokio::time::sleep(std::time::Duration::from_millis(20)).await;
         }
     }
 
@@ -688,6 +743,22 @@ pub fn dot_binary() -> Option<PathBuf> {
     installed_tool("ECMXF_DOT", "/usr/bin/dot", |_| true, "ECMXF_REQUIRE_DOT", "apt-get install graphviz")
 }
 
+/// The node_modules folder `.ci/run` installs tests/node's packages into
+/// (`$ECMXF_NODE_MODULES`, else target/node/node_modules), if `node` loads
+/// `module` from it; required where `ECMXF_REQUIRE_NODE` is set.
+pub fn node_modules(module: &str) -> Option<PathBuf> {
+    let loads = |modules: &Path| {
+        Command::new("node")
+            .env("NODE_PATH", modules)
+            .args(["-e", &format!("require('{module}')")])
+            .output()
+            .is_ok_and(|o| o.status.success())
+    };
+    let install = "mkdir -p target/node; cp tests/node/package.json tests/node/package-lock.json target/node; \
+                   npm ci --prefix target/node";
+    installed_tool("ECMXF_NODE_MODULES", "target/node/node_modules", loads, "ECMXF_REQUIRE_NODE", install)
+}
+
 /// `buf` (the Buf CLI, written in Go: its `buf curl` is a gRPC client
 /// built on connect-go, which like grpc-go reads the status from the error
 /// details): `$ECMXF_BUF`, else the copy `.ci/run` installs from the npm
@@ -700,4 +771,27 @@ pub fn buf_binary() -> Option<PathBuf> {
         "ECMXF_REQUIRE_BUF",
         "npm install --prefix target/buf @bufbuild/buf",
     )
+}
+
+/// A TCP connection to 127.0.0.1:`port` from address `from` (127.0.0.0/8
+/// is all loopback), so caps per peer address can be filled and passed.
+pub async fn connect_from(from: std::net::Ipv4Addr, port: u16) -> std::io::Result<tokio::net::TcpStream> {
+    let s = tokio::net::TcpSocket::new_v4()?;
+    s.bind(std::net::SocketAddr::new(from.into(), 0))?;
+    s.connect(std::net::SocketAddr::from(([127, 0, 0, 1], port))).await
+}
+
+/// How long until the peer closed `s` (EOF or reset), reading and dropping
+/// whatever it sends; `None` when it is still open after `limit`.
+pub async fn closed_within(mut s: tokio::net::TcpStream, limit: std::time::Duration) -> Option<std::time::Duration> {
+    use tokio::io::AsyncReadExt;
+    let start = std::time::Instant::now();
+    let mut buf = [0u8; 64];
+    loop {
+        match tokio::time::timeout(limit.saturating_sub(start.elapsed()), s.read(&mut buf)).await {
+            Ok(Ok(0)) | Ok(Err(_)) => return Some(start.elapsed()),
+            Ok(Ok(_)) => continue,
+            Err(_) => return None,
+        }
+    }
 }

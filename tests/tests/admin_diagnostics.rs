@@ -75,6 +75,15 @@ fn foe_round_trip_with_progress() {
             }
         };
         assert_eq!(e.code(), Code::InvalidArgument, "{e:?}");
+        // A file the slave does not have: the slave's refusal, named; a slave
+        // without FoE (the IO slave's SII lists CoE only): said at once.
+        let ctl = d.ctl(&["foe", "read", "-p", "1", "no-such-file", "-o", "/dev/null"]);
+        assert_ne!(ctl.code, 0);
+        assert!(ctl.stderr.contains("slave 1 did not complete the FoE read of \"no-such-file\""), "{}", ctl.stderr);
+        let started = std::time::Instant::now();
+        let ctl = d.ctl(&["foe", "read", "-p", "2", "x", "-o", "/dev/null"]);
+        assert!(ctl.stderr.contains("slave 2 has no FoE (the mailbox protocols its SII lists: CoE)"), "{}", ctl.stderr);
+        assert!(started.elapsed() < std::time::Duration::from_secs(1), "at once");
     });
 }
 

@@ -150,3 +150,29 @@ fn peripherals_gpio_adc_dac_qei() {
         }
     });
 }
+
+/// A mode the drive does not take (homing on a CSP/CSV/CST drive) gets one
+/// answer, whichever deadline ends the wait: the daemon's own 2 s or a
+/// caller's shorter one. It names the mode the drive shows.
+#[test]
+fn a_mode_the_drive_does_not_show_is_one_answer_whatever_the_deadline() {
+    run(async {
+        let mut d = Daemon::with_config(&config());
+        let ch = d.connect().await;
+        // The process image is the daemon's own work after bring-up; a
+        // loaded machine may take seconds over it, which no mode's answer
+        // is about, so it is built before the deadlines are put to test.
+        ProcessDataClient::new(ch).get_layout(pb::GetLayoutRequest {}).await.expect("the process image");
+        for args in [&["cia402", "mode", "-a", "0", "hm"][..], &["--timeout", "1s", "cia402", "mode", "-a", "0", "hm"]]
+        {
+            let out = d.ctl(args);
+            assert_ne!(out.code, 0, "{args:?}");
+            assert!(
+                out.stderr.contains("axis 0 shows mode 8 (0x6061), not 6, at the deadline"),
+                "{args:?}: {}",
+                out.stderr
+            );
+        }
+        d.stop();
+    });
+}

@@ -17,6 +17,10 @@ fn snap(d: &Daemon, name: &str, args: &[&str]) {
         r"(?m)^(Exchanges|Transactions|Input frames|Output frames|CRC errors|WKC errors|Ring overflows|Process data|Corrupt answers|Not-ready answers|Input batches lost|FIFO alarms|Recoveries|Max FIFO gap|FIFO levels|Config generation):(\s+).*$",
         "$1:$2[live]",
     );
+    // `domains`: the input age and the FIFO levels.
+    settings.add_filter(r"input age [0-9.]+ ms", "input age [live] ms");
+    settings.add_filter(r"WkcErrors [0-9]+", "WkcErrors [live]");
+    settings.add_filter(r"FIFO rx [0-9]+/([0-9]+) tx [0-9]+", "FIFO rx [live]/$1 tx [live]");
     settings.bind(|| insta::assert_snapshot!("ecmxfctl", out));
 }
 
@@ -30,8 +34,14 @@ fn tables_read_as_they_did() {
         snap(&d, "graph", &["graph"]);
         snap(&d, "slaves_verbose", &["slaves", "-v"]);
         snap(&d, "states", &["states"]);
+        // The devices name their entries after the first image is out.
+        let named = "process image entries named by their devices";
+        assert!(d.logged(named, std::time::Duration::from_secs(10)).await, "{}", d.log());
         snap(&d, "pdos", &["pdos"]);
         snap(&d, "sdos", &["sdos", "-p", "2"]);
+        snap(&d, "cstruct", &["cstruct", "-p", "2"]);
+        snap(&d, "domains", &["domains"]);
+        snap(&d, "debug", &["debug"]);
         snap(&d, "sii_decode", &["sii", "decode", "-p", "1"]);
         snap(&d, "sii_read", &["sii", "read", "-p", "1", "--count", "16"]);
         snap(&d, "upload", &["upload", "-p", "1", "0x6041"]);

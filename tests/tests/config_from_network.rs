@@ -115,3 +115,119 @@ fn slaves_with_their_esi_keep_it() {
         let _ = std::fs::remove_dir_all(&dir);
     });
 }
+
+/// Seven Elmo drives, each with 4 RxPDOs and 5 TxPDOs (one of each mapped
+/// here, the others fixed): more than PDO_CONFIG_SET's 3 PDOs, so bring-up
+/// writes them over CoE. The ENI carries them as CoE init commands and as
+/// its ProcessData; either alone rebuilds the same image on fresh drives.
+#[test]
+fn seven_drives_with_more_pdos_than_the_chip_carries_go_round() {
+    let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
+    run(async {
+        let dir = temp_dir("config-elmo7");
+        let device = format!("[[slave]]\nesi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n", elmo.display());
+        let link = ecmxf_e2e::sim_network(&dir, &device.repeat(7));
+        let pdos = "[[slave]]\nproduct_code = 0x30924\n\
+            [[slave.rx_pdos]]\nindex = 0x1607\nentries = [[0x607A, 0, 32], [0x60FF, 0, 32]]\n\
+            [[slave.rx_pdos]]\nindex = 0x160A\nentries = [[0x6040, 0, 16]]\n\
+            [[slave.rx_pdos]]\nindex = 0x160B\nentries = [[0x6060, 0, 8], [0, 0, 8]]\n\
+            [[slave.rx_pdos]]\nindex = 0x160C\nentries = [[0x6071, 0, 16]]\n\
+            [[slave.tx_pdos]]\nindex = 0x1A07\nentries = [[0x6064, 0, 32], [0x60F4, 0, 32]]\n\
+            [[slave.tx_pdos]]\nindex = 0x1A0A\nentries = [[0x6041, 0, 16]]\n\
+            [[slave.tx_pdos]]\nindex = 0x1A0B\nentries = [[0x6061, 0, 8], [0, 0, 8]]\n\
+            [[slave.tx_pdos]]\nindex = 0x1A0C\nentries = [[0x6062, 0, 32]]\n\
+            [[slave.tx_pdos]]\nindex = 0x1A0D\nentries = [[0x6063, 0, 32]]\n";
+        let mut d = Daemon::with_config(&config(&link, &pdos.repeat(7)));
+        let (image, _) = layout(&mut d).await;
+        assert_eq!((image.output_bytes, image.input_bytes), (7 * 14, 7 * 20), "every PDO reaches the frames");
+        assert_eq!(image.entries.iter().filter(|e| e.index != 0).count(), 7 * 11);
+        let eni = d.ctl(&["config", "--format", "eni"]);
+        assert_eq!(eni.code, 0, "{}", eni.stderr);
+        assert_eq!(
+            eni.stdout.matches("<InitCmd>").count(),
+            7 * ((1 + 4 * 2 + 6 + 4 + 1) + (1 + 5 * 2 + 7 + 5 + 1)),
+            "{}",
+            eni.stdout
+        );
+        round_trip(&mut d, &link, true).await;
+
+        // The ProcessData alone (init commands taken out) gives the same.
+        let (before, keys) = {
+            let mut again = Daemon::with_config(&config(&link, &pdos.repeat(7)));
+            let out = layout(&mut again).await;
+            again.stop();
+            out
+        };
+        // So do the init commands alone (no PDO with an Sm).
+        let places = |k: &[Key]| k.iter().map(|k| (k.1, k.2, k.3, k.4, k.5, k.6)).collect::<Vec<_>>();
+        let bare = strip_between(&eni.stdout, "<CoE>", "</CoE>");
+        let unassigned = eni.stdout.replace(" Sm=\"2\"", "").replace(" Sm=\"3\"", "");
+        assert!(!bare.contains("<InitCmd>") && !unassigned.contains(" Sm="));
+        for (name, text) in [("bare.xml", bare), ("unassigned.xml", unassigned)] {
+            let file = dir.join(name);
+            std::fs::write(&file, &text).unwrap();
+            let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", file.display(), config(&link, "")));
+            let (image, same) = layout(&mut d).await;
+            d.stop();
+            assert_eq!((image.output_bytes, image.input_bytes), (before.output_bytes, before.input_bytes), "{name}");
+            assert_eq!(places(&same), places(&keys), "{name}:\n{text}");
+        }
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}
+
+/// `text` without every `open`...`close` span.
+fn strip_between(text: &str, open: &str, close: &str) -> String {
+    let mut out = String::new();
+    let mut rest = text;
+    while let Some(a) = rest.find(open) {
+        out.push_str(&rest[..a]);
+        match rest[a..].find(close) {
+            Some(b) => rest = &rest[a + b + close.len()..],
+            None => rest = "",
+        }
+    }
+    out.push_str(rest);
+    out
+}
+
+/// SOEM's sample (two devices known only from it, PDOs assigned by its
+/// init commands, one of them by complete access) goes round too.
+#[test]
+fn soems_sample_goes_round() {
+    let Some(soem) = ecmxf_e2e::fixture("eni_soem_sample.xml") else { return };
+    run(async {
+        let dir = temp_dir("config-soem");
+        let mut slaves = String::new();
+        for position in [1, 2] {
+            slaves.push_str(&format!("[[slave]]\neni = \"{}\"\neni_slave = {position}\n", soem.display()));
+        }
+        let link = ecmxf_e2e::sim_network(&dir, &slaves);
+        let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", soem.display(), config(&link, "")));
+        round_trip(&mut d, &link, false).await;
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}
+
+/// A network of the first device of every ESI and SII file in the
+/// fixtures (a file added there is picked up), each configured with its
+/// ESI, goes round through both forms.
+#[test]
+fn a_network_of_every_fixture_goes_round() {
+    use ecmxf_devices::catalog::Catalog;
+    let Some(fixtures) = ecmxf_e2e::fixtures_dir() else { return };
+    let catalog = Catalog::scan_with_incoming(&fixtures).unwrap();
+    let mut firsts = Vec::new();
+    for d in catalog.devices.iter().filter(|d| d.has_process_data()) {
+        if !firsts.iter().any(|f: &&ecmxf_devices::catalog::CatalogDevice| f.origin.file() == d.origin.file()) {
+            firsts.push(d);
+        }
+    }
+    run(async {
+        let dir = temp_dir("config-fixtures");
+        let (link, slaves) = ecmxf_e2e::catalog_network(&dir, &firsts);
+        let mut d = Daemon::binary_with_config(&ecmxf_e2e::config_with_cycle(&link, "sync0_us = 1000\n", &slaves));
+        round_trip(&mut d, &link, true).await;
+        let _ = std::fs::remove_dir_all(&dir);
+    });
+}

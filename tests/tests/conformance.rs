@@ -19,11 +19,9 @@ use std::path::Path;
 use std::time::Duration;
 
 use ecmxf_devices::catalog::{self, Catalog, CatalogDevice};
-use ecmxf_devices::config_file::toml_path;
 use ecmxf_devices::od::DataType;
 use ecmxf_e2e::{Daemon, run};
 use ecmxf_proto::v1 as pb;
-use ecmxf_sim::config::SlaveSection;
 use tokio_stream::StreamExt;
 use tonic::transport::Channel;
 
@@ -55,17 +53,7 @@ fn pb_type(t: DataType) -> i32 {
 /// `dir`); the daemon is configured with each ESI device's file, to name
 /// and type its objects.
 fn start(dir: &Path, devices: &[&CatalogDevice]) -> Daemon {
-    let tables: String = devices.iter().map(|d| SlaveSection::table_for(d)).collect();
-    let network = dir.join("net.toml");
-    std::fs::write(&network, format!("version = 1\n{tables}")).unwrap();
-    let slaves: String = devices
-        .iter()
-        .map(|d| match d.origin.esi() {
-            Some(f) => format!("[[slave]]\nesi = {}\n", toml_path(f)),
-            None => "[[slave]]\n".to_string(),
-        })
-        .collect();
-    let link = format!("backend = \"sim\"\nnetwork = {}", toml_path(&network));
+    let (link, slaves) = ecmxf_e2e::catalog_network(dir, devices);
     Daemon::binary_with_config(&ecmxf_e2e::config_with_cycle(&link, "sync0_us = 1000\n", &slaves))
 }
 

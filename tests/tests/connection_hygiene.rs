@@ -4,16 +4,15 @@
 //! answered promptly and the daemon stays cheap; a cap that refuses says so
 //! in one log line; memory returns after many streams close.
 
-use std::net::{IpAddr, Ipv4Addr, SocketAddr};
+use std::net::Ipv4Addr;
 use std::time::{Duration, Instant};
 
-use ecmxf_e2e::{Daemon, run};
+use ecmxf_e2e::{Daemon, closed_within, connect_from, run};
 use ecmxf_proto::v1 as pb;
 use pb::master_client::MasterClient;
 use rcgen::{CertificateParams, KeyPair};
 use sha2::{Digest, Sha256};
 use tokio::io::AsyncReadExt;
-use tokio::net::{TcpSocket, TcpStream};
 
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
@@ -49,14 +48,6 @@ fn daemon_with_tcp(extra: &str) -> (Daemon, u16) {
     (Daemon::binary_with_config(&ecmxf_e2e::config("backend = \"sim\"", &api)), port)
 }
 
-/// Connects to `port` from `from` (any 127.x.y.z address is the loopback
-/// interface, so peers can have many addresses).
-async fn connect_from(from: Ipv4Addr, port: u16) -> std::io::Result<TcpStream> {
-    let s = TcpSocket::new_v4()?;
-    s.bind(SocketAddr::new(IpAddr::V4(from), 0))?;
-    s.connect(SocketAddr::from(([127, 0, 0, 1], port))).await
-}
-
 /// CPU seconds the process has used (utime + stime, USER_HZ = 100).
 fn process_cpu_seconds(pid: u32) -> f64 {
     let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
@@ -74,20 +65,6 @@ fn rss_kb(pid: u32) -> u64 {
         .find_map(|l| l.strip_prefix("VmRSS:"))
         .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
         .unwrap_or(0)
-}
-
-/// Waits until the peer closes `s`: `Some(time it took)`, `None` when it
-/// stays open past `limit` (a reset counts as closed).
-async fn closed_within(mut s: TcpStream, limit: Duration) -> Option<Duration> {
-    let start = Instant::now();
-    let mut buf = [0u8; 64];
-    loop {
-        match tokio::time::timeout(limit.saturating_sub(start.elapsed()), s.read(&mut buf)).await {
-            Ok(Ok(0)) | Ok(Err(_)) => return Some(start.elapsed()),
-            Ok(Ok(_)) => continue,
-            Err(_) => return None,
-        }
-    }
 }
 
 #[test]
@@ -135,7 +112,7 @@ fn idle_tcp_peers_are_closed_and_the_socket_stays_answered() {
             }
             while let Some(s) = opening.join_next().await {
                 let s = s.unwrap().expect("loopback connect");
-                waits.spawn(closed_within(s, Duration::from_millis(3000)));
+                waits.spawn(closed_within(s, Duration::from_millis(4000)));
             }
         }
         let mut closed = Vec::new();
@@ -151,11 +128,13 @@ fn idle_tcp_peers_are_closed_and_the_socket_stays_answered() {
         let (calls, slowest) = admin.await.unwrap();
 
         let open = closed.iter().filter(|c| c.is_none()).count();
-        assert_eq!(open, 0, "{open} of 2000 idle connections still open 3 s after connecting");
-        // The deadline runs from the daemon's accept, a little after the
-        // connect on a loaded machine.
+        assert_eq!(open, 0, "{open} of 2000 idle connections still open 4 s after connecting");
+        // The deadline runs from the daemon's accept. The kernel completes a
+        // connect before that, and with this test's other daemons busy on the
+        // same 2 cores the accept has lagged the connect by a whole second:
+        // the bound is the deadline, that lag, and half a second.
         let last = closed.iter().flatten().max().copied().unwrap_or_default();
-        assert!(last < Duration::from_millis(2000), "the last one closed {last:?} after connecting (deadline 1 s)");
+        assert!(last < Duration::from_millis(2500), "the last one closed {last:?} after connecting (deadline 1 s)");
         // How many met a full listener depends on how fast the peers came
         // (places free up as the first ones reach their deadline).
         let at_once = closed.iter().flatten().filter(|t| **t < Duration::from_millis(500)).count();
@@ -169,10 +148,13 @@ fn idle_tcp_peers_are_closed_and_the_socket_stays_answered() {
         );
         // What the peers cost on top of the engine's own work: this is a
         // debug build sharing 2 cores with other tests, whose idle figure
-        // alone is 5-10 % (the release build's is under 7 %, ecmxfd-bench).
-        // The fault this guards against took it from 12 % to 39-100 %.
+        // alone is 5-10 % (the release build's is under 7 %, ecmxfd-bench),
+        // and whose 2000 accepts and closes alone measured 4-10 %. The fault
+        // this guards against (peers held and polled) took it from 12 % to
+        // 39-100 %: a bound of 20 % still catches it, with room for a host
+        // stall.
         assert!(
-            cpu - cpu_idle < 0.10,
+            cpu - cpu_idle < 0.20,
             "2000 idle peers cost {:.1} % of a core on top of {:.1} % idle, over {wall:.1} s",
             (cpu - cpu_idle) * 100.0,
             cpu_idle * 100.0

@@ -221,3 +221,55 @@ fn a_write_to_the_bits_the_cia402_helper_drives_is_refused_naming_the_axis() {
         .unwrap();
     });
 }
+
+/// `ecmxfd --sim` in a terminal: closing the terminal (SIGHUP, with no
+/// configuration file to read again) stops it cleanly, its socket gone, so
+/// the next start finds no daemon in the way. Under `nohup` (SIGHUP
+/// ignored) it lives on.
+#[test]
+fn a_foreground_sim_daemon_stops_when_its_terminal_hangs_up() {
+    use nix::sys::signal::{Signal, kill};
+    let dir = ecmxf_e2e::temp_dir("hangup");
+    let socket = dir.join("ecmxfd.sock");
+    let start = |nohup: bool| {
+        let mut cmd = if nohup { Command::new("nohup") } else { Command::new(ecmxf_e2e::daemon_binary()) };
+        if nohup {
+            cmd.arg(ecmxf_e2e::daemon_binary());
+        }
+        let child = cmd
+            .args(["--sim", "--socket"])
+            .arg(&socket)
+            .current_dir(&dir)
+            .stdout(Stdio::null())
+            .stderr(Stdio::null())
+            .spawn()
+            .expect("start ecmxfd --sim");
+        let t = Instant::now();
+        while !socket.exists() {
+            assert!(t.elapsed() < Duration::from_secs(30), "no socket");
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        std::thread::sleep(Duration::from_millis(300));
+        child
+    };
+    let mut child = start(false);
+    kill(nix::unistd::Pid::from_raw(child.id() as i32), Signal::SIGHUP).unwrap();
+    let t = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        assert!(t.elapsed() < Duration::from_secs(2), "SIGHUP did not stop it");
+        std::thread::sleep(Duration::from_millis(10));
+    };
+    assert!(status.success(), "{status:?}");
+    assert!(!socket.exists(), "the socket is gone");
+
+    let mut child = start(true);
+    kill(nix::unistd::Pid::from_raw(child.id() as i32), Signal::SIGHUP).unwrap();
+    std::thread::sleep(Duration::from_millis(500));
+    assert!(child.try_wait().unwrap().is_none(), "under nohup a hang-up is not for it");
+    kill(nix::unistd::Pid::from_raw(child.id() as i32), Signal::SIGTERM).unwrap();
+    assert!(child.wait().unwrap().success());
+    let _ = std::fs::remove_dir_all(&dir);
+}

@@ -350,19 +350,8 @@ fn a_refused_init_command_is_named_by_its_line_in_the_eni() {
         let bad = dir.join("bad.xml");
         std::fs::write(&bad, text.replacen("<Index>24770</Index>", "<Index>24575</Index>", 1)).unwrap();
         let mut d = Daemon::with_config(&format!("eni = \"{}\"\n{}", bad.display(), config(&link, "")));
-        // The engine never runs: wait for the API, then for the error.
-        let mut status = pb::MasterStatus::default();
-        for _ in 0..500 {
-            if let Ok(ch) = ecmxf_proto::connect_unix(&d.socket).await {
-                if let Ok(s) = pb::master_client::MasterClient::new(ch).get_status(pb::GetStatusRequest {}).await {
-                    status = s.into_inner();
-                    if !status.last_error.is_empty() {
-                        break;
-                    }
-                }
-            }
-            tokio::time::sleep(Duration::from_millis(20)).await;
-        }
+        // The engine never runs: the error it keeps failing with.
+        let status = d.status_with_an_error().await;
         let e = &status.last_error;
         assert!(e.contains("slave 1 0x5fff:01 (transition PS, ENI line"), "{e}");
         // The command element starts a few lines above its Index.

@@ -191,8 +191,12 @@ fn a_48_slave_layout_is_built_once_by_the_daemon_whatever_callers_give_up() {
             r.set_timeout(Duration::from_millis(100));
             match pd.get_layout(r).await {
                 Ok(image) => break image.into_inner(),
+                // The caller gives up: the daemon's deadline answer, or
+                // the client's own timer when it fires first on a loaded
+                // host (tonic's "Timeout expired", Cancelled).
                 Err(e) => {
-                    assert_eq!(e.code(), tonic::Code::DeadlineExceeded, "{e:?}");
+                    let own_timer = e.code() == tonic::Code::Cancelled && e.message() == "Timeout expired";
+                    assert!(e.code() == tonic::Code::DeadlineExceeded || own_timer, "{e:?}");
                     gave_up += 1;
                 }
             }

@@ -206,7 +206,7 @@ fn layout_streams_leases_and_outputs() {
         too_many.rx_pdos = vec![m1.rx_pdos[0].clone(); 4];
         let e = pd.set_mapping(pb::SetMappingRequest { mapping: Some(too_many) }).await.unwrap_err();
         assert_eq!(e.code(), Code::InvalidArgument);
-        assert!(e.message().contains("mapping.rx_pdos"), "{}", e.message());
+        assert!(e.message().contains("mapping.rx_pdos") && e.message().contains("assigned twice"), "{}", e.message());
 
         // The fixed-mapping drive refuses a remap: the error says so and the
         // previous mapping runs again.

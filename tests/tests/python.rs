@@ -37,7 +37,7 @@ fn run_python(python: &PathBuf, script: &str, tests: usize) {
 fn python_client_scans_reads_writes_enables_and_streams() {
     let install = "python3 -m venv target/py-venv; target/py-venv/bin/pip install -r tests/python/requirements.txt";
     if let Some(python) = python_with("grpc_tools", install) {
-        run_python(&python, "tests/python/test_api.py", 5);
+        run_python(&python, "tests/python/test_api.py", 7);
     }
 }
 
@@ -46,6 +46,6 @@ fn python_client_scans_reads_writes_enables_and_streams() {
 #[test]
 fn python_package_reads_slaves_sdo_and_inputs_from_the_simulator() {
     if let Some(python) = python_with("ecmxf", "target/py-venv/bin/pip install ./clients/python") {
-        run_python(&python, "tests/python/test_package.py", 6);
+        run_python(&python, "tests/python/test_package.py", 7);
     }
 }

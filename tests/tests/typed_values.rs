@@ -53,6 +53,10 @@ fn mistyped_writes_are_refused_and_none_reaches_the_slave() {
         let sim = Simulator::serve(&dir, &[]);
         let mut d = Daemon::binary_with_config(&config(&sim.link(), ""));
         let mut sdo = SdoClient::new(d.connect().await);
+        // The devices name the image's entries over their mailboxes after
+        // the first image: done before requests are counted.
+        let named = "process image entries named by their devices";
+        assert!(d.logged(named, std::time::Duration::from_secs(10)).await, "{}", d.log());
 
         // Objects of known type (CiA 402) that no PDO maps, so only an SDO
         // changes them: INTEGER16, UNSIGNED16, UNSIGNED32 x2.

@@ -9,18 +9,21 @@
 //!   dictionary stay the same), its DC exceptions, and its PDO assignment and
 //!   mapping as read over CoE (`rx_pdos`/`tx_pdos`, which bring-up writes
 //!   only where the slave does not already run it, so a fixed mapping is
-//!   stated without being written). A mapping beyond PDO_CONFIG_SET's 3
-//!   PDOs of 8 entries, or not read over CoE, is left as the slave has it,
-//!   said in a comment.
+//!   stated without being written; beyond PDO_CONFIG_SET's 3 PDOs of 8
+//!   entries it writes them over CoE). A mapping not read over CoE is left
+//!   as the slave has it, said in a comment.
 //! - `--format eni`: an ETG.2100 EtherCATConfig (what `eni = FILE` takes):
 //!   each slave's Info, its ProcessData (PDOs with names and types, and
 //!   its Send/Recv place in the image), its DC block, the cycle, and a
 //!   ProcessImage naming every entry (the entry's variable name, else
 //!   SLAVE.PDO.ENTRY), which ecmxfd checks the layout against when it runs
-//!   the file. The assignment is the PDOs with an `Sm`, which ecmxfd writes
-//!   where a slave does not run it (config/eni.rs); a mapping to change is
-//!   for CoE init commands, which are not written here (a fixed mapping
-//!   refuses them).
+//!   the file. A slave whose mapping was read over CoE gets it as CoE init
+//!   commands at PS, in ETG.1000.6 5.6.7.4's order (0x1C12/0x1C13 emptied,
+//!   each 0x16xx/0x1Axx mapping count 0, entries, count, then the
+//!   assignment filled and counted), so any master rebuilds the image; the
+//!   PDOs with an `Sm` say the same assignment. ecmxfd writes neither where
+//!   the slave holds it already (a fixed PDO refuses a mapping write), so
+//!   the file runs on the network it came from (docs/eni.md).
 
 use std::collections::HashMap;
 use std::fmt::Write as _;
@@ -51,10 +54,6 @@ impl Report for ConfigReport {
         self.text.clone()
     }
 }
-
-/// PDO_CONFIG_SET's limits (v049, command 7): 3 PDOs of 8 entries.
-const SET_PDOS: usize = 3;
-const SET_ENTRIES: usize = 8;
 
 /// Everything the file is made of, read once.
 struct Network {
@@ -143,13 +142,8 @@ fn toml_pdos(out: &mut String, m: &SlaveMappingReport) {
         if list.is_empty() {
             continue;
         }
-        let fits = list.len() <= SET_PDOS && list.iter().all(|p| p.entries.len() <= SET_ENTRIES);
-        if m.source != "coe" || !fits {
-            let why = if m.source != "coe" {
-                format!("known from its {}, not read over CoE", m.source.to_uppercase())
-            } else {
-                format!("beyond PDO_CONFIG_SET's {SET_PDOS} PDOs of {SET_ENTRIES} entries")
-            };
+        if m.source != "coe" {
+            let why = format!("known from its {}, not read over CoE", m.source.to_uppercase());
             let pdos: Vec<String> = list.iter().map(|p| format!("{:#06x}", p.index)).collect();
             let _ = writeln!(out, "# {key}: {} as the slave has them ({why})", pdos.join(", "));
             continue;
@@ -176,6 +170,8 @@ fn xml(text: &str) -> String {
 /// An IEC 61131-3 type name for an ecmxfctl type (ETG.2100 `DataType`).
 fn iec_type(t: &str, bits: u32) -> String {
     match t {
+        // A few bits of a byte (a 2-bit sync mode): ETG.1000.6's BITn.
+        "uint8" | "int8" if (2..8).contains(&bits) => format!("BIT{bits}"),
         "bool" => "BOOL".into(),
         "int8" => "SINT".into(),
         "int16" => "INT".into(),
@@ -192,8 +188,11 @@ fn iec_type(t: &str, bits: u32) -> String {
     }
 }
 
-/// The ProcessImage name of an entry: its variable name, else
-/// SLAVE.PDO.ENTRY from the mapping's names (or numbers where unnamed).
+/// The ProcessImage name of an entry: SLAVE.REST, SLAVE the slave's name
+/// in this file (a reader gives a variable to the slave its name starts
+/// with, ETG.2100) and REST its variable's name without the daemon's
+/// prefix (the slave's configured name or its position), else PDO.ENTRY
+/// from the mapping's names (or numbers where unnamed).
 fn variable_names(net: &Network) -> HashMap<(bool, u32), String> {
     let mut out = HashMap::new();
     let mut taken: Vec<String> = Vec::new();
@@ -201,10 +200,16 @@ fn variable_names(net: &Network) -> HashMap<(bool, u32), String> {
         if e.index == 0 {
             continue;
         }
+        let slave = net.names.get(e.slave as usize).cloned().unwrap_or_else(|| e.slave.to_string());
         let name = if !e.variable.is_empty() {
-            e.variable.clone()
+            let configured = net.slaves.get(e.slave as usize).and_then(|s| s.expected.as_ref()).map(|x| &x.name);
+            let rest = [configured.cloned().unwrap_or_default(), e.slave.to_string()]
+                .iter()
+                .filter(|p| !p.is_empty())
+                .find_map(|p| e.variable.strip_prefix(p.as_str())?.strip_prefix('.'))
+                .unwrap_or(&e.variable);
+            format!("{slave}.{rest}")
         } else {
-            let slave = net.names.get(e.slave as usize).cloned().unwrap_or_else(|| e.slave.to_string());
             let (pdo, entry) = described(net, e);
             format!("{slave}.{pdo}.{entry}")
         };
@@ -259,13 +264,54 @@ fn eni_pdos(out: &mut String, tag: &str, sm: u8, list: &[PdoReport]) {
     }
 }
 
+/// One CoE init command at PS (ETG.2100 `InitCmd`, `Ccs` 1: a download),
+/// numbers in decimal as TwinCAT writes them, data as hex bytes.
+fn init_cmd(comment: &str, index: u32, subindex: u32, data: &[u8]) -> String {
+    let hex: String = data.iter().map(|b| format!("{b:02x}")).collect();
+    format!(
+        "\t\t\t\t\t\t<InitCmd>\n\t\t\t\t\t\t\t<Transition>PS</Transition>\n\t\t\t\t\t\t\t<Comment>{}</Comment>\n\
+         \t\t\t\t\t\t\t<Timeout>0</Timeout>\n\t\t\t\t\t\t\t<Ccs>1</Ccs>\n\t\t\t\t\t\t\t<Index>{index}</Index>\n\
+         \t\t\t\t\t\t\t<SubIndex>{subindex}</SubIndex>\n\t\t\t\t\t\t\t<Data>{hex}</Data>\n\t\t\t\t\t\t</InitCmd>\n",
+        xml(comment)
+    )
+}
+
+/// The init commands that give a slave its assignment and mapping over CoE
+/// (ETG.1000.6 5.6.7.4): per direction, the assignment emptied, each PDO's
+/// mapping (count 0, entries, count), the PDOs assigned, their count.
+fn pdo_init_cmds(m: &SlaveMappingReport) -> Vec<String> {
+    let mut out = Vec::new();
+    for (assign, list) in [(0x1C12u32, &m.rx_pdos), (0x1C13, &m.tx_pdos)] {
+        if list.is_empty() {
+            continue;
+        }
+        out.push(init_cmd(&format!("clear pdo {assign:#06x} entries"), assign, 0, &[0]));
+        for p in list {
+            out.push(init_cmd(&format!("clear pdo {:#06x} entries", p.index), p.index, 0, &[0]));
+            for (k, e) in p.entries.iter().enumerate() {
+                let value = e.index << 16 | (e.subindex & 0xFF) << 8 | (e.bit_length & 0xFF);
+                let comment = format!("download pdo {:#06x} entry {}", p.index, k + 1);
+                out.push(init_cmd(&comment, p.index, k as u32 + 1, &value.to_le_bytes()));
+            }
+            let count = [p.entries.len() as u8];
+            out.push(init_cmd(&format!("download pdo {:#06x} entry count", p.index), p.index, 0, &count));
+        }
+        for (k, p) in list.iter().enumerate() {
+            let comment = format!("download pdo {assign:#06x}:{:02x} index", k + 1);
+            out.push(init_cmd(&comment, assign, k as u32 + 1, &(p.index as u16).to_le_bytes()));
+        }
+        out.push(init_cmd(&format!("download pdo {assign:#06x} count"), assign, 0, &[list.len() as u8]));
+    }
+    out
+}
+
 fn eni(net: &Network) -> String {
     let mut out = String::new();
     let _ = writeln!(
         out,
         "<?xml version=\"1.0\" encoding=\"utf-8\"?>\n<!-- The network ecmxfd ran when `ecmxfctl config` read it as an ENI \
          ({} slaves; ETG.2100, decimal numbers as TwinCAT writes them). ecmxfd writes the assignment \
-         ProcessData gives where a slave does not run it; change a mapping with CoE InitCmds (0x16xx/0x1Axx at PS). -->\n<EtherCATConfig Version=\"1.3\">\n\t<Config>\n\
+         ProcessData gives, and the CoE InitCmds at PS, where a slave does not hold them already. -->\n<EtherCATConfig Version=\"1.3\">\n\t<Config>\n\
          \t\t<Master>\n\t\t\t<Info>\n\t\t\t\t<Name>ecmxfd</Name>\n\t\t\t</Info>\n\t\t</Master>",
         net.slaves.len()
     );
@@ -300,9 +346,15 @@ fn eni(net: &Network) -> String {
             let _ = writeln!(out, "\t\t\t</ProcessData>");
         }
         // Its mapping was read over CoE: it speaks CoE (the mailbox areas
-        // are the chip's to set up from the SII).
-        if mapping(net, s.position).is_some_and(|m| m.source == "coe") {
-            let _ = writeln!(out, "\t\t\t<Mailbox>\n\t\t\t\t<Protocol>CoE</Protocol>\n\t\t\t</Mailbox>");
+        // are the chip's to set up from the SII), and its init commands
+        // write that mapping.
+        if let Some(m) = mapping(net, s.position).filter(|m| m.source == "coe") {
+            let _ =
+                writeln!(out, "\t\t\t<Mailbox>\n\t\t\t\t<Protocol>CoE</Protocol>\n\t\t\t\t<CoE>\n\t\t\t\t\t<InitCmds>");
+            for cmd in pdo_init_cmds(m) {
+                let _ = write!(out, "{cmd}");
+            }
+            let _ = writeln!(out, "\t\t\t\t\t</InitCmds>\n\t\t\t\t</CoE>\n\t\t\t</Mailbox>");
         }
         if s.dc.active {
             let _ = writeln!(

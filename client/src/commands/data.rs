@@ -115,7 +115,7 @@ async fn inputs(api: &Api, names: Vec<String>, whole: bool) -> Result<Option<pb:
     }
 }
 
-async fn outputs(api: &Api, names: Vec<String>) -> Result<pb::OutputImage, CliError> {
+pub(super) async fn outputs(api: &Api, names: Vec<String>) -> Result<pb::OutputImage, CliError> {
     let r = api.pdo().read_outputs(api.req(pb::ReadOutputsRequest { entries: names })).await;
     Ok(r.map_err(CliError::rpc("read outputs"))?.into_inner())
 }

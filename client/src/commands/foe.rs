@@ -80,7 +80,12 @@ async fn follow(
                 }
             }
             Some(Err(st)) => {
-                bar.abandon();
+                // A refusal before any byte moved leaves no bar behind.
+                if bar.length().unwrap_or(0) == 0 {
+                    bar.finish_and_clear();
+                } else {
+                    bar.abandon();
+                }
                 return Err(CliError::rpc(action)(st));
             }
             None => {

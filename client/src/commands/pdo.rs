@@ -25,6 +25,9 @@ pub struct SlaveMappingReport {
     pub source: String,
     /// Why a lesser source was used ("" for CoE).
     pub note: String,
+    /// Where the names came from: "eni", "esi", "sii", "sdo_info" or
+    /// "none" (an older daemon that does not say: "").
+    pub names_from: String,
     /// RxPDOs (outputs, 0x1C12).
     pub rx_pdos: Vec<PdoReport>,
     /// TxPDOs (inputs, 0x1C13).
@@ -237,6 +240,7 @@ pub async fn fetch(api: &Api, position: Option<u32>) -> Result<PdosReport, CliEr
             }
             .into(),
             note: s.note,
+            names_from: s.names_from,
             rx_pdos: pdos(s.rx_pdos),
             tx_pdos: pdos(s.tx_pdos),
         })

@@ -324,29 +324,73 @@ pub async fn run(api: &Api, out: Out, cmd: &SiiCommand) -> Result<(), CliError> 
             }
             let backup_path = backup.clone().unwrap_or_else(|| {
                 let t = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map_or(0, |d| d.as_secs());
-                PathBuf::from(format!("sii-backup-{slave}-{t}.bin"))
+                PathBuf::from(format!("sii-backup-{slave}-{}.bin", utc_stamp(t)))
             });
-            // Fail before touching the EEPROM if the backup cannot be kept.
-            std::fs::write(&backup_path, b"").map_err(CliError::file(&backup_path))?;
-            let words = (data.len() / 2) as u64;
-            let req = api.req_for(pb::SiiWriteRequest { slave, word: *word, data }, Duration::from_millis(200 * words));
-            let r = match api.sii().write(req).await {
-                Ok(r) => r.into_inner(),
-                Err(s) => {
-                    let _ = std::fs::remove_file(&backup_path);
-                    return Err(CliError::rpc(format!("write SII of slave {slave}"))(s));
-                }
-            };
-            std::fs::write(&backup_path, &r.backup).map_err(CliError::file(&backup_path))?;
+            let words_written = write_words(api, out, slave, *word, &data, &backup_path).await?;
             out.report(&SiiWriteReport {
                 slave,
                 word: *word,
-                words_written: r.words_written,
+                words_written,
                 backup_file: backup_path.display().to_string(),
             })?;
         }
     }
     Ok(())
+}
+
+/// Words per Sii.Write call: progress shows between calls, about 1.6 s
+/// apart on hardware (the EEPROM takes some 200 ms a word).
+const WRITE_CHUNK_WORDS: usize = 8;
+
+/// Writes `data` from `word` on: first the whole range's old contents
+/// into `backup` (so it is complete even if a write fails part way, and
+/// nothing is written if it cannot be kept), then the words in chunks
+/// with a progress bar on a terminal. The words written.
+async fn write_words(
+    api: &Api,
+    out: Out,
+    slave: u32,
+    word: u32,
+    data: &[u8],
+    backup: &std::path::Path,
+) -> Result<u32, CliError> {
+    let words = (data.len() / 2) as u32;
+    let req = api.req_for(pb::SiiReadRequest { slave, word, count: words }, read_budget(words));
+    let r = api.sii().read(req).await;
+    let old = r.map_err(CliError::rpc(format!("read SII of slave {slave} for its backup")))?.into_inner().data;
+    std::fs::write(backup, &old).map_err(CliError::file(backup))?;
+    let bar = if out.json || !std::io::stderr().is_terminal() {
+        indicatif::ProgressBar::hidden()
+    } else {
+        let b = indicatif::ProgressBar::new(u64::from(words));
+        b.set_style(
+            indicatif::ProgressStyle::with_template("writing SII [{bar:40}] {pos}/{len} words, eta {eta}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar())
+                .progress_chars("=> "),
+        );
+        b
+    };
+    let mut written = 0u32;
+    for chunk in data.chunks(2 * WRITE_CHUNK_WORDS) {
+        let at = word + written;
+        let n = (chunk.len() / 2) as u64;
+        let req =
+            api.req_for(pb::SiiWriteRequest { slave, word: at, data: chunk.to_vec() }, Duration::from_millis(200 * n));
+        match api.sii().write(req).await {
+            Ok(r) => written += r.into_inner().words_written,
+            Err(s) => {
+                bar.abandon();
+                return Err(CliError::rpc(format!(
+                    "write SII of slave {slave} at word {at:#06x} ({written} of {words} words written and verified \
+                     before it; {} holds the whole range as it was)",
+                    backup.display()
+                ))(s));
+            }
+        }
+        bar.set_position(u64::from(written));
+    }
+    bar.finish_and_clear();
+    Ok(written)
 }
 
 #[cfg(test)]
@@ -358,5 +402,32 @@ mod tests {
         let d = hexdump(0x10, b"ECM-XF\x00\x01");
         assert_eq!(d, "000010  45 43 4d 2d 58 46 00 01                          ECM-XF..\n");
         assert_eq!(protocols(0x0C), vec!["CoE", "FoE"]);
+    }
+}
+
+/// `secs` since the Unix epoch as an ISO 8601 basic UTC time,
+/// `20261128T195300Z` (a file name sorts by it and says when).
+fn utc_stamp(secs: u64) -> String {
+    let (days, rest) = ((secs / 86_400) as i64, secs % 86_400);
+    // Civil date from days (H. Hinnant's days_from_civil, inverted).
+    let z = days + 719_468;
+    let era = z.div_euclid(146_097);
+    let doe = z.rem_euclid(146_097);
+    let yoe = (doe - doe / 1460 + doe / 36_524 - doe / 146_096) / 365;
+    let doy = doe - (365 * yoe + yoe / 4 - yoe / 100);
+    let mp = (5 * doy + 2) / 153;
+    let day = doy - (153 * mp + 2) / 5 + 1;
+    let month = if mp < 10 { mp + 3 } else { mp - 9 };
+    let year = yoe + era * 400 + i64::from(month <= 2);
+    format!("{year:04}{month:02}{day:02}T{:02}{:02}{:02}Z", rest / 3600, rest % 3600 / 60, rest % 60)
+}
+
+#[cfg(test)]
+mod stamp_tests {
+    #[test]
+    fn utc_stamps_read_as_dates() {
+        assert_eq!(super::utc_stamp(0), "19700101T000000Z");
+        assert_eq!(super::utc_stamp(951_782_400), "20000229T000000Z");
+        assert_eq!(super::utc_stamp(1_795_864_748), "20261128T111908Z");
     }
 }

@@ -75,6 +75,19 @@ impl From<AxisError> for Status {
     }
 }
 
+/// [`bounded`], except that a drive that did not arrive or show its mode
+/// says so whichever deadline ended the wait (the command's own or the
+/// caller's): one answer for one situation, naming what the drive shows.
+async fn bounded_wait<T>(
+    caller: &crate::api::auth::Caller,
+    work: impl std::future::Future<Output = Result<T, AxisError>>,
+) -> Result<T, Status> {
+    match work.await {
+        Err(e @ (AxisError::NotArrived { .. } | AxisError::ModeNotShown { .. })) => Err(e.into()),
+        other => bounded(caller, async { other }).await,
+    }
+}
+
 #[tonic::async_trait]
 impl Cia402Api for Cia402Service {
     async fn list_axes(&self, request: Request<pb::ListAxesRequest>) -> Result<Response<pb::ListAxesResponse>, Status> {
@@ -103,7 +116,7 @@ impl Cia402Api for Cia402Service {
         };
         let call = wait_budget(&caller, r.timeout_ms, COMMAND_WAIT);
         tracing::info!(who = %caller.who, axis = axis.number, target = ?command.target(), "axis command");
-        let status = bounded(&caller, self.0.master.axis_command(&axis, command, r.wait, call)).await?;
+        let status = bounded_wait(&caller, self.0.master.axis_command(&axis, command, r.wait, call)).await?;
         Ok(Response::new(status_pb(status)))
     }
 
@@ -114,7 +127,8 @@ impl Cia402Api for Cia402Service {
         let mode =
             i8::try_from(r.mode).map_err(|_| bad_argument("mode", format!("{} is outside -128..=127", r.mode)))?;
         let status =
-            bounded(&caller, self.0.master.set_axis_mode(&axis, mode, &r.lease_id, &caller.who, caller.call)).await?;
+            bounded_wait(&caller, self.0.master.set_axis_mode(&axis, mode, &r.lease_id, &caller.who, caller.call))
+                .await?;
         Ok(Response::new(status_pb(status)))
     }
 

@@ -14,11 +14,15 @@ use super::auth::Role;
 use super::bounded;
 use super::convert::{phase_to_pb, state_from_pb, state_to_pb};
 use super::status::to_status;
-use super::{Context, NETWORK_WAIT, wait_budget};
+use super::{Context, LogFilter, LogFilterRefusal, NETWORK_WAIT, wait_budget};
 use crate::config::SlaveConfig;
 use crate::master::diagnostics::{ErrorFlags, StatusFlags};
 use crate::master::states::{SlaveSelector, selector};
-use crate::master::{Call, Master, al_status_text};
+use crate::master::{Call, EngineError, Master, al_status_text};
+
+/// The longest log filter taken (a filter names a few modules; the text is
+/// logged when set).
+const MAX_LOG_FILTER: usize = 1024;
 
 /// The `Master` service.
 #[derive(Debug, Clone)]
@@ -124,6 +128,50 @@ impl MasterApi for MasterService {
         tracing::info!(who = %caller.who, "warm reset requested");
         bounded(&caller, self.0.master.warm_reset(caller.call.or_within(NETWORK_WAIT))).await?;
         Ok(Response::new(pb::WarmResetResponse { state: state_to_pb(self.0.master.layout().state) as i32 }))
+    }
+
+    async fn get_log_filter(
+        &self,
+        request: Request<pb::GetLogFilterRequest>,
+    ) -> Result<Response<pb::LogFilter>, Status> {
+        self.0.authorize(&request, Role::Observer)?;
+        let (filter, from_env) = self.log_filter()?.current();
+        Ok(Response::new(pb::LogFilter { filter, from_env }))
+    }
+
+    async fn set_log_filter(
+        &self,
+        request: Request<pb::SetLogFilterRequest>,
+    ) -> Result<Response<pb::LogFilter>, Status> {
+        let caller = self.0.authorize(&request, Role::Admin)?;
+        let control = self.log_filter()?;
+        let filter = request.into_inner().filter;
+        let bad = |reason: String| to_status(EngineError::BadArgument { field: "filter", reason });
+        if filter.trim().is_empty() {
+            return Err(bad("an empty log filter; give a level (\"debug\") or directives".into()));
+        }
+        if filter.len() > MAX_LOG_FILTER {
+            return Err(bad(format!("{} bytes; a log filter is at most {MAX_LOG_FILTER}", filter.len())));
+        }
+        control.set(&filter).map_err(|why| match why {
+            LogFilterRefusal::FromEnv => Status::failed_precondition(format!(
+                "RUST_LOG={:?} is in force and wins over any other filter: unset it and restart the daemon",
+                control.current().0
+            )),
+            LogFilterRefusal::Invalid(why) => bad(format!("{filter:?} is not a log filter: {why}")),
+        })?;
+        tracing::info!(who = %caller.who, filter, "log filter set (until the next reload or restart)");
+        let (filter, from_env) = control.current();
+        Ok(Response::new(pb::LogFilter { filter, from_env }))
+    }
+}
+
+impl MasterService {
+    /// The daemon's log filter, or why there is none to reach.
+    fn log_filter(&self) -> Result<&Arc<dyn LogFilter>, Status> {
+        self.0.log_filter.get().ok_or_else(|| {
+            Status::failed_precondition("this daemon does not own its logging (it runs embedded in another program)")
+        })
     }
 }
 

@@ -20,6 +20,7 @@ use crate::master::{Call, Master};
 
 pub(crate) mod admin;
 pub(crate) mod auth;
+pub(crate) mod authority;
 pub(crate) mod cia402;
 pub(crate) mod convert;
 pub(crate) mod diagnostics;
@@ -59,6 +60,27 @@ pub(crate) struct Context {
     rules: tokio::sync::watch::Sender<u64>,
     /// The identity behind each lease holder's name.
     holders: std::sync::Mutex<std::collections::HashMap<String, auth::Identity>>,
+    /// The daemon's log filter, when the daemon owns its logging (set once
+    /// by the service that started it; embedded daemons have none).
+    pub log_filter: std::sync::OnceLock<Arc<dyn LogFilter>>,
+}
+
+/// The daemon's log filter as `Master.GetLogFilter`/`SetLogFilter` reach
+/// it: implemented by the service that started logging.
+pub(crate) trait LogFilter: Send + Sync + std::fmt::Debug {
+    /// The filter in force, and whether `RUST_LOG` set it.
+    fn current(&self) -> (String, bool);
+    /// Replaces the filter until the next reload or restart.
+    fn set(&self, filter: &str) -> Result<(), LogFilterRefusal>;
+}
+
+/// Why a log filter was not applied.
+#[derive(Debug)]
+pub(crate) enum LogFilterRefusal {
+    /// `RUST_LOG` is in force and wins.
+    FromEnv,
+    /// The text is not a filter: the parser's reason.
+    Invalid(String),
 }
 
 impl Context {
@@ -72,6 +94,7 @@ impl Context {
             stopping: tokio::sync::watch::Sender::new(false),
             rules: tokio::sync::watch::Sender::new(0),
             holders: std::sync::Mutex::default(),
+            log_filter: std::sync::OnceLock::new(),
         })
     }
 

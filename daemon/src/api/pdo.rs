@@ -57,14 +57,21 @@ fn source_pb(s: PdoSource) -> pb::PdoSource {
 }
 
 fn pdos_from_pb(list: &[pb::Pdo], field: &'static str) -> Result<Vec<PdoConfig>, Status> {
-    if list.len() > 3 {
-        return Err(bad_argument(field, format!("{} PDOs; PDO_CONFIG_SET carries 3", list.len())));
+    // Subindex 0 counts them in a byte; beyond PDO_CONFIG_SET's 3 PDOs of 8
+    // entries, bring-up writes them over CoE.
+    if list.len() > 254 {
+        return Err(bad_argument(field, format!("{} PDOs; an assignment holds 254", list.len())));
+    }
+    if let Some(twice) =
+        list.iter().enumerate().find_map(|(k, p)| list[..k].iter().any(|q| q.index == p.index).then_some(p.index))
+    {
+        return Err(bad_argument(field, format!("PDO {twice:#06x} is assigned twice")));
     }
     list.iter()
         .map(|p| {
             let index = u16::try_from(p.index).map_err(|_| bad_argument(field, format!("PDO index {:#x}", p.index)))?;
-            if p.entries.len() > 8 {
-                return Err(bad_argument(field, format!("PDO {index:#06x} has {} entries; 8 fit", p.entries.len())));
+            if p.entries.len() > 254 {
+                return Err(bad_argument(field, format!("PDO {index:#06x} has {} entries; 254 fit", p.entries.len())));
             }
             let entries = p
                 .entries
@@ -179,6 +186,7 @@ impl ProcessDataApi for ProcessDataService {
                 tx_pdos: mapping_pb(&p.tx),
                 source: source_pb(p.source) as i32,
                 note: p.note.clone(),
+                names_from: p.names_from.as_str().to_string(),
             })
             .collect();
         Ok(Response::new(pb::GetMappingResponse { slaves }))

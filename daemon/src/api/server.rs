@@ -169,11 +169,13 @@ fn routes(
     let v1 = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(ecmxf_proto::ERROR_MODEL_DESCRIPTOR_SET)
         .build_v1()
         .map_err(ServeError::Reflection)?;
     let v1alpha = tonic_reflection::server::Builder::configure()
         .register_encoded_file_descriptor_set(pb::FILE_DESCRIPTOR_SET)
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+        .register_encoded_file_descriptor_set(ecmxf_proto::ERROR_MODEL_DESCRIPTOR_SET)
         .build_v1alpha()
         .map_err(ServeError::Reflection)?;
     let c = || Arc::clone(ctx);
@@ -380,8 +382,10 @@ pub(crate) async fn serve(
     let (unix_tx, unix_rx) = mpsc::channel(16);
     tasks.spawn(admission::admit_loop(listener, unix_gate, deadline, |io| async move { Ok(io) }, unix_tx));
     let mut stop = shutdown.clone();
+    // Socket paths as `:authority` (grpcio, grpc-java) made `localhost`:
+    // api/authority.rs.
     let unix = server().add_routes(routes.clone()).serve_with_incoming_shutdown(
-        ReceiverStream::new(unix_rx).map(Ok::<_, std::io::Error>),
+        ReceiverStream::new(unix_rx).map(|conn| Ok::<_, std::io::Error>(super::authority::AuthorityFix::new(conn))),
         async move {
             let _ = stop.changed().await;
         },

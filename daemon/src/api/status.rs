@@ -46,6 +46,9 @@ pub(crate) fn to_status(e: EngineError) -> Status {
             (Code::Internal, info("CHIP_FAILED", &[]))
         }
         EngineError::Refused(_) => (Code::FailedPrecondition, info("REFUSED", &[])),
+        EngineError::FoeRefused { slave, name, .. } => {
+            (Code::FailedPrecondition, info("FOE_REFUSED", &[("slave", &slave.to_string()), ("file", name)]))
+        }
         EngineError::Timeout => (Code::DeadlineExceeded, info("TIMEOUT", &[])),
         EngineError::QueueFull => (Code::ResourceExhausted, info("QUEUE_FULL", &[])),
         EngineError::Unavailable(_) => (Code::Unavailable, info("NOT_RUNNING", &[])),
@@ -78,7 +81,9 @@ impl From<EngineError> for Status {
 /// Whether an error message a user reads shows Rust `{:?}` output (an
 /// `Option`, a struct or enum dump, a path) instead of words: such text
 /// says nothing to a user of grpcurl or Python. Quoted names (`"1.foo"`)
-/// and durations (`100ms`) are words.
+/// and durations (`100ms`) are words. Debug builds only: the tests read
+/// what it finds.
+#[cfg(any(debug_assertions, test))]
 pub(crate) fn looks_like_debug(message: &str) -> bool {
     const MARKS: [&str; 9] = ["Some(", "None", "Ok(", "Err(", "::", " { ", "\\\"", "One(", "All)"];
     if MARKS.iter().any(|m| message.contains(m)) {

@@ -26,10 +26,9 @@ use std::sync::Arc;
 use std::sync::atomic::Ordering::Relaxed;
 use std::time::{Duration, Instant};
 
+use ecmxfd::config::SparkplugConfig;
 use ecmxfd::config::sparkplug::BrokerUrl;
-use ecmxfd::config::{Config, LinkConfig, SparkplugConfig};
-use ecmxfd::master::entry_writes::Staging;
-use support::{cpu_seconds, serve, started};
+use support::{cpu_seconds, io_plant, median};
 
 const SLAVES: usize = 64;
 
@@ -77,51 +76,13 @@ fn broker(dir: &std::path::Path) -> Result<Broker, String> {
     Ok(Broker { child, port })
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 fn main() -> Result<(), String> {
     let secs: u64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(5);
     let rounds: usize = std::env::args().nth(2).and_then(|s| s.parse().ok()).unwrap_or(3);
     let dir = std::env::temp_dir().join(format!("ecmxfd-spb-bench-{}", std::process::id()));
     std::fs::create_dir_all(&dir).map_err(|e| e.to_string())?;
     let broker = broker(&dir)?;
-    let network = dir.join("net64.toml");
-    let slaves: String = (0..SLAVES).map(|_| "[[slave]]\nprofile = \"digital-io\"\n").collect();
-    std::fs::write(&network, format!("version = 1\n{slaves}")).map_err(|e| e.to_string())?;
-    let sim = serve(Some(&network))?;
-    let mut config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
-    config.cycle.sync0_us = 1000;
-    let master = Arc::new(started(&sim, config)?);
-    let rt = tokio::runtime::Builder::new_multi_thread()
-        .worker_threads(2)
-        .enable_all()
-        .build()
-        .map_err(|e| e.to_string())?;
-    rt.spawn(Arc::clone(&master).keep_image_built());
-    let image = rt.block_on(master.image(ecmxfd::master::Call::anonymous(None))).map_err(|e| e.to_string())?;
-    let outputs: Vec<usize> =
-        image.entries.iter().enumerate().filter(|(_, e)| e.output && e.index == 0x7000).map(|(i, _)| i).collect();
-    let lease = master.acquire_lease(&[], Some(Duration::from_secs(5)), "bench").map_err(|e| e.to_string())?;
-    // The plant's application: every output byte changes every 100 ms.
-    rt.spawn({
-        let (master, image) = (Arc::clone(&master), Arc::clone(&image));
-        async move {
-            let mut tick = tokio::time::interval(Duration::from_millis(100));
-            for n in 0u64.. {
-                tick.tick().await;
-                let mut staging = Staging::new(&master, &image);
-                for &i in &outputs {
-                    let _ = staging.entry(&image.entries[i], &[(n % 255) as u8 + 1]);
-                }
-                if let Err(e) = staging.commit(master.leases(), &lease.id, "bench") {
-                    eprintln!("writer: {e}");
-                }
-            }
-        }
-    });
+    let (sim, master, rt) = io_plant(&dir, SLAVES, 1000)?;
     std::thread::sleep(Duration::from_secs(1));
     let sparkplug = SparkplugConfig {
         broker: vec![BrokerUrl { tls: false, host: "127.0.0.1".into(), port: broker.port }],

@@ -36,10 +36,12 @@ impl std::fmt::Display for Role {
 }
 
 /// `[api]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ApiConfig {
-    /// Unix socket path (default: [`ecmxf_proto::default_socket_path`]).
+    /// Unix socket path (default: `$ECMXF_SOCKET`, else for root
+    /// /run/ecmxfd/ecmxfd.sock, for other users
+    /// `$XDG_RUNTIME_DIR/ecmxfd.sock` or /tmp/ecmxfd-UID.sock).
     pub socket: Option<PathBuf>,
     /// Socket file mode, e.g. 0o660.
     pub socket_mode: u32,
@@ -120,7 +122,7 @@ impl Default for ApiConfig {
 }
 
 /// A role as written in the file.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum RoleName {
     /// No access.
@@ -147,7 +149,7 @@ impl RoleName {
 }
 
 /// `[[api.user]]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct UserRole {
     /// Numeric uid.
@@ -157,7 +159,7 @@ pub struct UserRole {
 }
 
 /// `[[api.group]]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct GroupRole {
     /// Numeric gid.
@@ -168,7 +170,7 @@ pub struct GroupRole {
 
 /// `[[api.token]]` / `[[api.client_cert]]`: a SHA-256 fingerprint (hex) of
 /// the token's bytes or of the certificate's DER bytes.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TokenRole {
     /// 64 hex digits (`printf %s TOKEN | sha256sum`, or `openssl x509
@@ -194,9 +196,6 @@ impl ApiConfig {
         }
         if self.tcp.is_some() && self.tokens.is_empty() && self.client_certs.is_empty() {
             return bad("api.tcp", "no [[api.token]] or [[api.client_cert]]: no TCP client could authenticate".into());
-        }
-        if !self.client_certs.is_empty() && self.client_ca.is_none() {
-            return bad("api.client_cert", "client certificates need api.client_ca to verify them".into());
         }
         for (key, list) in [("api.token", &self.tokens), ("api.client_cert", &self.client_certs)] {
             for (i, t) in list.iter().enumerate() {

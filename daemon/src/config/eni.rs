@@ -16,8 +16,8 @@
 //!   `Sm`) as `rx_pdos`/`tx_pdos` (see `take_assignments`): bring-up
 //!   writes it only where the slave does not run it, the assignment alone
 //!   where the PDOs map as the file says (engine/bringup/pdos.rs), so the
-//!   layout is the file's even without assigning init commands; beyond
-//!   PDO_CONFIG_SET's 3 PDOs of 8 entries it is left to them;
+//!   layout is the file's even without assigning init commands (beyond
+//!   PDO_CONFIG_SET's 3 PDOs of 8 entries it is written over CoE);
 //! - the DC block: `CycleTime0` is the SYNC0 cycle unless `[cycle]
 //!   sync0_us` is given, `ShiftTime` the slave's shift, a slave without
 //!   one runs without DC (see [`Config::take_dc`]);
@@ -55,7 +55,7 @@
 use ecmxf_devices::eni::{CcsConvention, CoeAccess, CoeInitCmd, Eni, RegisterInitCmd, Transition};
 use ecmxf_devices::esi::{EsiDevice, EsiFile};
 
-use super::{Config, InitTransition, PdoConfig, SlaveConfig, SlaveVariable, StartupRegister, StartupSdo};
+use super::{Config, EsiChoice, InitTransition, PdoConfig, SlaveConfig, SlaveVariable, StartupRegister, StartupSdo};
 
 /// The transition ecmxfd replays a command at, if it is one it makes
 /// (it brings slaves up: IP, PS, SO).
@@ -173,6 +173,7 @@ impl Config {
                     esi: None,
                     esi_init_cmds: true,
                     esi_init_cmds_skip: Vec::new(),
+                    esi_choices: Vec::new(),
                     variables: Vec::new(),
                     registers: startup_registers(&s.register_init_cmds),
                 })
@@ -260,14 +261,13 @@ impl Config {
     /// bring-up writes only what the slave does not already run (the
     /// assignment alone where its PDOs map as the file says), so the
     /// layout is the file's even without init commands that assign it (a
-    /// file `ecmxfctl config --format eni` wrote). An assignment beyond
-    /// PDO_CONFIG_SET's 3 PDOs of 8 entries is left to the init commands
-    /// ([`assignment_of`]); a slave without CoE runs its fixed one.
+    /// file `ecmxfctl config --format eni` wrote, its init commands taken
+    /// out). A slave without CoE runs its fixed one.
     fn take_assignments(&mut self, eni: &Eni) {
         for (mine, theirs) in self.slaves.iter_mut().zip(&eni.slaves) {
             for (rx, list) in [(true, &mut mine.rx_pdos), (false, &mut mine.tx_pdos)] {
                 if list.is_empty() {
-                    if let Ok(Some(pdos)) = assignment_of(theirs, rx) {
+                    if let Some(pdos) = assignment_of(theirs, rx) {
                         *list = pdos;
                     }
                 }
@@ -293,30 +293,17 @@ impl Config {
     }
 }
 
-/// PDO_CONFIG_SET's limits (v049, command 7): the PDOs of its v049 form,
-/// the entries of a slot.
-const SET_PDOS: usize = ecmxf_wire::payload::pdo::PdoConfigForm::Manual.slots();
-const SET_ENTRIES: usize = ecmxf_wire::payload::pdo::MAPPING_ENTRIES;
-
 /// An ENI slave's assignment in one direction (its ProcessData PDOs with
-/// an `Sm`): `Ok(None)` when it gives none or the slave has no CoE to
-/// write one with, `Err(why)` when it is beyond PDO_CONFIG_SET.
-fn assignment_of(slave: &ecmxf_devices::eni::EniSlave, rx: bool) -> Result<Option<Vec<PdoConfig>>, String> {
+/// an `Sm`): `None` when it gives none or the slave has no CoE to write one
+/// with.
+fn assignment_of(slave: &ecmxf_devices::eni::EniSlave, rx: bool) -> Option<Vec<PdoConfig>> {
     let coe = slave.mailbox.is_some_and(|m| m.protocols & ecmxf_devices::sii::protocol::COE != 0);
-    let Some(pd) = slave.process_data.as_ref().filter(|_| coe) else { return Ok(None) };
+    let pd = slave.process_data.as_ref().filter(|_| coe)?;
     let assigned: Vec<_> = if rx { &pd.rx_pdos } else { &pd.tx_pdos }.iter().filter(|p| p.sm.is_some()).collect();
     if assigned.is_empty() {
-        return Ok(None);
+        return None;
     }
-    if assigned.len() > SET_PDOS || assigned.iter().any(|p| p.entries.len() > SET_ENTRIES) {
-        let sizes: Vec<String> = assigned.iter().map(|p| format!("{:#06x} ({})", p.index, p.entries.len())).collect();
-        return Err(format!(
-            "{} PDOs {} beyond PDO_CONFIG_SET's {SET_PDOS} PDOs of {SET_ENTRIES} entries: left to its init commands",
-            if rx { "Rx" } else { "Tx" },
-            sizes.join(", ")
-        ));
-    }
-    Ok(Some(
+    Some(
         assigned
             .iter()
             .map(|p| PdoConfig {
@@ -328,28 +315,41 @@ fn assignment_of(slave: &ecmxf_devices::eni::EniSlave, rx: bool) -> Result<Optio
                     .collect(),
             })
             .collect(),
-    ))
+    )
 }
 
-/// The device of an ESI file a `[[slave]]` entry means: by its product
-/// code (and revision when given; else the highest), or the only one.
-pub(super) fn esi_device<'a>(file: &'a EsiFile, slave: &SlaveConfig) -> Option<&'a EsiDevice> {
-    match slave.product_code {
-        Some(p) => file
-            .devices
-            .iter()
-            .filter(|d| d.product_code == p && slave.revision.is_none_or(|r| d.revision == r))
-            .max_by_key(|d| d.revision),
-        None => (file.devices.len() == 1).then(|| &file.devices[0]),
-    }
+/// The devices of an ESI file a `[[slave]]` entry may mean: those with its
+/// product code and revision where it gives them. One is the device (as
+/// before any scan); several are narrowed at bring-up by the identity the
+/// slave reports (`EsiFile::for_identity`'s rule: same revision, else the
+/// nearest lower, else the highest), as TwinCAT and the IgH master match a
+/// scanned slave to its description. Devices the file could not read (no
+/// ProductCode) are not among them.
+pub(super) fn esi_candidates<'a>(file: &'a EsiFile, slave: &SlaveConfig) -> Vec<&'a EsiDevice> {
+    file.devices
+        .iter()
+        .filter(|d| slave.product_code.is_none_or(|p| d.product_code == p))
+        .filter(|d| slave.revision.is_none_or(|r| d.revision == r))
+        .collect()
+}
+
+/// How `[[slave]]`'s device is named in messages: its display name, else
+/// its order name.
+fn device_name(d: &EsiDevice) -> String {
+    let name = if d.name.trim().is_empty() { &d.type_name } else { &d.name };
+    name.trim().to_string()
 }
 
 impl Config {
     /// Without an ENI, the CoE init commands of each `[[slave]] esi`
     /// device become its first start-up SDOs, as a configuration tool
     /// writes them into an ENI, so a network described by ESI files alone
-    /// starts as it would from that tool's ENI. The key and message of a file
-    /// that does not read.
+    /// starts as it would from that tool's ENI. A file whose devices the
+    /// entry does not narrow to one keeps each candidate's (`esi_choices`)
+    /// for bring-up to choose by the scanned identity: a Beckhoff or Elmo
+    /// file lists many devices and revisions, and a drive whose mode of
+    /// operation is set there must not start without it. The key and
+    /// message of a file that does not read.
     pub(super) fn apply_esi_init_cmds(&mut self) -> Result<(), (String, String)> {
         for (i, s) in self.slaves.iter_mut().enumerate() {
             let Some(path) = s.esi.as_ref().filter(|_| s.esi_init_cmds) else { continue };
@@ -357,30 +357,58 @@ impl Config {
             let text =
                 ecmxf_devices::esi::read_xml(path).map_err(|e| (key.clone(), format!("{}: {e}", path.display())))?;
             let file = EsiFile::parse(&text).map_err(|e| (key.clone(), format!("{}: {e}", path.display())))?;
-            let Some(device) = esi_device(&file, s) else { continue };
-            let cmds: Vec<CoeInitCmd> =
-                device.init_cmds.iter().filter(|c| !s.esi_init_cmds_skip.contains(&c.index)).cloned().collect();
             let name = path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into());
-            let mut sdos = startup_sdos(&cmds, &format!("init command of ESI {name}"));
-            sdos.append(&mut s.sdos);
-            s.sdos = sdos;
+            let source = format!("init command of ESI {name}");
+            let sdos_of = |d: &EsiDevice| {
+                let cmds: Vec<CoeInitCmd> =
+                    d.init_cmds.iter().filter(|c| !s.esi_init_cmds_skip.contains(&c.index)).cloned().collect();
+                startup_sdos(&cmds, &source)
+            };
+            match esi_candidates(&file, s).as_slice() {
+                [] => {}
+                [device] => {
+                    let mut sdos = sdos_of(device);
+                    sdos.append(&mut s.sdos);
+                    s.sdos = sdos;
+                }
+                several => {
+                    s.esi_choices = several
+                        .iter()
+                        .map(|d| EsiChoice {
+                            name: device_name(d),
+                            vendor_id: file.vendor_id,
+                            product_code: d.product_code,
+                            revision: d.revision,
+                            sdos: sdos_of(d),
+                        })
+                        .collect();
+                }
+            }
         }
         Ok(())
     }
 }
 
 /// What `--check-config` says about the ESI init commands of `[[slave]]`
-/// `i` (written, skipped, or not known without a product code).
+/// `i` (written, skipped, or chosen at bring-up among several devices).
 pub(super) fn esi_init_notes(i: usize, slave: &SlaveConfig, file: &EsiFile) -> Vec<String> {
-    let Some(device) = esi_device(file, slave) else {
-        return if file.devices.iter().any(|d| !d.init_cmds.is_empty()) {
-            vec![format!(
-                "slave[{i}].esi: the file has several devices and the entry no product_code: their init commands are \
-                 not written"
-            )]
-        } else {
-            Vec::new()
-        };
+    let device = match esi_candidates(file, slave).as_slice() {
+        [] => return Vec::new(),
+        [device] => *device,
+        several => {
+            let with = several.iter().filter(|d| !d.init_cmds.is_empty()).count();
+            let what = if !slave.esi_init_cmds {
+                "not written (esi_init_cmds = false)".to_string()
+            } else if with == 0 {
+                "none of them has init commands".to_string()
+            } else {
+                format!(
+                    "the init commands ({with} of them have some) are those of the device the slave's scanned \
+                     identity (vendor, product, revision) names, chosen at bring-up; bring-up fails if none matches"
+                )
+            };
+            return vec![format!("slave[{i}].esi: {} devices of the file may be this slave: {what}", several.len())];
+        }
     };
     device
         .init_cmds
@@ -458,11 +486,6 @@ pub(super) fn eni_notes(eni: &Eni) -> Vec<String> {
                 ));
             }
         }
-        for rx in [true, false] {
-            if let Err(why) = assignment_of(s, rx) {
-                notes.push(format!("{who}: ProcessData: {why}"));
-            }
-        }
         if s.dc.is_none() && eni.slaves.iter().any(|o| o.dc.is_some()) {
             notes.push(format!("{who}: no DC block: runs without DC (dc_assign_activate = 0) unless its entry says"));
         }
@@ -473,7 +496,8 @@ pub(super) fn eni_notes(eni: &Eni) -> Vec<String> {
             let why = match *element {
                 "ProcessData" => {
                     "applied: its PDOs with an Sm are the assignment, written where the slave does not run it \
-                     (the assignment alone where the PDOs map as the file says); names and types name the entries"
+                     (the assignment alone where the PDOs map as the file says; over CoE beyond PDO_CONFIG_SET's 3 PDOs of 8 \
+                     entries); names and types name the entries"
                 }
                 "DC" => {
                     "applied: CycleTime0 is the SYNC0 cycle unless [cycle] sync0_us is given, ShiftTime the slave's \

@@ -34,6 +34,15 @@ impl Config {
                 if self.eni.is_none() {
                     notes.extend(super::eni::esi_init_notes(i, s, &file));
                 }
+                // What the file's description of the device cannot carry
+                // (a PDO on a sync manager the device lacks, a PDO listed
+                // twice): the device the entry names, else every one it
+                // may mean, as the daemon will say at start.
+                for d in file.devices.iter().filter(|d| s.product_code.is_none_or(|p| d.product_code == p)) {
+                    for w in &d.warnings {
+                        notes.push(format!("{key}: {} (revision {:#010x}): {w}", d.type_name, d.revision));
+                    }
+                }
             }
         }
         for (key, file, label) in [

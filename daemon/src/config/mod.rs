@@ -11,12 +11,17 @@ use serde::{Deserialize, Serialize};
 pub mod api;
 mod eni;
 mod files;
+mod manual;
+pub mod opcua;
 #[cfg(feature = "sim")]
 pub(crate) mod sim_network;
 pub mod sparkplug;
+pub mod web;
 
 pub use api::{ApiConfig, Role};
+pub use opcua::OpcuaConfig;
 pub use sparkplug::SparkplugConfig;
+pub use web::WebConfig;
 
 /// A configuration mistake: unreadable file, TOML syntax or schema (naming
 /// key and line), or a value not allowed (naming the dotted key). The same
@@ -34,8 +39,19 @@ pub const SYNC0_US: std::ops::RangeInclusive<u32> = 125..=(u32::MAX / 1000);
 /// CPUs the affinity mask can name (the kernel's `CPU_SETSIZE`).
 pub const MAX_CPUS: usize = 1024;
 
+/// ecmxfd.toml(5), in roff: every key of [`Config`] with its type,
+/// default and documentation (`config/manual.rs`).
+pub fn manual_page(version: &str) -> String {
+    manual::render(&schemars::schema_for!(Config), version)
+}
+
+/// Every key ecmxfd.toml(5) documents, dotted (`cycle.sync0_us`).
+pub fn documented_keys() -> Vec<String> {
+    manual::keys(&schemars::schema_for!(Config))
+}
+
 /// The whole file.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct Config {
     /// Format version, 1.
@@ -88,6 +104,12 @@ pub struct Config {
     /// The MQTT Sparkplug B edge node; absent: off.
     #[serde(default)]
     pub sparkplug: Option<SparkplugConfig>,
+    /// The OPC UA server; absent: off.
+    #[serde(default)]
+    pub opcua: Option<OpcuaConfig>,
+    /// The web dashboard; absent: off.
+    #[serde(default)]
+    pub web: Option<WebConfig>,
     /// Where the daemon keeps what it learned across restarts (object
     /// dictionaries read from devices). Unset: systemd's
     /// `$STATE_DIRECTORY` (the unit's `StateDirectory=`), else nothing is
@@ -97,7 +119,7 @@ pub struct Config {
 }
 
 /// `[log]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct LogConfig {
     /// A `tracing` filter: "info", "warn", "info,ecmxfd::engine=debug".
@@ -112,7 +134,7 @@ impl Default for LogConfig {
 }
 
 /// `[metrics]`.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct MetricsConfig {
     /// Serve Prometheus metrics at http://ADDRESS/metrics; absent: off.
@@ -120,7 +142,7 @@ pub struct MetricsConfig {
 }
 
 /// `[gateway]`: the ETG.8200 mailbox gateway (daemon/src/gateway).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct GatewayConfig {
     /// UDP address to serve, e.g. "0.0.0.0:34980" (0x88A4, the port tools
@@ -129,6 +151,7 @@ pub struct GatewayConfig {
     /// Clients allowed: addresses ("10.0.0.7") or networks ("10.0.0.0/24",
     /// "fd00::/8"). Empty: this host only.
     #[serde(default)]
+    #[schemars(with = "Vec<String>")]
     pub allow: Vec<AllowedClients>,
 }
 
@@ -194,7 +217,7 @@ impl GatewayConfig {
 }
 
 /// `[outputs]`.
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct OutputsConfig {
     /// What the daemon does when the last client that wrote outputs goes
@@ -206,7 +229,7 @@ pub struct OutputsConfig {
 }
 
 /// `outputs.on_last_writer_gone`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum WriterGoneAction {
     /// Keep sending the last outputs written (what the chip itself does
@@ -233,7 +256,7 @@ impl WriterGoneAction {
 }
 
 /// `[link]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(try_from = "RawLink")]
 pub enum LinkConfig {
     /// The in-process simulator.
@@ -308,18 +331,35 @@ impl LinkConfig {
 /// reported at its own line (an internally tagged enum buffers the table
 /// and toml can then only point at `[link]`); which keys go with which
 /// backend is checked in [`LinkConfig::try_from`].
-#[derive(Deserialize)]
+#[derive(Deserialize, schemars::JsonSchema)]
 #[serde(deny_unknown_fields)]
 struct RawLink {
+    /// How the chip is reached: "spidev" (the chip on an SPI bus), "sim"
+    /// (the simulator in the daemon's process) or "sim-socket" (a
+    /// simulator served by `ecmxf-sim serve`).
     backend: String,
+    /// sim: the simulated network's file (ecmxf-sim(1)); absent: the demo
+    /// network.
     network: Option<PathBuf>,
+    /// sim-socket: the socket `ecmxf-sim serve` listens on.
     socket: Option<PathBuf>,
+    /// spidev: the SPI device, e.g. "/dev/spidev0.0".
     device: Option<PathBuf>,
+    /// spidev: the SPI clock, Hz (default 20000000; the chip takes up to
+    /// 50 MHz where the wiring allows).
     spi_hz: Option<u32>,
+    /// spidev: the GPIO chip of INT0 and INT1, e.g. "/dev/gpiochip0".
     gpio_chip: Option<PathBuf>,
+    /// spidev: INT0's line offset (the chip's ready signal); absent: not
+    /// wired, the daemon waits `idle_us` after each transfer instead.
     int0_line: Option<u32>,
+    /// spidev: INT1's line offset (the chip's event signal).
     int1_line: Option<u32>,
+    /// spidev: the kernel's debounce on INT1, us (INT0's busy pulse, tens
+    /// of us, would vanish under it: it is never debounced).
     debounce_us: Option<u32>,
+    /// spidev: the time after a transfer without INT0, us (default 200;
+    /// the vendor's driver waits 150-200).
     idle_us: Option<u32>,
 }
 
@@ -373,7 +413,7 @@ impl TryFrom<RawLink> for LinkConfig {
 }
 
 /// `[chip]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct ChipSettings {
     /// SPI data-section size to switch to (32..=1408).
@@ -396,7 +436,7 @@ impl Default for ChipSettings {
 }
 
 /// `[realtime]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct RealtimeConfig {
     /// SCHED_FIFO priority 1..=99; 0 = normal scheduling.
@@ -419,7 +459,7 @@ impl Default for RealtimeConfig {
 }
 
 /// `[cycle]`.
-#[derive(Clone, Debug, Deserialize, Serialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, Serialize, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct CycleConfig {
     /// SYNC0 cycle, us (>= 125).
@@ -446,7 +486,12 @@ pub struct CycleConfig {
     /// midway between `fifo_low` and `fifo_high`), trading margin against
     /// host stalls for latency: a stall longer than the budget empties the
     /// FIFO (counted, with an event). 250..=1000000 and at least two DC
-    /// cycles; unset: the FIFO is kept midway between its marks.
+    /// cycles, and no less than the link holds: a refill must land within
+    /// half the budget's frames after a transaction's packet, the emergency
+    /// question and a FIFO call (four packets), so a budget under
+    /// 2 x ceil(4 packets / cycle) + 1 cycles is refused (`--check-config`
+    /// names the smallest: 2125 us at 125 us with 512-byte packets at
+    /// 20 MHz); unset: the FIFO is kept midway between its marks.
     pub output_latency_us: Option<u32>,
 }
 
@@ -479,7 +524,7 @@ impl CycleConfig {
 
 /// `cycle.target_state`: the state bring-up drives the network to. A
 /// closed set, so a typo is refused by the parser with the key and line.
-#[derive(Clone, Copy, Debug, Default, Deserialize, Serialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, schemars::JsonSchema, Serialize, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum TargetState {
     /// PRE-OP: mailboxes only, no process data.
@@ -522,7 +567,7 @@ impl Default for CycleConfig {
 }
 
 /// One expected slave (`[[slave]]`).
-#[derive(Clone, Debug, Default, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SlaveConfig {
     /// A label for logs and the API.
@@ -533,7 +578,8 @@ pub struct SlaveConfig {
     pub product_code: Option<u32>,
     /// Revision it must have.
     pub revision: Option<u32>,
-    /// RxPDO assignment to configure (PDO_CONFIG_SET, at most 3 PDOs of 8).
+    /// RxPDO assignment to configure (PDO_CONFIG_SET for up to 3 PDOs of 8
+    /// entries, over CoE beyond).
     #[serde(default)]
     pub rx_pdos: Vec<PdoConfig>,
     /// TxPDO assignment to configure.
@@ -562,6 +608,12 @@ pub struct SlaveConfig {
     /// Objects (indexes) whose ESI init commands are not written.
     #[serde(default)]
     pub esi_init_cmds_skip: Vec<u16>,
+    /// When the entry's ESI file has several devices the entry's identity
+    /// keys do not narrow to one: each candidate with its init commands,
+    /// the one the slave's scanned identity names chosen at bring-up
+    /// (config/eni.rs, `esi_device_sdos` in engine/bringup). Not a TOML key.
+    #[serde(skip)]
+    pub esi_choices: Vec<EsiChoice>,
     /// The ENI's process-image variables of this slave, placed from the
     /// start of its data (config/eni.rs): the names the image's entries
     /// take, and the offsets the layout must match. Not a TOML key.
@@ -573,6 +625,23 @@ pub struct SlaveConfig {
     /// key.
     #[serde(skip)]
     pub registers: Vec<StartupRegister>,
+}
+
+/// One device of a `[[slave]] esi` file the slave may turn out to be, and
+/// the start-up SDOs its CoE init commands make.
+#[derive(Clone, Debug, PartialEq)]
+pub struct EsiChoice {
+    /// Its name in the file (`Type` text, then `Name`).
+    pub name: String,
+    /// The file's vendor id.
+    pub vendor_id: u32,
+    /// `Type/@ProductCode`.
+    pub product_code: u32,
+    /// `Type/@RevisionNo`.
+    pub revision: u32,
+    /// Its init commands as start-up SDOs, those `esi_init_cmds_skip`
+    /// names left out.
+    pub sdos: Vec<StartupSdo>,
 }
 
 /// An ESC register write at a transition (an ENI register init command).
@@ -613,7 +682,7 @@ fn yes() -> bool {
 }
 
 /// One PDO of an assignment.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct PdoConfig {
     /// Mapping object (0x16xx / 0x1Axx).
@@ -623,7 +692,7 @@ pub struct PdoConfig {
 }
 
 /// A start-up SDO download.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct StartupSdo {
     /// Object index.
@@ -656,7 +725,7 @@ pub struct StartupSdo {
 
 /// When a start-up SDO is written (ETG.2100 transitions a master replays
 /// CoE init commands at).
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq, Eq)]
 #[serde(rename_all = "lowercase")]
 pub enum InitTransition {
     /// INIT to PRE-OP (once the mailbox works: in PRE-OP).
@@ -691,7 +760,7 @@ impl StartupSdo {
 }
 
 /// One axis of the chip's CiA402 helper (`[[axis]]`).
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct AxisConfig {
     /// Slave position.
@@ -708,7 +777,7 @@ pub struct AxisConfig {
 }
 
 /// `[recovery]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields, default)]
 pub struct RecoveryConfig {
     /// Bring the network back to the target state after faults.
@@ -783,6 +852,8 @@ impl Config {
             state_dir: None,
             gateway: None,
             sparkplug: None,
+            opcua: None,
+            web: None,
         }
     }
 
@@ -803,6 +874,12 @@ impl Config {
             _ => {}
         }
         c.api.resolve_paths(base);
+        if let Some(p) = c.opcua.as_mut().and_then(|o| o.pki_dir.as_mut()) {
+            resolve(p);
+        }
+        if let Some(w) = c.web.as_mut() {
+            w.resolve_paths(base);
+        }
         for s in &mut c.slaves {
             if let Some(p) = &mut s.esi {
                 resolve(p);
@@ -970,8 +1047,23 @@ impl Config {
             );
         }
         self.api.validate(path)?;
+        // The certificates `[[api.client_cert]]` names are verified against
+        // the API's CA, or the dashboard's.
+        let verified = self.api.client_ca.is_some() || self.web.as_ref().is_some_and(|w| w.client_ca.is_some());
+        if !self.api.client_certs.is_empty() && !verified {
+            return bad(
+                "api.client_cert",
+                "client certificates need api.client_ca (or web.client_ca) to verify them".into(),
+            );
+        }
         if let Some(s) = &self.sparkplug {
             s.validate(path)?;
+        }
+        if let Some(o) = &self.opcua {
+            o.validate(path)?;
+        }
+        if let Some(w) = &self.web {
+            w.validate(path)?;
         }
         if let LinkConfig::Spidev { int0_line: None, idle_us, .. } = &self.link {
             if *idle_us < 100 {
@@ -983,17 +1075,23 @@ impl Config {
         }
         for (i, s) in self.slaves.iter().enumerate() {
             for (dir, pdos) in [("rx_pdos", &s.rx_pdos), ("tx_pdos", &s.tx_pdos)] {
-                if pdos.len() > 3 {
-                    return bad(
-                        &format!("slave[{i}].{dir}"),
-                        format!("{} PDOs; PDO_CONFIG_SET carries 3 (use SDOs for more)", pdos.len()),
-                    );
+                // Subindex 0 counts them in a byte; beyond 3 PDOs of 8
+                // entries bring-up writes them over CoE (engine/bringup/pdos.rs).
+                if pdos.len() > 254 {
+                    return bad(&format!("slave[{i}].{dir}"), format!("{} PDOs; an assignment holds 254", pdos.len()));
+                }
+                if let Some(twice) = pdos
+                    .iter()
+                    .enumerate()
+                    .find_map(|(k, p)| pdos[..k].iter().any(|q| q.index == p.index).then_some(p.index))
+                {
+                    return bad(&format!("slave[{i}].{dir}"), format!("PDO {twice:#06x} is assigned twice"));
                 }
                 for (k, p) in pdos.iter().enumerate() {
-                    if p.entries.len() > 8 {
+                    if p.entries.len() > 254 {
                         return bad(
                             &format!("slave[{i}].{dir}[{k}].entries"),
-                            format!("{} entries; a PDO here holds 8", p.entries.len()),
+                            format!("{} entries; a PDO holds 254", p.entries.len()),
                         );
                     }
                     for e in &p.entries {
@@ -1037,6 +1135,24 @@ impl Config {
 
 #[cfg(test)]
 mod tests {
+    #[test]
+    fn every_key_of_the_manual_page_is_documented() {
+        let missing = manual::undocumented(&schemars::schema_for!(Config));
+        assert!(missing.is_empty(), "keys without documentation: {missing:?}");
+    }
+
+    #[test]
+    fn the_manual_page_has_the_files_tables_and_keys() {
+        let page = manual_page("0");
+        for want in [".SH [link]", ".SH [cycle]", ".SS [[slave.sdo]]", ".SH [[axis]]", ".B sync0_us", ".B backend"] {
+            assert!(page.contains(want), "no {want:?} in the page");
+        }
+        let keys = documented_keys();
+        for want in ["version", "link.backend", "cycle.sync0_us", "slave.sdo.index", "api.token.name", "web.listen"] {
+            assert!(keys.iter().any(|k| k == want), "{want} not among {keys:?}");
+        }
+    }
+
     use super::*;
 
     fn parse(t: &str) -> Result<Config, ConfigError> {

@@ -11,12 +11,13 @@ use super::ConfigError;
 use super::api::RoleName;
 
 /// `[sparkplug]`.
-#[derive(Clone, Debug, Deserialize, PartialEq)]
+#[derive(Clone, Debug, Deserialize, schemars::JsonSchema, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SparkplugConfig {
     /// Brokers, tried in order (fail-over): "mqtt://host:1883",
     /// "mqtts://host:8883". One string or a list.
     #[serde(deserialize_with = "one_or_many")]
+    #[schemars(with = "Vec<String>")]
     pub broker: Vec<BrokerUrl>,
     /// The Sparkplug group (topic level 2).
     pub group_id: String,
@@ -78,7 +79,7 @@ pub struct SparkplugConfig {
 }
 
 /// `sparkplug.metric_names`.
-#[derive(Clone, Copy, Debug, Default, Deserialize, PartialEq, Eq)]
+#[derive(Clone, Copy, Debug, Default, Deserialize, schemars::JsonSchema, PartialEq, Eq)]
 #[serde(rename_all = "kebab-case")]
 pub enum MetricNames {
     /// Entry names without the slave's number.

@@ -16,6 +16,7 @@
 
 use std::time::Duration;
 
+use ecmxf_wire::Request;
 use ecmxf_wire::payload::emergency::{CoeEmergencyGet, EMERGENCY_MAX, EmergencyRecord};
 
 /// The watch's question: the newest record only.
@@ -45,7 +46,7 @@ pub(crate) struct EmergencyWatch {
     newest: Option<u16>,
     /// A question is out (the exchange count right after it); its answer
     /// comes with the next exchange.
-    asked: Option<u64>,
+    asked: Option<(u64, u8)>,
 }
 
 /// Whether running number `n` comes after `last` (the numbers are u16 and wrap).
@@ -58,8 +59,8 @@ impl EmergencyWatch {
     /// (see [`EmergencyWatch::check`]). The exchange refreshes the status
     /// header like any other, so it can stand in for a status poll.
     pub(crate) fn ask<L: Link>(&mut self, port: &mut Port<L>) -> Result<(), PortError> {
-        port.send_once(&NEWEST)?;
-        self.asked = Some(port.stats().exchanges);
+        let index = port.send_once(&NEWEST)?;
+        self.asked = Some((port.stats().exchanges, index));
         Ok(())
     }
 
@@ -78,14 +79,16 @@ impl EmergencyWatch {
         port: &mut Port<L>,
         mut emit: impl FnMut(EmergencyRecord),
     ) -> Result<(), PortError> {
-        match self.asked {
+        let index = match self.asked {
             None => return Ok(()),
             // No exchange since the question: its answer is not here yet.
-            Some(n) if port.stats().exchanges == n => return Ok(()),
-            Some(_) => self.asked = None,
-        }
-        // Lost, or another answer came first: asked again next time.
-        let Some(Ok(reply)) = port.previous().map(|a| a.answer_to(&NEWEST)) else { return Ok(()) };
+            Some((n, _)) if port.stats().exchanges == n => return Ok(()),
+            Some((_, index)) => index,
+        };
+        self.asked = None;
+        // Lost: asked again next time.
+        let answer = port.answer_to(index, <CoeEmergencyGet as Request<'_>>::CODE);
+        let Some(Ok(reply)) = answer.map(|a| a.answer_to(&NEWEST)) else { return Ok(()) };
         let Some(newest) = reply.records().next() else { return Ok(()) };
         let first_look = !std::mem::replace(&mut self.looked, true);
         if newest.is_empty() || self.newest == Some(newest.number) {

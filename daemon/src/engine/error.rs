@@ -23,6 +23,16 @@ pub enum EngineError {
     },
     /// The network is not in a state that allows this.
     WrongState(WrongState),
+    /// The slave did not complete a FoE transfer. The chip passes on no
+    /// FoE error code or text (v049 FOE_FUNC_REQ: only its error bit).
+    FoeRefused {
+        /// Slave.
+        slave: u8,
+        /// The file.
+        name: String,
+        /// A write (else a read).
+        write: bool,
+    },
     /// The slave aborted an SDO transfer.
     SdoAbort {
         /// Slave.
@@ -75,6 +85,12 @@ impl fmt::Display for EngineError {
             Self::SdoAbort { slave, index, subindex, code } => {
                 write!(f, "SDO {index:#06x}:{subindex:02x} on slave {slave} aborted: {code}")
             }
+            Self::FoeRefused { slave, name, write } => write!(
+                f,
+                "slave {slave} did not complete the FoE {} of {name:?}: no such file, a wrong password, or one it \
+                 does not take (the chip passes on no FoE error code)",
+                if *write { "write" } else { "read" }
+            ),
             Self::Failed(s) => write!(f, "failed: {s}"),
             Self::Refused(s) => write!(f, "refused by the chip: {s}"),
             Self::Timeout => f.write_str("deadline exceeded"),
@@ -116,6 +132,24 @@ pub enum WrongState {
         /// The protocols its SII lists (ETG.1000.6 table 2 bits).
         protocols: u16,
     },
+    /// The slave does not speak FoE: its SII's mailbox protocols do not
+    /// list it.
+    NoFoe {
+        /// The slave.
+        slave: u8,
+        /// The protocols its SII lists.
+        protocols: u16,
+    },
+}
+
+/// The mailbox protocols of an SII's word 0x1C, by name ("none" for none).
+fn protocol_names(protocols: u16) -> String {
+    let names: Vec<&str> = [(0x01, "AoE"), (0x02, "EoE"), (0x04, "CoE"), (0x08, "FoE"), (0x10, "SoE"), (0x20, "VoE")]
+        .into_iter()
+        .filter(|(bit, _)| protocols & bit != 0)
+        .map(|(_, name)| name)
+        .collect();
+    if names.is_empty() { "none".to_string() } else { names.join(", ") }
 }
 
 impl fmt::Display for WrongState {
@@ -135,16 +169,16 @@ impl fmt::Display for WrongState {
                 }
             }
             Self::NoInputs => f.write_str("the process image has no inputs (no slave maps a TxPDO)"),
-            Self::NoCoe { slave, protocols } => {
-                let names: Vec<&str> =
-                    [(0x01, "AoE"), (0x02, "EoE"), (0x04, "CoE"), (0x08, "FoE"), (0x10, "SoE"), (0x20, "VoE")]
-                        .into_iter()
-                        .filter(|(bit, _)| protocols & bit != 0)
-                        .map(|(_, name)| name)
-                        .collect();
-                let listed = if names.is_empty() { "none".to_string() } else { names.join(", ") };
-                write!(f, "slave {slave} has no CoE mailbox (the mailbox protocols its SII lists: {listed})")
-            }
+            Self::NoCoe { slave, protocols } => write!(
+                f,
+                "slave {slave} has no CoE mailbox (the mailbox protocols its SII lists: {})",
+                protocol_names(*protocols)
+            ),
+            Self::NoFoe { slave, protocols } => write!(
+                f,
+                "slave {slave} has no FoE (the mailbox protocols its SII lists: {})",
+                protocol_names(*protocols)
+            ),
         }
     }
 }

@@ -31,6 +31,44 @@ pub const WARN_LOAD: f64 = 0.5;
 pub const MAX_LOAD: f64 = 0.9;
 /// Packets one FIFO call takes: the call and its guarded resend.
 pub const PACKETS_PER_CALL: u64 = 2;
+/// Packets the link may carry from the moment a FIFO refill is due to the
+/// moment it lands: a transaction's step already under way, the emergency
+/// question that rides just before a FIFO call, and the call itself.
+pub const REFILL_PACKETS: u64 = PACKETS_PER_CALL + 2;
+
+/// The shortest output latency budget (`cycle.output_latency_us`) that
+/// packets of `packet_ns` hold at a `cycle_ns` DC cycle, ns. For a budget
+/// the RxFIFO is kept `target` frames deep (a write waits for those and
+/// one cycle of the chip's own: budget = target + 1 cycles) and refilled
+/// before it falls to half of that (`cyclic::Plan::levels`); what is left
+/// then must outlast [`REFILL_PACKETS`] packets, or the slaves get their
+/// last outputs again (an underrun) each time a transaction's packet goes
+/// before the refill. Host stalls come on top: this is the link's floor.
+pub fn min_output_latency_ns(packet_ns: u64, cycle_ns: u64) -> u64 {
+    let cycle = cycle_ns.max(1);
+    let refill_cycles = (REFILL_PACKETS * packet_ns).div_ceil(cycle).max(1);
+    (2 * refill_cycles + 1) * cycle
+}
+
+/// Why an output latency budget cannot hold, in words (`None`: it can).
+pub fn latency_refusal(budget_us: u32, packet_ns: u64, cycle_ns: u64) -> Option<String> {
+    let min_ns = min_output_latency_ns(packet_ns, cycle_ns);
+    if u64::from(budget_us) * 1000 >= min_ns {
+        return None;
+    }
+    let cycle_us = cycle_ns / 1000;
+    let refill_us = (REFILL_PACKETS * packet_ns).div_ceil(1000);
+    Some(format!(
+        "{budget_us} us cannot hold at a {cycle_us} us cycle with SPI packets of {} us: the RxFIFO is kept {} \
+         frame(s) deep for it and refilled at half of that, and a refill can land {refill_us} us after it is due \
+         (a FIFO call of {PACKETS_PER_CALL} packets, with a transaction's packet and the emergency question \
+         before it), so the slaves would get repeated outputs; the smallest budget this link holds is {} us \
+         (or lengthen cycle.sync0_us, raise link.spi_hz, or lower chip.data_size)",
+        packet_ns.div_ceil(1000),
+        (budget_us as u64 * 1000 / cycle_ns.max(1)).saturating_sub(1).max(2),
+        min_ns.div_ceil(1000)
+    ))
+}
 
 /// What the cyclic exchange costs the link.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -161,6 +199,25 @@ mod tests {
         // which ran the RxFIFO dry every 45 ms. Refused, saying why.
         let e = check(1024, 560, 528, 470_000, 1_000_000).unwrap_err();
         assert!(e.to_string().contains("94%") && e.to_string().contains("2 packets"), "{e}");
+    }
+
+    #[test]
+    fn a_latency_budget_needs_room_for_a_refill_behind_a_transaction() {
+        // The demo network's packets (512-byte data at 20 MHz and the
+        // chip's 30 us): 248 us. At 125 us, four packets are 8 cycles: a
+        // FIFO kept 16 deep, 17 cycles in all.
+        let packet = clocked_ns(512, 20_000_000) + 30_000;
+        assert_eq!(min_output_latency_ns(packet, 125_000), 17 * 125_000);
+        for refused in [250, 1000, 2000] {
+            let why = latency_refusal(refused, packet, 125_000).expect("refused");
+            assert!(why.contains("the smallest budget this link holds is 2125 us"), "{why}");
+        }
+        assert_eq!(latency_refusal(2125, packet, 125_000), None);
+        // At 1 ms a refill fits in a cycle: 3 cycles.
+        assert_eq!(min_output_latency_ns(packet, 1_000_000), 3_000_000);
+        // Large packets at 500 us (1024-byte data at 24 MHz): 3 cycles
+        // behind, 7 in all.
+        assert_eq!(min_output_latency_ns(clocked_ns(1024, 24_000_000), 500_000), 3_500_000);
     }
 
     #[test]

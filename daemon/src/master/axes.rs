@@ -355,8 +355,13 @@ impl Master {
                 if Instant::now() >= end {
                     return Err(AxisError::NotArrived { axis: n, state: now, target });
                 }
-                // The drive's state changes only with an input frame.
+                // The drive's state changes only with an input frame. At the
+                // deadline the state last read is the answer: a read after it
+                // would only say the deadline passed.
                 self.next_inputs(end.saturating_duration_since(Instant::now())).await;
+                if Instant::now() >= end {
+                    return Err(AxisError::NotArrived { axis: n, state: now, target });
+                }
             }
         }
         Ok(self.axis_status(axis, call).await?)
@@ -376,8 +381,19 @@ impl Master {
         self.write_axis_object(axis, MODES_OF_OPERATION, mode.into(), lease_id, who, call).await?;
         let call = call.or_within(MODE_WAIT);
         let end = Instant::now() + call.left().unwrap_or_default();
+        let mut shown = None;
         loop {
-            let s = self.axis_status(axis, call).await?;
+            // Each look asks the chip (and SDOs for what is not mapped): the
+            // deadline can end one midway, and then the mode last read is
+            // the answer, as at the deadline below.
+            let s = match (self.axis_status(axis, call).await, shown) {
+                (Ok(s), _) => s,
+                (Err(EngineError::Timeout), Some(shown)) => {
+                    return Err(AxisError::ModeNotShown { axis: axis.number, shown, mode });
+                }
+                (Err(e), _) => return Err(e.into()),
+            };
+            shown = Some(s.mode_display);
             if s.mode_display == i32::from(mode) {
                 return Ok(s);
             }
@@ -385,6 +401,10 @@ impl Master {
                 return Err(AxisError::ModeNotShown { axis: axis.number, shown: s.mode_display, mode });
             }
             self.next_inputs(end.saturating_duration_since(Instant::now())).await;
+            // At the deadline the mode last read is the answer (as above).
+            if Instant::now() >= end {
+                return Err(AxisError::ModeNotShown { axis: axis.number, shown: s.mode_display, mode });
+            }
         }
     }
 

@@ -178,10 +178,14 @@ impl DeviceDictionary {
         od
     }
 
+    /// The description of object `index`, if the device gave one.
+    pub fn object(&self, index: u16) -> Option<&DeviceObject> {
+        self.objects.binary_search_by_key(&index, |o| o.index).ok().map(|i| &self.objects[i])
+    }
+
     /// The description of `index:subindex`, if the device gave one.
     pub fn entry(&self, index: u16, subindex: u8) -> Option<&DeviceEntry> {
-        let o = self.objects.binary_search_by_key(&index, |o| o.index).ok().map(|i| &self.objects[i])?;
-        o.entries.iter().find(|e| e.subindex == subindex)
+        self.object(index)?.entries.iter().find(|e| e.subindex == subindex)
     }
 
     /// The type of `index:subindex`, if the device described it.
@@ -277,6 +281,31 @@ impl Master {
         }
     }
 
+    /// The dictionary of the device at `slave` as read before, in memory
+    /// or kept on disk: never a mailbox exchange.
+    pub(crate) fn kept_device_dictionary(&self, slave: u8) -> Option<Arc<DeviceDictionary>> {
+        self.known_device_dictionary(slave).or_else(|| self.dictionary_on_disk(self.identity(slave)?).map(Arc::new))
+    }
+
+    /// Where the dictionary of a device is kept, if anywhere.
+    fn dictionary_file(&self, identity: Identity) -> Option<PathBuf> {
+        let (vendor, product, revision) = identity;
+        self.dictionary_dir().map(|d| d.join(format!("{vendor:08x}-{product:08x}-{revision:08x}.json")))
+    }
+
+    /// The dictionary kept on disk for a device, if one is and reads.
+    fn dictionary_on_disk(&self, identity: Identity) -> Option<DeviceDictionary> {
+        let f = self.dictionary_file(identity)?;
+        let text = std::fs::read_to_string(&f).ok()?;
+        match serde_json::from_str::<DeviceDictionary>(&text) {
+            Ok(d) if d.identity == identity => Some(d),
+            _ => {
+                tracing::warn!(file = %f.display(), "a kept object dictionary does not read; reading it again");
+                None
+            }
+        }
+    }
+
     /// From disk when kept there, else from the device (then kept).
     async fn load_device_dictionary(
         &self,
@@ -284,18 +313,10 @@ impl Master {
         identity: Identity,
         call: Call,
     ) -> Result<DeviceDictionary, DictionaryError> {
-        let (vendor, product, revision) = identity;
-        let file = self.dictionary_dir().map(|d| d.join(format!("{vendor:08x}-{product:08x}-{revision:08x}.json")));
-        if let Some(f) = &file {
-            if let Ok(text) = std::fs::read_to_string(f) {
-                match serde_json::from_str::<DeviceDictionary>(&text) {
-                    Ok(d) if d.identity == identity => return Ok(d),
-                    _ => {
-                        tracing::warn!(file = %f.display(), "a kept object dictionary does not read; reading it again")
-                    }
-                }
-            }
+        if let Some(d) = self.dictionary_on_disk(identity) {
+            return Ok(d);
         }
+        let file = self.dictionary_file(identity);
         let d = self.read_device_dictionary(slave, identity, call).await?;
         if let Some(f) = &file {
             let kept = f
@@ -373,6 +394,37 @@ impl Master {
             });
         }
         Ok(DeviceDictionary { identity, objects })
+    }
+
+    /// The device's name for object `index` (Get Object Description):
+    /// one SDO Information exchange, no whole dictionary. For naming PDOs.
+    pub(crate) async fn described_object_name(
+        &self,
+        slave: u8,
+        index: u16,
+        call: Call,
+    ) -> Result<String, DictionaryError> {
+        let what = format!("object {index:#06x}");
+        let payload = self.sdo_info(slave, InfoRequest::Object { index }, &what, call).await?;
+        let o = ObjectDescription::decode(&payload).map_err(|e| DictionaryError::Garbled(e.to_string()))?;
+        Ok(text(o.name))
+    }
+
+    /// The device's name for entry `index:subindex` (Get Entry Description
+    /// without value information): one SDO Information exchange. For
+    /// naming mapped entries.
+    pub(crate) async fn described_entry_name(
+        &self,
+        slave: u8,
+        index: u16,
+        subindex: u8,
+        call: Call,
+    ) -> Result<String, DictionaryError> {
+        let ask = InfoRequest::Entry { index, subindex, value_info: ValueInfo(0) };
+        let what = format!("entry {index:#06x}:{subindex:02x}");
+        let payload = self.sdo_info(slave, ask, &what, call).await?;
+        let e = EntryDescription::decode(&payload).map_err(|e| DictionaryError::Garbled(e.to_string()))?;
+        Ok(text(e.name))
     }
 
     /// One SDO Information question and its whole answer (fragments

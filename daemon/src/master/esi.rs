@@ -119,8 +119,9 @@ impl EsiLibrary {
         Ok(file)
     }
 
-    /// The device of the file at `path` with this identity: the same
-    /// revision when the file has it, else the highest of that product.
+    /// The device of the file at `path` a slave with this identity is: of
+    /// that product, the same revision, else the nearest lower, else the
+    /// highest (`EsiFile::for_identity`).
     pub(crate) async fn device(
         &self,
         path: &Path,
@@ -136,10 +137,12 @@ impl EsiLibrary {
                 slave: vendor,
             });
         }
-        let device = file
-            .device(product, Some(revision))
-            .or_else(|_| file.device(product, None))
-            .map_err(|error| DescriptionError::Esi { path: path.to_path_buf(), error })?;
+        // The rule bring-up chooses the init commands by, so names, types
+        // and dictionary come from the device whose commands were written.
+        let device = file.for_identity(product, revision).ok_or_else(|| DescriptionError::Esi {
+            path: path.to_path_buf(),
+            error: EsiError::NoSuchDevice { product_code: product, revision: Some(revision) },
+        })?;
         let at = file.devices.iter().position(|d| std::ptr::eq(d, device)).unwrap_or(0);
         for w in &device.warnings {
             tracing::warn!(esi = %path.display(), device = %device.type_name, "{w}");

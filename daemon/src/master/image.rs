@@ -23,7 +23,7 @@ use ecmxf_devices::od::DataType;
 use tokio::sync::{Notify, watch};
 
 use super::objects::{entry_name, lookup};
-use super::pdos::{PdoDescription, SlavePdos};
+use super::pdos::{PdoDescription, PdoSource, SlavePdos};
 use super::{Call, EngineError, Master, NotRunning, Phase, SlaveSummary};
 
 /// Slaves whose PDOs are read at once: each read waits for the chip, so
@@ -84,6 +84,40 @@ impl Image {
     /// Reads the PDOs of every slave with process data, `BUILDERS` slaves
     /// at a time, and lays them out as bring-up placed them (`key`).
     pub(crate) async fn build(master: &Arc<Master>, key: &LayoutKey) -> Result<Self, EngineError> {
+        let mappings = read_all_pdos(master, &key.slaves).await?;
+        Ok(Self::lay_out(master, key, mappings))
+    }
+
+    /// This image again with the names its slaves' devices give the
+    /// entries no other source named (SDO Information, see
+    /// [`Master::name_from_device`]), or `None` when none does. Names only
+    /// add: the entries, offsets and types are this image's.
+    pub(crate) async fn named_by_devices(&self, master: &Arc<Master>, key: &LayoutKey) -> Option<Self> {
+        let mut mappings = self.mappings.clone();
+        let mut named = false;
+        for (slave, m) in mappings.iter_mut().enumerate().filter(|(_, m)| m.device_can_name) {
+            let mut pdos = SlavePdos::clone(m);
+            pdos.device_can_name = false;
+            master.name_from_device(slave as u8, &mut pdos, Call::daemon()).await;
+            if pdos != **m {
+                *m = Arc::new(pdos);
+                named = true;
+            }
+        }
+        if !named {
+            return None;
+        }
+        let mut image = Self::lay_out(master, key, mappings);
+        // The types stay the first image's (a value is never read or
+        // written as two types in one layout).
+        for (e, before) in image.entries.iter_mut().zip(&self.entries) {
+            e.data_type = before.data_type;
+        }
+        Some(image)
+    }
+
+    /// The image of `mappings` as bring-up placed them (`key`).
+    fn lay_out(master: &Master, key: &LayoutKey, mappings: Vec<Arc<SlavePdos>>) -> Self {
         // One copy of the configuration for the whole build.
         let config = master.config();
         let mut image = Image {
@@ -91,27 +125,27 @@ impl Image {
             input_bytes: key.tx_size as u32,
             generation: key.generation,
             cycle_us: config.cycle.sync0_us,
+            mappings,
             ..Image::default()
         };
-        image.mappings = read_all_pdos(master, &key.slaves).await?;
         for output in [true, false] {
             for (i, s) in key.slaves.iter().enumerate() {
                 let (bytes, offset) = if output { (s.rx_bytes, s.rx_offset) } else { (s.tx_bytes, s.tx_offset) };
+                let pdos = Arc::clone(&image.mappings[i]);
+                let list = if output { &pdos.rx } else { &pdos.tx };
+                if let Some(note) = described_differently(i, &s.name, output, bytes, &pdos) {
+                    image.notes.push(note);
+                }
                 if bytes == 0 {
                     continue;
                 }
-                let pdos = Arc::clone(&image.mappings[i]);
-                let list = if output { &pdos.rx } else { &pdos.tx };
                 let first = image.entries.len();
                 image.add_slave(i as u8, output, (offset * 8) as u32, (bytes * 8) as u32, list);
                 let slave = config.slaves.get(i).cloned().unwrap_or_default();
                 image.name_variables(first, &slave, output, (offset * 8) as u32);
             }
         }
-        for n in &image.notes {
-            tracing::warn!(target: "ecmxfd::api::image", "{n}");
-        }
-        Ok(image)
+        image
     }
 
     /// Names the entries of one slave's outputs or inputs (from `first`
@@ -184,8 +218,11 @@ impl Image {
                     let data_type = e.data_type.unwrap_or_else(|| {
                         lookup(e.index, e.subindex)
                             .map(|(k, _)| k.data_type)
+                            // A string mapped in part keeps its type, in
+                            // whole bytes; a few bits of one are a number.
                             .filter(|t| {
-                                matches!(t, DataType::VisibleString(_) | DataType::OctetString(_)) || t.bits() == len
+                                matches!(t, DataType::VisibleString(_) | DataType::OctetString(_)) && len % 8 == 0
+                                    || t.bits() == len
                             })
                             .unwrap_or_else(|| type_for_bits(len))
                     });
@@ -344,7 +381,7 @@ impl LayoutKey {
 
 /// One build's outcome.
 #[derive(Clone, Debug)]
-struct Built {
+pub(crate) struct Built {
     key: LayoutKey,
     result: Result<Arc<Image>, EngineError>,
 }
@@ -392,6 +429,11 @@ impl ImageCache {
         }
     }
 
+    /// Changes with each build, naming or failure.
+    pub(crate) fn changes(&self) -> watch::Receiver<Option<Built>> {
+        self.built.subscribe()
+    }
+
     /// The image for the network in force if one was built (or its build
     /// failed), without waiting or asking for one: for front ends that
     /// publish on their own clock (Sparkplug) and try again next time.
@@ -418,16 +460,26 @@ impl ImageCache {
                     let result = Image::build(&master, &key).await.map(Arc::new);
                     let took_ms = started.elapsed().as_millis() as u64;
                     match &result {
-                        Ok(i) => tracing::info!(
-                            slaves = key.slaves.len(),
-                            entries = i.entries.len(),
-                            took_ms,
-                            "process image laid out"
-                        ),
+                        Ok(i) => {
+                            tracing::info!(
+                                slaves = key.slaves.len(),
+                                entries = i.entries.len(),
+                                took_ms,
+                                "process image laid out"
+                            );
+                            for n in &i.notes {
+                                tracing::warn!(target: "ecmxfd::api::image", "{n}");
+                            }
+                        }
                         Err(e) => tracing::warn!(took_ms, "process image not laid out: {e}"),
                     }
                     just_failed = result.is_err();
-                    self.built.send_replace(Some(Built { key, result }));
+                    self.built.send_replace(Some(Built { key: key.clone(), result: result.clone() }));
+                    // Then the devices' own names, in a second pass: the
+                    // first image never waits for them.
+                    if let Ok(first) = result {
+                        self.name_by_devices(&master, &key, &first).await;
+                    }
                     continue;
                 }
             }
@@ -440,9 +492,98 @@ impl ImageCache {
     }
 }
 
+impl ImageCache {
+    /// Replaces `first` with the image its devices name, if they do and
+    /// the network is still the one it was built for.
+    async fn name_by_devices(&self, master: &Arc<Master>, key: &LayoutKey, first: &Image) {
+        let started = Instant::now();
+        let Some(named) = first.named_by_devices(master, key).await else { return };
+        let labels = |i: &Image| i.entries.iter().filter(|e| !e.label.is_empty()).count();
+        let added = labels(&named).saturating_sub(labels(first));
+        let mut named = Some(named);
+        let still = self.built.send_if_modified(|b| match (b, named.take()) {
+            (Some(b), Some(named)) if b.key == *key && b.result.as_ref().is_ok_and(|i| std::ptr::eq(&**i, first)) => {
+                b.result = Ok(Arc::new(named));
+                true
+            }
+            _ => false,
+        });
+        if still {
+            tracing::info!(
+                named = added,
+                took_ms = started.elapsed().as_millis() as u64,
+                "process image entries named by their devices"
+            );
+        }
+    }
+}
+
+/// What the chip made of a slave's data in one direction, when it is not
+/// what the slave's PDOs (from their best source) describe: PDOs listed but
+/// no bytes placed (a PDO on a sync manager the device lacks, an assignment
+/// the chip did not read), or bytes of another size. Each is a note of the
+/// layout (`ecmxfctl pdos`, GetLayout, the log at start): the entries past
+/// what the description covers stay reachable by offset as
+/// `N.more_outputs`/`N.more_inputs`.
+fn described_differently(slave: usize, name: &str, output: bool, bytes: usize, pdos: &SlavePdos) -> Option<String> {
+    let list = if output { &pdos.rx } else { &pdos.tx };
+    let bits: u32 = list.iter().flat_map(|p| &p.entries).map(|e| u32::from(e.bits)).sum();
+    if list.is_empty() || bits.div_ceil(8) as usize == bytes {
+        return None;
+    }
+    let (dir, kind) = if output { ("output", "RxPDOs") } else { ("input", "TxPDOs") };
+    let from = match pdos.source {
+        PdoSource::Coe => "read over CoE",
+        PdoSource::Sii => "from its SII",
+        PdoSource::Esi => "from its ESI",
+        PdoSource::None => "from no source",
+    };
+    let indexes: Vec<String> = list.iter().map(|p| format!("{:#06x}", p.index)).collect();
+    let why = if pdos.note.is_empty() { String::new() } else { format!(" ({})", pdos.note) };
+    Some(if bytes == 0 {
+        format!(
+            "slave {slave} ({name}): its {kind} {} ({bits} bits, {from}{why}) have no {dir} bytes in the frames: the \
+             chip placed none (a PDO on a sync manager the device lacks, or an assignment it did not read)",
+            indexes.join(", ")
+        )
+    } else {
+        format!(
+            "slave {slave} ({name}): the chip placed {bytes} {dir} bytes; its {kind} {} ({from}{why}) describe {bits} \
+             bits: what they do not cover is reachable by offset as {slave}.more_{dir}s",
+            indexes.join(", ")
+        )
+    })
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::master::pdos::EntryDescription;
+
+    #[test]
+    fn pdos_the_chip_placed_otherwise_are_named_with_their_source() {
+        let entry = |bits| EntryDescription { index: 0x6000, subindex: 1, bits, name: String::new(), data_type: None };
+        let pdo = |entries| PdoDescription { index: 0x1A00, name: String::new(), sync_manager: Some(3), entries };
+        let pdos = SlavePdos {
+            source: PdoSource::Sii,
+            note: "CoE: no mailbox".into(),
+            names_from: crate::master::pdos::NameSource::None,
+            device_can_name: false,
+            rx: Vec::new(),
+            tx: vec![pdo(vec![entry(8), entry(4)])],
+        };
+        assert_eq!(described_differently(2, "IO", false, 2, &pdos), None, "12 bits in 2 bytes");
+        assert_eq!(described_differently(2, "IO", true, 0, &pdos), None, "nothing described, nothing placed");
+        let none = described_differently(2, "IO", false, 0, &pdos).unwrap();
+        assert!(
+            none.starts_with(
+                "slave 2 (IO): its TxPDOs 0x1a00 (12 bits, from its SII (CoE: no mailbox)) have no input bytes"
+            ),
+            "{none}"
+        );
+        let other = described_differently(2, "IO", false, 4, &pdos).unwrap();
+        assert!(other.contains("the chip placed 4 input bytes") && other.contains("2.more_inputs"), "{other}");
+    }
 
     #[test]
     fn bits_round_trip_at_any_offset() {

@@ -23,21 +23,35 @@ impl Master {
     /// goes out and the slave answers for itself); [`WrongState::NoCoe`]
     /// when its SII lists the mailbox protocols and CoE is not among them.
     pub(crate) async fn check_coe(&self, slave: u8, call: Call) -> Result<(), EngineError> {
-        let Some(identity) = self.identity(slave) else { return Ok(()) };
-        let protocols = match self.mailbox.get(slave, identity) {
-            Some(p) => p,
-            None => match self.eeprom_read(slave, PROTOCOLS_WORD, call).await {
-                Ok(words) => {
-                    let p = u16::from_le_bytes([words[0], words[1]]);
-                    self.mailbox.put(slave, identity, p);
-                    p
-                }
-                Err(_) => return Ok(()),
-            },
-        };
-        if protocols & protocol::COE == 0 {
-            return Err(EngineError::WrongState(WrongState::NoCoe { slave, protocols }));
+        match self.protocols(slave, call).await {
+            Some(p) if p & protocol::COE == 0 => {
+                Err(EngineError::WrongState(WrongState::NoCoe { slave, protocols: p }))
+            }
+            _ => Ok(()),
         }
-        Ok(())
+    }
+
+    /// The same for FoE ([`WrongState::NoFoe`]): a transfer to a slave
+    /// without it is answered at once, not as the chip's bare failure.
+    pub(crate) async fn check_foe(&self, slave: u8, call: Call) -> Result<(), EngineError> {
+        match self.protocols(slave, call).await {
+            Some(p) if p & protocol::FOE == 0 => {
+                Err(EngineError::WrongState(WrongState::NoFoe { slave, protocols: p }))
+            }
+            _ => Ok(()),
+        }
+    }
+
+    /// The mailbox protocols `slave`'s SII lists, read once; `None` when it
+    /// cannot be read.
+    async fn protocols(&self, slave: u8, call: Call) -> Option<u16> {
+        let identity = self.identity(slave)?;
+        if let Some(p) = self.mailbox.get(slave, identity) {
+            return Some(p);
+        }
+        let words = self.eeprom_read(slave, PROTOCOLS_WORD, call).await.ok()?;
+        let p = u16::from_le_bytes([words[0], words[1]]);
+        self.mailbox.put(slave, identity, p);
+        Some(p)
     }
 }

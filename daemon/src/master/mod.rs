@@ -36,6 +36,7 @@ mod call;
 pub mod device_dictionary;
 pub(crate) mod diagnostics;
 pub mod entry_writes;
+pub(crate) mod esc_errors;
 pub(crate) mod esi;
 pub(crate) mod frame_claims;
 pub(crate) mod histogram;
@@ -45,6 +46,7 @@ pub(crate) mod mailbox;
 pub(crate) mod mailbox_channel;
 mod network;
 pub(crate) mod objects;
+pub(crate) mod opcua_state;
 pub(crate) mod outputs;
 pub mod pdos;
 mod per_slave;
@@ -145,6 +147,21 @@ pub enum Health {
     /// limit between two FIFO exchanges. Degraded until a whole window
     /// passes without one (see `engine::trouble`).
     Troubled(Trouble),
+}
+
+impl Health {
+    /// One word or two for it, as front ends show it ("healthy", "stalled").
+    pub fn word(&self) -> &'static str {
+        match self {
+            Self::Healthy => "healthy",
+            Self::NotRunning(_) => "not running",
+            Self::WrongState { .. } => "wrong state",
+            Self::Stalled { .. } => "stalled",
+            Self::SlavesMissing { .. } => "slaves missing",
+            Self::Int0Stuck => "int0 stuck",
+            Self::Troubled(_) => "troubled",
+        }
+    }
 }
 
 /// Trouble that passes, as [`Health::Troubled`] reports it.
@@ -320,6 +337,8 @@ pub struct Master {
     dictionaries: device_dictionary::DeviceDictionaries,
     /// The Sparkplug node's connection and counters.
     sparkplug: Arc<sparkplug_state::SparkplugState>,
+    /// The OPC UA server's sessions and counters.
+    opcua: Arc<opcua_state::OpcuaState>,
     /// Output leases: one table for every front end (gRPC, Sparkplug,
     /// and the ones to come), swept by [`Master::sweep_leases`].
     leases: Leases,
@@ -394,6 +413,7 @@ impl Master {
             channels: mailbox_channel::MailboxChannels::default(),
             dictionaries: device_dictionary::DeviceDictionaries::default(),
             sparkplug: Arc::default(),
+            opcua: Arc::default(),
             leases: Leases::default(),
             lease_ttl,
         }
@@ -426,6 +446,12 @@ impl Master {
     /// configured).
     pub fn sparkplug_state(&self) -> &Arc<sparkplug_state::SparkplugState> {
         &self.sparkplug
+    }
+
+    /// The OPC UA server's sessions and counters (zero while none is
+    /// configured).
+    pub fn opcua_state(&self) -> &Arc<opcua_state::OpcuaState> {
+        &self.opcua
     }
 
     /// Opens the configured link and starts.
@@ -653,6 +679,12 @@ impl Master {
                 tokio::time::timeout_at(end.into(), self.image.get(self)).await.unwrap_or(Err(EngineError::Timeout))
             }
         }
+    }
+
+    /// Changes each time an image is built, named or its build fails (the
+    /// value says nothing: ask [`Master::current_image`]).
+    pub(crate) fn watch_images(&self) -> tokio::sync::watch::Receiver<Option<image::Built>> {
+        self.image.changes()
     }
 
     /// The process image of the network in force if it is built (or its

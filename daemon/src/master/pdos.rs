@@ -12,12 +12,30 @@
 //! Entry types come from the device: the ESI dictionary, then the PDO
 //! entry's own type (ESI `DataType`, SII data type code); what is left is
 //! typed by the caller's table.
+//!
+//! Names of PDOs and entries come from the best source too, in this order
+//! (`names_from` says which named any): the configured ESI, or the ENI's
+//! description of the slave; else the SII's strings (its PDO categories);
+//! else, for a CoE slave that does SDO Information (SII CoE details bit 1),
+//! the device itself: its dictionary when the daemon has read it
+//! (`device_dictionary.rs`), else only what is mapped is asked for, one Get
+//! Object Description per PDO and one Get Entry Description (no value
+//! information) per unnamed entry (ETG.1000.6 5.6.3.5, 5.6.3.6). That is
+//! 1 + PDOs + entries mailbox exchanges once per bring-up (a 12-slave
+//! mix mapping 81 entries: about 100), not a whole dictionary (hundreds
+//! of objects, each with its entries). The listing is part of the process
+//! image the daemon builds in its own task after each bring-up (`image.rs`,
+//! `Call::daemon`), so no client's deadline ever carries it; the device's
+//! names come in a second pass, after the first image is out, so they
+//! never delay the first write. They only add: labels and variable names
+//! where there were none; entries, offsets and types stay as they were.
 
 use ecmxf_devices::esi::{EsiDevice, EsiPdo};
 use ecmxf_devices::od::DataType;
 use ecmxf_devices::sii::{self, PdoRecord, Sii, decode_text};
 use ecmxf_wire::payload::pdo::{PdoEntry, RX_PDO_ASSIGN, TX_PDO_ASSIGN};
 
+use super::device_dictionary::DictionaryError;
 use super::esi::EsiRef;
 use super::sii::Categories;
 use super::{Call, Master};
@@ -34,6 +52,35 @@ pub enum PdoSource {
     Esi,
     /// Nothing says (no process data, or no source answered).
     None,
+}
+
+/// Where a slave's PDO and entry names came from: the first source, in
+/// the order they are asked, that named any.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum NameSource {
+    /// The ENI's description of the slave.
+    Eni,
+    /// The configured ESI file.
+    Esi,
+    /// The slave's SII strings (PDO categories).
+    Sii,
+    /// The device's own SDO Information (ETG.1000.6 5.6.3).
+    SdoInfo,
+    /// No source named them.
+    None,
+}
+
+impl NameSource {
+    /// Its name in listings ("eni", "esi", "sii", "sdo_info", "none").
+    pub fn as_str(self) -> &'static str {
+        match self {
+            Self::Eni => "eni",
+            Self::Esi => "esi",
+            Self::Sii => "sii",
+            Self::SdoInfo => "sdo_info",
+            Self::None => "none",
+        }
+    }
 }
 
 /// One mapped entry.
@@ -71,6 +118,12 @@ pub struct SlavePdos {
     pub source: PdoSource,
     /// Why a lesser source was used ("" for CoE).
     pub note: String,
+    /// Where the names came from.
+    pub names_from: NameSource,
+    /// Entries are unnamed and the device may name them over SDO
+    /// Information ([`Master::name_from_device`]): a CoE slave without
+    /// ESI or ENI.
+    pub device_can_name: bool,
     /// RxPDOs (outputs).
     pub rx: Vec<PdoDescription>,
     /// TxPDOs (inputs).
@@ -80,7 +133,14 @@ pub struct SlavePdos {
 impl SlavePdos {
     /// A slave with nothing to list, and why.
     pub(crate) fn none(note: impl Into<String>) -> Self {
-        Self { source: PdoSource::None, note: note.into(), rx: Vec::new(), tx: Vec::new() }
+        Self {
+            source: PdoSource::None,
+            note: note.into(),
+            names_from: NameSource::None,
+            device_can_name: false,
+            rx: Vec::new(),
+            tx: Vec::new(),
+        }
     }
 }
 
@@ -155,8 +215,22 @@ impl Master {
                         Err(e) => return Err(e),
                     }
                 }
-                let pdos = SlavePdos { source: PdoSource::Coe, note: String::new(), rx, tx };
+                let named_by_sii = any_named(&rx, &tx);
+                let pdos = SlavePdos {
+                    source: PdoSource::Coe,
+                    note: String::new(),
+                    names_from: if named_by_sii { NameSource::Sii } else { NameSource::None },
+                    device_can_name: false,
+                    rx,
+                    tx,
+                };
                 let mut pdos = typed(pdos, esi_device.or(eni_device.as_ref()));
+                if pdos.names_from == NameSource::None && any_named(&pdos.rx, &pdos.tx) {
+                    pdos.names_from = if esi_device.is_some() { NameSource::Esi } else { NameSource::Eni };
+                }
+                // Without a description, the device can name what it maps:
+                // a second pass, once the image is out (`image.rs`).
+                pdos.device_can_name = esi_device.is_none() && eni_device.is_none() && !all_named(&pdos.rx, &pdos.tx);
                 // Without an ESI, what the device described of itself (SDO
                 // Information, when read) types the entries left untyped.
                 if let Some(d) = self.known_device_dictionary(slave).filter(|_| esi_device.is_none()) {
@@ -175,7 +249,15 @@ impl Master {
             Ok(image) if !image.rx_pdos.is_empty() || !image.tx_pdos.is_empty() => {
                 let (rx, tx) = (from_sii(&image, &image.rx_pdos), from_sii(&image, &image.tx_pdos));
                 let note = notes.join("; ");
-                return Ok(typed(SlavePdos { source: PdoSource::Sii, note, rx, tx }, esi_device));
+                let names_from = if any_named(&rx, &tx) { NameSource::Sii } else { NameSource::None };
+                let mut pdos = typed(
+                    SlavePdos { source: PdoSource::Sii, note, names_from, device_can_name: false, rx, tx },
+                    esi_device,
+                );
+                if pdos.names_from == NameSource::None && any_named(&pdos.rx, &pdos.tx) {
+                    pdos.names_from = NameSource::Esi;
+                }
+                return Ok(pdos);
             }
             Ok(_) => notes.push("SII: no PDO categories".into()),
             Err(e) if source_lacks(&e) => notes.push(format!("SII: {e}")),
@@ -184,10 +266,83 @@ impl Master {
         if let Some(d) = esi_device {
             let (rx, tx) = (from_esi(&d.rx_pdos), from_esi(&d.tx_pdos));
             let note = notes.join("; ");
-            return Ok(typed(SlavePdos { source: PdoSource::Esi, note, rx, tx }, esi_device));
+            let names_from = if any_named(&rx, &tx) { NameSource::Esi } else { NameSource::None };
+            return Ok(typed(
+                SlavePdos { source: PdoSource::Esi, note, names_from, device_can_name: false, rx, tx },
+                esi_device,
+            ));
         }
         notes.push("no ESI configured".into());
         Ok(SlavePdos::none(notes.join("; ")))
+    }
+
+    /// Names the PDOs and entries still unnamed as the device describes
+    /// them (SDO Information): from its dictionary when the daemon has read
+    /// it (in memory or kept on disk), else by asking only for what is mapped, one Get Object
+    /// Description per PDO and one Get Entry Description (no value
+    /// information) per entry: 1 + PDOs + entries mailbox exchanges, the
+    /// first (the SII's CoE details) usually cached. This is the daemon's
+    /// second pass over an image it has already published (`image.rs`):
+    /// its own work, never in a client's deadline, and never before the
+    /// first image. Names are not worth failing a listing: a
+    /// question the device refuses leaves that name empty; a failed
+    /// exchange ends the naming.
+    pub(crate) async fn name_from_device(&self, slave: u8, pdos: &mut SlavePdos, call: Call) {
+        let before = count_named(&pdos.rx, &pdos.tx);
+        if let Some(d) = self.kept_device_dictionary(slave) {
+            for p in pdos.rx.iter_mut().chain(pdos.tx.iter_mut()) {
+                if p.name.is_empty() {
+                    if let Some(o) = d.object(p.index) {
+                        p.name.clone_from(&o.name);
+                    }
+                }
+                for e in p.entries.iter_mut().filter(|e| e.index != 0 && e.name.is_empty()) {
+                    if let Some(x) = d.entry(e.index, e.subindex) {
+                        e.name.clone_from(&x.name);
+                    }
+                }
+            }
+        } else {
+            match self.supports_sdo_info(slave, call).await {
+                Ok(true) => {}
+                Ok(false) => return,
+                Err(e) => {
+                    tracing::debug!(slave, "PDO names from SDO Information: {e}");
+                    return;
+                }
+            }
+            // A refusal or an answer that does not read leaves one name
+            // empty; anything else (mailbox, engine) ends the naming.
+            let go_on =
+                |e: &DictionaryError| matches!(e, DictionaryError::Aborted { .. } | DictionaryError::Garbled(_));
+            'pdos: for p in pdos.rx.iter_mut().chain(pdos.tx.iter_mut()) {
+                if p.name.is_empty() && is_mapping_index(p.index) {
+                    match self.described_object_name(slave, p.index, call).await {
+                        Ok(name) => p.name = name,
+                        Err(e) => {
+                            tracing::debug!(slave, "PDO name from SDO Information: {e}");
+                            if !go_on(&e) {
+                                break 'pdos;
+                            }
+                        }
+                    }
+                }
+                for e in p.entries.iter_mut().filter(|e| e.index != 0 && e.name.is_empty()) {
+                    match self.described_entry_name(slave, e.index, e.subindex, call).await {
+                        Ok(name) => e.name = name,
+                        Err(err) => {
+                            tracing::debug!(slave, "entry name from SDO Information: {err}");
+                            if !go_on(&err) {
+                                break 'pdos;
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        if pdos.names_from == NameSource::None && count_named(&pdos.rx, &pdos.tx) > before {
+            pdos.names_from = NameSource::SdoInfo;
+        }
     }
 
     /// Both directions over CoE; a direction without bytes is left empty.
@@ -241,6 +396,25 @@ impl Master {
         }
         Ok(out)
     }
+}
+
+/// How many PDO and entry names (gaps left out) the lists have.
+fn count_named(rx: &[PdoDescription], tx: &[PdoDescription]) -> usize {
+    rx.iter()
+        .chain(tx)
+        .map(|p| {
+            usize::from(!p.name.is_empty()) + p.entries.iter().filter(|e| e.index != 0 && !e.name.is_empty()).count()
+        })
+        .sum()
+}
+
+fn any_named(rx: &[PdoDescription], tx: &[PdoDescription]) -> bool {
+    count_named(rx, tx) > 0
+}
+
+/// Whether every PDO and entry (gaps left out) has a name.
+fn all_named(rx: &[PdoDescription], tx: &[PdoDescription]) -> bool {
+    rx.iter().chain(tx).all(|p| !p.name.is_empty() && p.entries.iter().all(|e| e.index == 0 || !e.name.is_empty()))
 }
 
 /// The SII categories that describe PDOs and name them.

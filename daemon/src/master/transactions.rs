@@ -270,6 +270,7 @@ impl Master {
         progress: Option<Arc<TransferProgress>>,
         call: Call,
     ) -> Result<(), EngineError> {
+        self.check_foe(slave, call).await?;
         let request = SlotRequest::FoeWrite { slave, name: name.to_owned(), password, data };
         let _mailbox = self.coe_lock(slave).await;
         self.request_with_progress(request, call, progress).await.map(|_| ())
@@ -286,6 +287,7 @@ impl Master {
         progress: Option<Arc<TransferProgress>>,
         call: Call,
     ) -> Result<Vec<u8>, EngineError> {
+        self.check_foe(slave, call).await?;
         let request = SlotRequest::FoeRead { slave, name: name.to_owned(), password, max_len };
         let _mailbox = self.coe_lock(slave).await;
         self.request_with_progress(request, call, progress).await

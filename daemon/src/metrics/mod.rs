@@ -81,6 +81,15 @@ pub(crate) async fn render(sources: &Sources) -> String {
     let mut out = String::with_capacity(8192);
     let s = master.status();
     let verdict = master.verdict(&s);
+    // What runs: the daemon's version and the chip's firmware (0 before
+    // the first bring-up read it), one sample of 1 as Prometheus' *_info.
+    let _ = writeln!(
+        out,
+        "# HELP ecmxf_build_info The daemon's version and the chip's firmware.\n# TYPE ecmxf_build_info gauge\n\
+         ecmxf_build_info{{version=\"{}\",firmware=\"{:#04x}\"}} 1",
+        env!("CARGO_PKG_VERSION"),
+        master.layout().firmware
+    );
     let _ = writeln!(out, "# HELP ecmxf_engine_phase The engine's phase (1 for the current one).");
     let _ = writeln!(out, "# TYPE ecmxf_engine_phase gauge");
     for (p, name) in PHASES {
@@ -247,6 +256,24 @@ pub(crate) async fn render(sources: &Sources) -> String {
                 &s.refused,
             ),
             ("ecmxf_sparkplug_connects_total", "Sparkplug connections made to a broker.", &s.connects),
+        ] {
+            metric(&mut out, name, "counter", help, counter.load(Relaxed));
+        }
+    }
+    let o = master.opcua_state();
+    if o.enabled.load(std::sync::atomic::Ordering::Relaxed) {
+        use std::sync::atomic::Ordering::Relaxed;
+        for (name, help, gauge) in [
+            ("ecmxf_opcua_sessions", "OPC UA sessions open.", &o.sessions),
+            ("ecmxf_opcua_monitored_items", "OPC UA monitored items on the daemon's variables.", &o.monitored_items),
+        ] {
+            metric(&mut out, name, "gauge", help, gauge.load(Relaxed));
+        }
+        for (name, help, counter) in [
+            ("ecmxf_opcua_samples_total", "Values sampled for OPC UA monitored items.", &o.samples),
+            ("ecmxf_opcua_writes_total", "OPC UA output writes done.", &o.writes),
+            ("ecmxf_opcua_calls_total", "OPC UA method calls done.", &o.calls),
+            ("ecmxf_opcua_refused_total", "OPC UA writes and calls refused (role, lease, value).", &o.refused),
         ] {
             metric(&mut out, name, "counter", help, counter.load(Relaxed));
         }

@@ -100,6 +100,8 @@ pub(super) struct Outgoing {
     pub device: Option<u8>,
     /// The payload.
     pub payload: Payload,
+    /// Why a device was born or died, in words for the log ("" else).
+    pub why: &'static str,
 }
 
 /// A node metric's source.
@@ -295,10 +297,19 @@ impl Node {
         // Deaths first: a device lost, or one whose image changed under it.
         let born: Vec<u8> = self.devices.keys().copied().collect();
         for p in born {
-            let stale = self.devices.get(&p).is_some_and(|d| !same_image(d.image.as_ref(), view.image));
+            let stale = self.image_changed_its_metrics(view, p);
             if !alive(view, p) || !positions.contains(&p) || stale {
                 self.devices.remove(&p);
-                out.push(self.message(Kind::DDeath, Some(p), view.now_ms, Vec::new()));
+                let why = if !positions.contains(&p) {
+                    "no longer published ([sparkplug] slaves)"
+                } else if stale {
+                    "its process image was laid out again (metrics change)"
+                } else {
+                    not_alive(view, p)
+                };
+                let mut death = self.message(Kind::DDeath, Some(p), view.now_ms, Vec::new());
+                death.why = why;
+                out.push(death);
             }
         }
         for &p in &positions {
@@ -320,7 +331,9 @@ impl Node {
                 })
                 .collect();
             self.devices.insert(p, Device { metrics, last, image: view.image.cloned() });
-            out.push(self.message(Kind::DBirth, Some(p), view.now_ms, payload));
+            let mut birth = self.message(Kind::DBirth, Some(p), view.now_ms, payload);
+            birth.why = "in the network, in OP, its process data flowing";
+            out.push(birth);
         }
         if data {
             let deadband = self.settings.data_deadband;
@@ -419,6 +432,25 @@ impl Node {
             kind,
             device,
             payload: Payload { timestamp: Some(now_ms), metrics, seq: Some(seq), ..Payload::default() },
+            why: "",
+        }
+    }
+
+    /// Whether device `p` was born of another image than `view`'s and its
+    /// metrics differ in this one (a new image with the same metrics, such
+    /// as one whose entries the devices only named, is taken as is: no
+    /// death and birth for it).
+    fn image_changed_its_metrics(&mut self, view: &View, p: u8) -> bool {
+        if self.devices.get(&p).is_none_or(|d| same_image(d.image.as_ref(), view.image)) {
+            return false;
+        }
+        let now = self.device_metrics(view, p);
+        match self.devices.get_mut(&p) {
+            Some(d) if d.metrics == now => {
+                d.image = view.image.cloned();
+                false
+            }
+            _ => true,
         }
     }
 
@@ -521,6 +553,21 @@ fn same_image(a: Option<&Arc<Image>>, b: Option<&Arc<Image>>) -> bool {
 /// Whether slave `p` is a live device: process data flows in the target
 /// state, the ring still reaches it, it reported no AL state other than
 /// OP, and its process image is laid out (DBIRTH lists every metric).
+/// Why a device is not alive, in words (see [`alive`]).
+fn not_alive(view: &View, p: u8) -> &'static str {
+    if view.snapshot.phase != Phase::Running {
+        "the engine is not running the network"
+    } else if !view.flowing {
+        "process data stopped flowing"
+    } else if u64::from(p) >= view.snapshot.slaves || usize::from(p) >= view.layout.slaves.len() {
+        "the slave is gone from the ring"
+    } else if view.al.get(&p).is_some_and(|(state, _)| *state != EcatState::Op) {
+        "the slave left OP (AL status)"
+    } else {
+        "the process image is not laid out yet"
+    }
+}
+
 fn alive(view: &View, p: u8) -> bool {
     view.snapshot.phase == Phase::Running
         && view.flowing

@@ -154,13 +154,17 @@ fn a_lost_slave_dies_alone_and_is_born_again_when_back() {
     node.birth(&w.view(0));
     // The ring ends before slave 2.
     w.snapshot.slaves = 2;
-    assert_eq!(kinds(&node.update(&w.view(1), false)), [(Kind::DDeath, Some(2))]);
+    let out = node.update(&w.view(1), false);
+    assert_eq!(kinds(&out), [(Kind::DDeath, Some(2))]);
+    assert_eq!(out[0].why, "the slave is gone from the ring", "the log says why");
     assert!(node.update(&w.view(2), true).is_empty());
     w.snapshot.slaves = 3;
     assert_eq!(kinds(&node.update(&w.view(3), false)), [(Kind::DBirth, Some(2))]);
     // An AL error of slave 1 kills slave 1 only.
     w.al.insert(1, (EcatState::SafeOp, 0x001A));
-    assert_eq!(kinds(&node.update(&w.view(4), false)), [(Kind::DDeath, Some(1))]);
+    let out = node.update(&w.view(4), false);
+    assert_eq!(kinds(&out), [(Kind::DDeath, Some(1))]);
+    assert_eq!(out[0].why, "the slave left OP (AL status)");
     w.al.clear();
     assert_eq!(kinds(&node.update(&w.view(5), false)), [(Kind::DBirth, Some(1))]);
     assert_eq!(node.born().collect::<Vec<_>>(), [0, 1, 2]);
@@ -178,16 +182,30 @@ fn every_device_dies_when_the_network_leaves_op_and_a_new_image_means_new_births
     assert!(out.iter().all(|o| o.payload.metrics.is_empty()));
     w.snapshot.phase = Phase::Running;
     assert_eq!(node.update(&w.view(2), false).len(), 3);
-    // Laid out again (a new configuration): the devices are born again
-    // with the new metrics, the aliases of names they had kept.
+    // A new image with the same metrics (its devices named its entries):
+    // nobody dies.
     let before = node.birth(&w.view(3));
     w.image = Arc::new((*w.image).clone());
+    assert!(node.update(&w.view(4), false).is_empty(), "the same metrics are not a new birth");
+    // Laid out again with other types (a new configuration): the devices
+    // are born again with the new metrics, the aliases of names they had
+    // kept.
+    let mut retyped = (*w.image).clone();
+    for e in &mut retyped.entries {
+        e.data_type = DataType::Int64;
+    }
+    w.image = Arc::new(retyped);
     let out = node.update(&w.view(4), false);
-    assert_eq!(out.iter().filter(|o| o.kind == Kind::DDeath).count(), 3);
-    assert_eq!(out.iter().filter(|o| o.kind == Kind::DBirth).count(), 3);
+    // Slave 1 has no process data: its metrics did not change.
+    assert_eq!(
+        kinds(&out),
+        [(Kind::DDeath, Some(0)), (Kind::DDeath, Some(2)), (Kind::DBirth, Some(0)), (Kind::DBirth, Some(2))]
+    );
+    assert!(out.iter().filter(|o| o.kind == Kind::DDeath).all(|o| o.why.contains("laid out again")));
+    assert!(out.iter().filter(|o| o.kind == Kind::DBirth).all(|o| !o.why.is_empty()));
     let alias_of =
         |o: &Outgoing, n: &str| o.payload.metrics.iter().find(|m| m.name.as_deref() == Some(n)).unwrap().alias;
-    assert_eq!(alias_of(&before[1], "Outputs/setpoint"), alias_of(&out[3], "Outputs/setpoint"));
+    assert_eq!(alias_of(&before[1], "Outputs/setpoint"), alias_of(&out[2], "Outputs/setpoint"));
 }
 
 #[test]

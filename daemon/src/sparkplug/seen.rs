@@ -77,7 +77,7 @@ impl Seen {
             inputs_ms,
             snapshot,
             flowing: verdict.flowing(),
-            health: health_word(&verdict.health).into(),
+            health: verdict.health.word().into(),
             layout: m.layout(),
             image,
             inputs,
@@ -129,19 +129,6 @@ pub(super) fn track_al(al: &mut BTreeMap<u8, (EcatState, u16)>, kind: &EventKind
 }
 
 /// The health in one or two words (the node metric `Engine/Health`).
-fn health_word(h: &crate::master::Health) -> &'static str {
-    use crate::master::Health;
-    match h {
-        Health::Healthy => "healthy",
-        Health::NotRunning(_) => "not running",
-        Health::WrongState { .. } => "wrong state",
-        Health::Stalled { .. } => "stalled",
-        Health::SlavesMissing { .. } => "slaves missing",
-        Health::Int0Stuck => "int0 stuck",
-        Health::Troubled(_) => "troubled",
-    }
-}
-
 pub(super) fn now_ms() -> u64 {
     SystemTime::now().duration_since(UNIX_EPOCH).map_or(0, |d| d.as_millis() as u64)
 }

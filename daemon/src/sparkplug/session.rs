@@ -266,7 +266,11 @@ impl Session<'_> {
         let devices = out.len() - 1;
         self.send(client, out);
         self.stats.connected.store(1, Relaxed);
-        info!(devices, "sparkplug: births published");
+        if devices == 0 {
+            info!("sparkplug: node born (NBIRTH); its devices are born once the network runs in OP with data flowing");
+        } else {
+            info!(devices, "sparkplug: node and {devices} devices born (NBIRTH, DBIRTH)");
+        }
     }
 
     /// NDEATH, then the disconnect, both given [`GOODBYE`] to go out.
@@ -333,6 +337,9 @@ impl Session<'_> {
     /// Hands messages to the client's queue; a full queue drops them.
     fn send(&self, client: &AsyncClient, out: Vec<Outgoing>) {
         for o in out {
+            if let (Some(p), false) = (o.device, o.why.is_empty()) {
+                info!(slave = p, "sparkplug: {} slave-{p}: {}", o.kind, o.why);
+            }
             let topic = match o.device {
                 None => self.topics.node(o.kind),
                 Some(p) => self.topics.device(o.kind, &topic::device_id(p)),

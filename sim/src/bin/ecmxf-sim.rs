@@ -3,6 +3,7 @@
 //! it, or check a network file.
 #![forbid(unsafe_code)]
 
+use std::io::Write as _;
 use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
@@ -77,6 +78,81 @@ enum Command {
         /// Network file.
         network: PathBuf,
     },
+    /// Write the ecmxf-sim(1) manual page into DIR (for packaging).
+    #[command(hide = true)]
+    Man {
+        /// The folder to write ecmxf-sim.1 into.
+        dir: PathBuf,
+    },
+}
+
+/// What ecmxf-sim(1) says beyond the commands' options: the network file
+/// and the control commands (the same list `ctl help` prints).
+fn man_more() -> String {
+    let mut text = String::from(
+        r#".SH DESCRIPTION
+ecmxf\-sim simulates the NEXTW ECM\-XF EtherCAT master chip and the
+EtherCAT network behind it, as the chip's manual describes them: the SPI
+packets and their check words, the blocking\-command slot, the PDO FIFOs
+fed per DC cycle, mailboxes (CoE with SDO Information, FoE), SII, the
+slaves' state machines, CiA 402 drives and faults. ecmxfd(8) runs it
+in its own process with \fBbackend = "sim"\fR (or \fB\-\-sim\fR), or
+reaches one served by \fBecmxf\-sim serve\fR with \fBbackend =
+"sim\-socket"\fR; \fBecmxf\-sim hardware\fR runs any program, the chip
+vendor's driver included, on emulated /dev/spidev0.0 and /dev/gpiochip0.
+.SH NETWORK FILE
+TOML, strict (an unknown key is an error naming it and its line):
+.PP
+.nf
+.RS
+version = 1
+[chip]                      # optional
+processing_us = 30
+firmware_version = 0x24
+spi_hz = 20_000_000
+[[slave]]                   # one per slave, in ring order
+profile = "neuromeka\-core"  # a built\-in device, or:
+# esi = "file.xml" (with product_code, revision), sii = "dump.bin",
+# eni = "network.xml" with eni_slave = "Name" or a position from 1
+alias = 1
+min_cycle_us = 125          # a shorter SYNC0 is refused at SAFE\-OP
+.RE
+.fi
+.PP
+\fBecmxf\-sim check FILE\fR lists the slaves a file makes and what it
+could not model as the file says.
+.SH CONTROL COMMANDS
+Sent to a serving simulator with \fBecmxf\-sim ctl \-\-socket SOCKET
+WORDS...\fR; numbers are decimal or 0x hex.
+.PP
+.nf
+"#,
+    );
+    for line in ecmxf_sim::control::HELP.lines() {
+        let line = line.replace('\\', "\\e").replace('-', "\\-");
+        text.push_str(&line);
+        text.push('\n');
+    }
+    text.push_str(".fi\n.SH EXIT STATUS\n0 on success; 2 for a network file that does not load; 1 for any other failure; \
+                   \\fBhardware\\fR exits with its command's status.\n.SH SEE ALSO\necmxfd(8), ecmxfd.toml(5), ecmxfctl(1)\n");
+    text
+}
+
+/// Writes ecmxf-sim(1) into `dir`.
+fn write_man_page(dir: &std::path::Path) -> std::io::Result<PathBuf> {
+    use clap::CommandFactory;
+    std::fs::create_dir_all(dir)?;
+    let man = clap_mangen::Man::new(Cli::command()).section("1");
+    let mut page = Vec::new();
+    man.render_title(&mut page)?;
+    man.render_name_section(&mut page)?;
+    man.render_synopsis_section(&mut page)?;
+    page.extend_from_slice(man_more().as_bytes());
+    man.render_subcommands_section(&mut page)?;
+    man.render_version_section(&mut page)?;
+    let path = dir.join("ecmxf-sim.1");
+    std::fs::write(&path, page)?;
+    Ok(path)
 }
 
 /// Why a command failed, and so its exit code: a network file that does
@@ -193,11 +269,19 @@ fn run(cli: Cli) -> Result<(), Failure> {
                 Err(text) => Err(text.into()),
             }
         }
+        Command::Man { dir } => {
+            let path = write_man_page(&dir)
+                .map_err(|e| format!("cannot write the manual page into {}: {e}", dir.display()))?;
+            println!("{}", path.display());
+            Ok(())
+        }
         Command::Check { network } => {
             let (net, _) = load(Some(&network))?;
+            // A closed pipe (`| head -1`) ends the listing, not in a panic.
+            let mut out = std::io::stdout().lock();
             for (i, s) in net.slaves.iter().enumerate() {
                 let sii = s.sii();
-                println!(
+                let line = format!(
                     "{i}: {:<24} vendor {:#010x} product {:#010x} revision {:#010x} outputs {} B inputs {} B",
                     s.name,
                     sii.vendor_id,
@@ -206,6 +290,21 @@ fn run(cli: Cli) -> Result<(), Failure> {
                     s.rx.bytes(),
                     s.tx.bytes()
                 );
+                if writeln!(out, "{line}").is_err() {
+                    return Ok(());
+                }
+                for note in &s.notes {
+                    if writeln!(out, "   {note}").is_err() {
+                        return Ok(());
+                    }
+                }
+                for ((index, sub), why) in &s.od.beyond_file {
+                    let what = why.says();
+                    let note = format!("   {index:#06x}:{sub:02x}, {what}");
+                    if writeln!(out, "{note}").is_err() {
+                        return Ok(());
+                    }
+                }
             }
             Ok(())
         }

@@ -304,8 +304,10 @@ impl Chip {
                 self.fifo.rx_depth_set = n.0;
                 value(0)
             }
-            A::FifoGetTxCount(_) => reply(&TxFifoDepth(self.fifo.tx_depth)),
-            A::FifoGetRxCount(_) => reply(&RxFifoDepth(self.fifo.rx_depth)),
+            // v049 ECM_CMD_FIFO_GET_TX_CNT / RX_CNT: "取得 FIFO 設置數量", the
+            // count set, which FIFO_INIT makes the one in use.
+            A::FifoGetTxCount(_) => reply(&TxFifoDepth(self.fifo.tx_depth_set)),
+            A::FifoGetRxCount(_) => reply(&RxFifoDepth(self.fifo.rx_depth_set)),
             A::FwVersionGet(_) => reply(&FirmwareVersion(self.config.firmware_version)),
             A::IntSetEnable(c) => {
                 self.int_config = c.0;

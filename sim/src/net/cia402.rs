@@ -59,6 +59,61 @@ pub const ERROR_PD_TIMEOUT: u16 = 0x8700;
 pub const FAULT_REACTION_NS: u64 = 5_000_000;
 /// Position window for "target reached", counts.
 pub const POSITION_WINDOW: f64 = 100.0;
+/// Acceleration and quick-stop deceleration where the dictionary gives
+/// none, counts/s^2 (one revolution per second, reached in 0.1 s).
+pub const DEFAULT_ACCELERATION: f64 = 10.0 * COUNTS_PER_REV;
+
+/// The objects a CiA 402 axis needs to be told its mode and to show it
+/// (0x6060, 0x6061, 0x6502 at each axis' base), added where a drive's file
+/// maps a controlword and a statusword but its dictionary lacks them (an
+/// ESI without `<Dictionary>`, an SII): the real drive has them, being a
+/// drive. Each is marked in `beyond_file`.
+pub fn add_profile_objects(od: &mut ObjectDictionary) {
+    use ecmxf_devices::od::BeyondFile;
+    for k in 0..8u16 {
+        let b = k * AXIS_STRIDE;
+        if od.object(idx::CONTROLWORD + b).is_none() || od.object(idx::STATUSWORD + b).is_none() {
+            continue;
+        }
+        let supported = (1i64 << 7) | (1 << 8) | (1 << 9);
+        for (index, name, t, access, m, v) in [
+            (idx::MODE, "Modes of operation", DataType::Int8, Access::RW, Mappable::Rx, 0),
+            (idx::MODE_DISPLAY, "Modes of operation display", DataType::Int8, Access::RO, Mappable::Tx, 0),
+            (idx::SUPPORTED_MODES, "Supported drive modes", DataType::UInt32, Access::RO, Mappable::No, supported),
+        ] {
+            if od.object(index + b).is_none() {
+                od.insert(index + b, Object::var(name, Entry::new(name, t, access).mappable(m).default_int(v)));
+                od.beyond_file.insert((index + b, 0), BeyondFile::ProfileAdded);
+            }
+        }
+    }
+}
+
+/// The axes a device's dictionary describes (CiA 402: a controlword and a
+/// statusword at 0x6040/0x6041, further axes 0x800 above): a drive built
+/// from an ESI or SII file runs the same state machine and motion as the
+/// built-in drives, driven through whatever PDO mapping its file gives.
+/// Its modes are those of 0x6502 the model moves in (8 CSP, 9 CSV, 10
+/// CST), all three where the file does not say.
+pub fn axes_in(od: &ObjectDictionary) -> Vec<Axis> {
+    (0..8u16)
+        .filter(|k| {
+            let b = k * AXIS_STRIDE;
+            od.object(idx::CONTROLWORD + b).is_some() && od.object(idx::STATUSWORD + b).is_some()
+        })
+        .map(|k| {
+            let b = k * AXIS_STRIDE;
+            let supported = od.int(idx::SUPPORTED_MODES + b, 0);
+            let mut modes: Vec<i8> = [8i8, 9, 10].into_iter().filter(|m| supported & (1 << (m - 1)) != 0).collect();
+            if modes.is_empty() {
+                modes = vec![8, 9, 10];
+            }
+            let asked = od.int(idx::MODE + b, 0) as i8;
+            let default_mode = if modes.contains(&asked) { asked } else { modes[0] };
+            Axis::new(k, AxisSpec { modes, default_mode, ..AxisSpec::default() })
+        })
+        .collect()
+}
 
 /// A controlword command (CiA402 Table "device control commands").
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -298,9 +353,12 @@ impl Axis {
     fn move_axis(&mut self, od: &ObjectDictionary, dt: f64) {
         use Cia402State as S;
         let b = self.base;
-        let vmax = od.int(idx::MAX_SPEED + b, 0) as f64 * COUNTS_PER_REV / 60.0;
-        let accel = (od.int(idx::ACCELERATION + b, 0) as f64).max(1.0);
-        let decel = (od.int(idx::QUICK_STOP_DECEL + b, 0) as f64).max(1.0);
+        // A limit the device's description leaves at 0 (or out) is the
+        // spec's: a drive built from a file still moves.
+        let or = |v: i64, default: f64| if v > 0 { v as f64 } else { default };
+        let vmax = or(od.int(idx::MAX_SPEED + b, 0), self.spec.max_speed_rpm as f64) * COUNTS_PER_REV / 60.0;
+        let accel = or(od.int(idx::ACCELERATION + b, 0), DEFAULT_ACCELERATION);
+        let decel = or(od.int(idx::QUICK_STOP_DECEL + b, 0), DEFAULT_ACCELERATION);
         let ramp_to = |v: f64, target: f64, a: f64| {
             let dv = (target - v).clamp(-a * dt, a * dt);
             v + dv
@@ -321,7 +379,7 @@ impl Axis {
                     self.torque = 0.0;
                 }
                 _ => {
-                    let tmax = od.int(idx::MAX_TORQUE + b, 0) as f64;
+                    let tmax = or(od.int(idx::MAX_TORQUE + b, 0), self.spec.max_torque as f64);
                     self.torque = (od.int(idx::TARGET_TORQUE + b, 0) as f64).clamp(-tmax, tmax);
                     // Viscous friction keeps the speed bounded.
                     let a = self.torque * self.spec.counts_per_s2_per_torque - 5.0 * self.velocity;

@@ -2,9 +2,10 @@
 
 use ecmxf_devices::esi;
 pub use ecmxf_devices::esi::*;
+use ecmxf_devices::init_cmd::{CoeAccess, CoeInitCmd};
 use ecmxf_wire::payload::pdo::PdoEntry;
 
-use super::od::{Access, DataType, Entry, Object, ObjectDictionary, ObjectKind};
+use super::od::{Access, DataType, Entry, Object, ObjectDictionary, ObjectKind, StateSet};
 use super::pdo_map::{self, RX_ASSIGN, TX_ASSIGN};
 use super::profiles::{Identity, identity_objects};
 use super::sii;
@@ -58,21 +59,90 @@ impl SimulatedDevice for EsiDevice {
         // an ESI without it (Elmo rev 1, NI 9144: no `<Dictionary>`) still
         // describes a CoE device, which has the CiA301 mandatory objects.
         if self.protocols & sii::protocol::COE != 0 {
+            // CiA 301's mandatory objects, marked as added where the file's
+            // dictionary lacks them; the optional device name only where
+            // the file has no dictionary to say it has none.
+            let described = self.dictionary.objects().next().is_some();
+            let absent: Vec<u16> = [0x1000, 0x1001, 0x1018].into_iter().filter(|i| od.object(*i).is_none()).collect();
+            let no_name = od.object(0x1008).is_none();
             let id = Identity { vendor_id, product_code: self.product_code, revision: self.revision, serial: 0 };
             identity_objects(&mut od, id, &self.name, 0);
+            if described && no_name {
+                od.remove(0x1008);
+            }
+            for index in absent.into_iter().filter(|_| described) {
+                od.beyond_file.insert((index, 0), ecmxf_devices::od::BeyondFile::ProfileAdded);
+            }
         }
         for (sub, v) in [(1, vendor_id), (2, self.product_code), (3, self.revision)] {
             od.set_int(0x1018, sub, v.into());
         }
+        accept_own_init_cmds(&mut od, &self.init_cmds);
         let has_dc = self.dc_modes.iter().any(|(_, a)| *a != 0);
-        let mut slave = Slave::new(self.sii_image(vendor_id), od, Device::Passive, has_dc);
+        super::cia402::add_profile_objects(&mut od);
+        let axes = super::cia402::axes_in(&od);
+        let device = if axes.is_empty() { Device::Passive } else { Device::Drive(axes) };
+        let mut slave = Slave::new(self.sii_image(vendor_id), od, device, has_dc);
         if slave.name.is_empty() {
             slave.name = self.type_name.clone();
         }
+        slave.notes = self.warnings.clone();
         if alias != 0 {
             slave.eeprom_write(4, alias);
         }
         slave
+    }
+}
+
+/// What the device's own CoE init commands write, it takes: its vendor
+/// ships them (an ESI whose dictionary declares 0x6060 read-only, or lacks
+/// 0x60C2, yet writes both at PS), so the real device accepts them. An
+/// entry the dictionary lacks is added (typed by the data's size), one it
+/// declares read-only is made writable; both are kept in
+/// `beyond_file` for `ecmxf-sim check` to name. PDO objects are left
+/// to the mapping's own rules.
+fn accept_own_init_cmds(od: &mut ObjectDictionary, cmds: &[CoeInitCmd]) {
+    use ecmxf_devices::od::BeyondFile;
+    for c in cmds.iter().filter(|c| !c.disabled && !c.complete_access) {
+        let CoeInitCmd { index, subindex, access: CoeAccess::Download(data), .. } = c else { continue };
+        let (index, sub) = (*index, *subindex);
+        if matches!(index, 0x1600..=0x17FF | 0x1A00..=0x1BFF | 0x1C12 | 0x1C13) {
+            continue;
+        }
+        match od.entry(index, sub).map(|e| e.access.write.preop) {
+            Some(true) => {}
+            Some(false) => {
+                if let Some(e) = od.entry_mut(index, sub) {
+                    e.access.write = StateSet::ALL;
+                    od.beyond_file.insert((index, sub), BeyondFile::InitCmdOpened);
+                }
+            }
+            None => {
+                let dtype = match data.len() {
+                    1 => DataType::UInt8,
+                    2 => DataType::UInt16,
+                    4 => DataType::UInt32,
+                    8 => DataType::UInt64,
+                    n => DataType::OctetString(n as u16),
+                };
+                let entry = Entry::new(&c.comment, dtype, Access::RW);
+                if sub == 0 {
+                    od.insert(index, Object::var(&c.comment, entry));
+                } else {
+                    let mut obj = od
+                        .object(index)
+                        .cloned()
+                        .unwrap_or_else(|| Object::record(&c.comment, ObjectKind::Record, Access::RO, Vec::new()));
+                    obj.entries.insert(sub, entry);
+                    let highest = obj.entries.keys().copied().max().unwrap_or(0);
+                    if let Some(e0) = obj.entries.get_mut(&0) {
+                        e0.set_int(highest.into());
+                    }
+                    od.insert(index, obj);
+                }
+                od.beyond_file.insert((index, sub), BeyondFile::InitCmdAdded);
+            }
+        }
     }
 }
 

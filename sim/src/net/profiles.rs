@@ -128,7 +128,8 @@ pub fn build_sii(spec: &SiiSpec<'_>) -> Vec<u8> {
 }
 
 /// The CiA 301 objects every CoE slave has (0x1000 device type, 0x1001
-/// error register, 0x1008 name, 0x1018 identity), saying what it is.
+/// error register, 0x1008 name, 0x100A software version, 0x1018
+/// identity), saying what it is.
 pub(crate) fn identity_objects(od: &mut ObjectDictionary, id: Identity, name: &str, device_type: u32) {
     let insert_absent = |od: &mut ObjectDictionary, index: u16, object: Object| {
         if od.object(index).is_none() {
@@ -155,6 +156,18 @@ pub(crate) fn identity_objects(od: &mut ObjectDictionary, id: Identity, name: &s
         Object::var(
             "Device name",
             Entry::new("Device name", DataType::VisibleString(n), Access::RO).default_bytes(name.as_bytes()),
+        ),
+    );
+    // What a real device's firmware says of itself: the simulator's own
+    // version.
+    let software = concat!("ecmxf-sim ", env!("CARGO_PKG_VERSION"));
+    insert_absent(
+        od,
+        0x100A,
+        Object::var(
+            "Manufacturer software version",
+            Entry::new("Manufacturer software version", DataType::VisibleString(software.len() as u16), Access::RO)
+                .default_bytes(software.as_bytes()),
         ),
     );
     insert_absent(

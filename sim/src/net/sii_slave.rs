@@ -56,5 +56,8 @@ pub fn slave_from_sii(eeprom: Vec<u8>) -> Result<Slave, SiiError> {
         identity_objects(&mut od, id, &image.name().unwrap_or_default(), 0);
     }
     let has_dc = image.dc.is_some();
-    Ok(Slave::new(eeprom, od, Device::Passive, has_dc))
+    super::cia402::add_profile_objects(&mut od);
+    let axes = super::cia402::axes_in(&od);
+    let device = if axes.is_empty() { Device::Passive } else { Device::Drive(axes) };
+    Ok(Slave::new(eeprom, od, device, has_dc))
 }

@@ -97,6 +97,9 @@ pub struct Slave {
     pub mailboxes: Mailboxes,
     /// Whether it answers CoE SDO Information (SII CoE details bit 1).
     pub sdo_info: bool,
+    /// What its description could not carry, in words (a PDO on a sync
+    /// manager the device lacks: not assigned), for `ecmxf-sim check`.
+    pub notes: Vec<String>,
 }
 
 /// Register addresses the simulation keeps live.
@@ -173,6 +176,7 @@ impl Slave {
             dc_cycle_ns: 0,
             mailboxes: Mailboxes::new(sii.mailbox),
             sdo_info: sii.general.as_ref().is_some_and(|g| g.coe_details & 0x02 != 0),
+            notes: Vec::new(),
         };
         s.relayout();
         s.sync_registers();

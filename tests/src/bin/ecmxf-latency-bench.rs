@@ -4,8 +4,10 @@
 //! `cargo run --release -p ecmxf-e2e --bin ecmxf-latency-bench` (`--secs N`
 //! per configuration, default 5).
 //!
-//! For each (cycle, budget) it starts the daemon (embedded, on the demo
-//! simulator), takes a lease on the IO slave, and repeatedly writes a new
+//! For each (cycle, budget) it checks the configuration as `ecmxfd
+//! --check-config` does (a budget the link cannot hold is refused there,
+//! with the smallest that can: one line, then the next budget), starts the
+//! daemon (embedded, on the demo simulator), takes a lease on the IO slave, and repeatedly writes a new
 //! byte to its outputs, then waits for the byte in the input image streamed
 //! back (StreamInputs). It prints, from this one run:
 //! - write -> loopback: from just before the WriteOutputs call to the
@@ -38,24 +40,38 @@ struct Outcome {
     late: u64,
 }
 
-async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
+/// The configuration of one run, refused as `--check-config` refuses it.
+fn checked_config(cycle_us: u32, budget_us: u32) -> Result<String, String> {
     let extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
     let config = ecmxf_e2e::config_with_cycle("backend = \"sim\"", &extra, "");
-    let mut d = Daemon::with_config(&config);
+    let dir = ecmxf_e2e::temp_dir("latency-check");
+    let path = dir.join("ecmxfd.toml");
+    std::fs::write(&path, &config).map_err(|e| e.to_string())?;
+    let (mut out, mut err) = (Vec::new(), Vec::new());
+    let status = ecmxfd::check_config(&path, &mut out, &mut err);
+    let _ = std::fs::remove_dir_all(&dir);
+    match status {
+        0 => Ok(config),
+        _ => Err(String::from_utf8_lossy(&err).trim().to_owned()),
+    }
+}
+
+async fn measure(config: &str, secs: u64) -> Result<Outcome, String> {
+    let mut d = Daemon::with_config(config);
     let ch = d.connect().await;
     let mut pd = ProcessDataClient::new(ch.clone());
     let mut master = MasterClient::new(ch.clone());
-    let layout = pd.get_layout(pb::GetLayoutRequest {}).await.expect("layout").into_inner();
+    let layout = pd.get_layout(pb::GetLayoutRequest {}).await.map_err(|e| format!("layout: {e}"))?.into_inner();
     let (out_at, in_at) = ecmxf_e2e::io_slave_bytes(&layout);
-    let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 5000 }).await.expect("lease");
-    let lease = lease.into_inner().id;
+    let lease = pd.acquire_lease(pb::AcquireLeaseRequest { slaves: vec![2], ttl_ms: 5000 }).await;
+    let lease = lease.map_err(|e| format!("lease: {e}"))?.into_inner().id;
     let mut inputs = pd
         .stream_inputs(pb::StreamInputsRequest { entries: vec![], decimation: 1, on_change: false })
         .await
-        .expect("stream")
+        .map_err(|e| format!("stream: {e}"))?
         .into_inner();
     let counters = |s: &pb::MasterStatus| s.counters.unwrap_or_default();
-    let before = master.get_status(pb::GetStatusRequest {}).await.expect("status").into_inner();
+    let before = master.get_status(pb::GetStatusRequest {}).await.map_err(|e| format!("status: {e}"))?.into_inner();
     let (cpu0, t0) = (cpu_seconds(&DAEMON_THREADS), Instant::now());
     let until = Instant::now() + Duration::from_secs(secs);
     let mut loopback_us = Vec::new();
@@ -71,7 +87,7 @@ async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
         let t0 = monotonic_ns();
         pd.write_outputs(pb::WriteOutputsRequest { lease_id: lease.clone(), writes: vec![write] })
             .await
-            .expect("write");
+            .map_err(|e| format!("write {k}: {e}"))?;
         let deadline = Instant::now() + Duration::from_secs(2);
         loop {
             let s = tokio::time::timeout_at(deadline.into(), inputs.next()).await;
@@ -87,19 +103,19 @@ async fn measure(cycle_us: u32, budget_us: u32, secs: u64) -> Outcome {
         // Writes at no fixed phase to the cycle.
         tokio::time::sleep(Duration::from_micros(300 + (k * 137) % 900)).await;
     }
-    let status = master.get_status(pb::GetStatusRequest {}).await.expect("status").into_inner();
+    let status = master.get_status(pb::GetStatusRequest {}).await.map_err(|e| format!("status: {e}"))?.into_inner();
     let cpu_percent = (cpu_seconds(&DAEMON_THREADS) - cpu0) / t0.elapsed().as_secs_f64() * 100.0;
     let (b, a) = (counters(&before), counters(&status));
     drop(inputs);
     d.stop();
     loopback_us.sort_unstable();
-    Outcome {
+    Ok(Outcome {
         cpu_percent,
         loopback_us,
         underruns: a.fifo_alarms - b.fifo_alarms,
         late: a.output_latency_misses - b.output_latency_misses,
         status,
-    }
+    })
 }
 
 fn main() {
@@ -122,9 +138,28 @@ fn main() {
         "{:>8} {:>9} {:>7} | {:>24} | {:>20} {:>6} {:>9} {:>7}",
         "cycle", "budget", "writes", "write->loopback p50/p99/max", "daemon wire p50/p99", "late", "underruns", "cpu %"
     );
-    let all = [(125, 1000), (125, 2000), (125, 5000), (125, 20000), (1000, 2000), (1000, 5000), (1000, 20000)];
-    for (cycle_us, budget_us) in all.into_iter().filter(|c| only.is_none_or(|o| o == *c)) {
-        let o = rt.block_on(measure(cycle_us, budget_us, secs));
+    let all = [
+        (125, 1000),
+        (125, 2000),
+        (125, 2500),
+        (125, 5000),
+        (125, 20000),
+        (1000, 2000),
+        (1000, 3000),
+        (1000, 5000),
+        (1000, 20000),
+    ];
+    // `--only` runs that pair, listed or not.
+    let pairs: Vec<(u32, u32)> = only.map_or_else(|| all.to_vec(), |o| vec![o]);
+    for (cycle_us, budget_us) in pairs {
+        let run = checked_config(cycle_us, budget_us).map(|config| rt.block_on(measure(&config, secs)));
+        let o = match run.and_then(|r| r) {
+            Ok(o) => o,
+            Err(why) => {
+                println!("{cycle_us:>5} us {budget_us:>6} us   refused or failed: {why}");
+                continue;
+            }
+        };
         let l = &o.loopback_us;
         println!(
             "{:>5} us {:>6} us {:>7} | {:>7.2} {:>7.2} {:>7.2} ms | {:>8.2} {:>8.2} ms {:>6} {:>9} {:>7.0}",
@@ -141,5 +176,4 @@ fn main() {
             o.cpu_percent
         );
     }
-    println!("(1 ms cycle with a 1 ms budget is refused: a budget must cover two cycles)");
 }

@@ -70,7 +70,7 @@ impl PdoMapping {
 /// | --- | --- | --- |
 /// | [`Manual`](Self::Manual) | 112 (REQ: 4) | slave u8, PDO count u8, assignment u16, 3 mapping indices, 3 entry counts, 3 x 8 entries |
 /// | [`FourPdos`](Self::FourPdos) | 148 | the same fields with 4 PDO slots (headers before 1.52) |
-/// | [`Identified`](Self::Identified) | 156 | vendor id u32, product code u32, then the 148-byte form (header 1.52) |
+/// | [`Identified`](Self::Identified) | 156 | vendor id u32, product code u32, slave, count, assignment, 4 mapping indices, 4 entry counts, then `Table[32]` packed: PDO j's entries after the earlier PDOs' (header 1.52, code 1.60) |
 ///
 /// A REQ in a vendor form reads slave and assignment from that form's
 /// offsets, and GET answers in the form its REQ used.
@@ -168,6 +168,8 @@ pub const PDO_CONFIG_LEN: usize = 112;
 pub const PDO_CONFIG_FOUR_LEN: usize = 148;
 /// Size of the vendor header 1.52's form with vendor id and product code.
 pub const PDO_CONFIG_IDENTIFIED_LEN: usize = 156;
+/// Entries of that form's packed table (`Table[32]`).
+const PACKED_ENTRIES: usize = 32;
 
 impl PdoConfig {
     /// A configuration from mapping indices and their entries; fails when
@@ -208,6 +210,21 @@ impl PdoConfig {
         for p in slots {
             w.u16(p.entry_count)?;
         }
+        if let PdoConfigForm::Identified { .. } = self.form {
+            // Packed: PDO j's entries follow the earlier PDOs' entries.
+            let carried = usize::from(self.pdo_count).min(slots.len());
+            let packed = slots[..carried].iter().flat_map(|p| p.used());
+            let mut n = 0;
+            for e in packed {
+                w.u32(e.to_u32())?;
+                n += 1;
+            }
+            check_range("PDO entries in all", n, 0, PACKED_ENTRIES as u32)?;
+            for _ in n as usize..PACKED_ENTRIES {
+                w.u32(0)?;
+            }
+            return Ok(w.len_u16());
+        }
         for p in slots {
             for e in &p.entries {
                 w.u32(e.to_u32())?;
@@ -231,6 +248,27 @@ impl PdoConfig {
         }
         for p in &mut pdos[..slots] {
             p.entry_count = r.u16("PDO entry count")?;
+        }
+        if let PdoConfigForm::Identified { .. } = form {
+            // Packed (the vendor's v1.60 code finds PDO j after the earlier
+            // PDOs' entries): a table whose counts do not fit its 32
+            // entries, or give a PDO more than a slot holds, cannot be read
+            // one way only, and is refused rather than applied otherwise.
+            let carried = usize::from(pdo_count).min(slots);
+            let mut table = [PdoEntry::default(); PACKED_ENTRIES];
+            for e in &mut table {
+                *e = PdoEntry::from_u32(r.u32("PDO entry")?);
+            }
+            let mut at = 0;
+            for p in &mut pdos[..carried] {
+                let n = usize::from(p.entry_count);
+                if n > MAPPING_ENTRIES || at + n > PACKED_ENTRIES {
+                    return Err(PayloadError::InvalidValue { field: "PDO entry count", value: p.entry_count.into() });
+                }
+                p.entries[..n].copy_from_slice(&table[at..at + n]);
+                at += n;
+            }
+            return Ok(Self { slave, pdo_count, assign_index, pdos, form });
         }
         for p in &mut pdos[..slots] {
             for e in &mut p.entries {
@@ -775,6 +813,18 @@ mod tests {
                 let mut c = c;
                 c.form = form;
                 c.pdos[3] = PdoMapping { index: 0x1603, entry_count: 8, entries: fourth };
+                if form != PdoConfigForm::FourPdos {
+                    // The packed table carries the used entries of the
+                    // PDOs counted, at most 8 each.
+                    c.pdo_count %= 5;
+                    for (j, p) in c.pdos.iter_mut().enumerate() {
+                        p.entry_count %= 9;
+                        let used = if j < usize::from(c.pdo_count) { usize::from(p.entry_count) } else { 0 };
+                        for e in &mut p.entries[used..] {
+                            *e = PdoEntry::default();
+                        }
+                    }
+                }
                 let (fields, _) = request_round_trip(&c);
                 prop_assert_eq!(usize::from(fields.data_len), form.data_len());
                 reply_round_trip(&PdoConfigReply(c));
@@ -802,6 +852,34 @@ mod tests {
         assert_eq!(&d[28..32], &[0x10, 0x00, 0x40, 0x60], "first entry: bits, subindex, index");
         let req = PdoConfigReq::decode(&RequestFields { data_len: 156, ..RequestFields::default() }, &d).unwrap();
         assert_eq!((req.slave, req.assign_index), (3, RX_PDO_ASSIGN));
+    }
+
+    /// The packed table: PDO 2's entries right after PDO 1's; a count a
+    /// slot cannot hold, or counts beyond the 32 entries, are refused.
+    #[test]
+    fn the_identified_forms_table_is_packed() {
+        let e = |i: u16| PdoEntry { index: 0x6000 + i, subindex: 0, bits: 8 };
+        let (a, b) = ([e(1), e(2), e(3)], [e(4)]);
+        let mut c = PdoConfig::new(1, TX_PDO_ASSIGN, &[(0x1A00, &a), (0x1A01, &b)]).unwrap();
+        c.form = PdoConfigForm::Identified { vendor_id: 2, product_code: 3 };
+        let mut d = [0u8; 200];
+        c.encode(&mut d).unwrap();
+        let entry = |k: usize| &d[28 + 4 * k..32 + 4 * k];
+        assert_eq!(entry(2), &e(3).to_u32().to_le_bytes(), "PDO 1's third entry");
+        assert_eq!(entry(3), &e(4).to_u32().to_le_bytes(), "PDO 2's first entry, packed after it");
+        let fields = RequestFields { data_len: 156, ..RequestFields::default() };
+        let back = PdoConfig::decode(&fields, &d).unwrap();
+        assert_eq!(back.used()[1].used(), &b);
+        // A count of 9: no slot holds it.
+        d[22] = 9;
+        assert!(matches!(
+            PdoConfig::decode(&fields, &d),
+            Err(PayloadError::InvalidValue { field: "PDO entry count", value: 9 })
+        ));
+        // Four PDOs of 8 fill the table; a fifth count would not fit.
+        d[9] = 4;
+        d[20..28].copy_from_slice(&[8, 0, 8, 0, 8, 0, 8, 0]);
+        assert!(PdoConfig::decode(&fields, &d).is_ok());
     }
 
     #[test]

@@ -492,6 +492,36 @@ class Lease:
                 pass  # expired already
 
 
+_START_HINT = (
+    "is ecmxfd running? Start it (`systemctl start ecmxfd`, or `ecmxfd --sim` to try the simulator), "
+    "or say where it listens with socket= / $ECMXF_SOCKET, or address= for TCP"
+)
+
+
+def _check_socket(path: str) -> None:
+    """Fails at once, in ecmxfctl's words, where nothing can answer: no
+    socket file, a file nobody listens on, a socket not ours to use."""
+    import socket as _socket
+
+    probe = _socket.socket(_socket.AF_UNIX, _socket.SOCK_STREAM)
+    probe.settimeout(1.0)
+    try:
+        probe.connect(path)
+    except FileNotFoundError:
+        why = "no socket there"
+    except ConnectionRefusedError:
+        why = "nothing listens on the socket (stale file)"
+    except PermissionError:
+        why = "permission denied on the socket (be in its group, see api.socket_group)"
+    except OSError:
+        return  # let gRPC say what it is
+    else:
+        return
+    finally:
+        probe.close()
+    raise errors.Unreachable(f"cannot reach ecmxfd at {path}: {why}: {_START_HINT}")
+
+
 def connect(
     socket: Optional[Union[str, Path]] = None,
     address: Optional[str] = None,
@@ -519,6 +549,7 @@ def connect(
         where = address
     else:
         path = str(socket or default_socket())
+        _check_socket(path)
         channel = grpc.insecure_channel("unix:" + path, options=UNIX_OPTIONS + _MESSAGE_LIMIT)
         where = path
     try:

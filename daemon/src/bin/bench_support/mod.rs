@@ -78,6 +78,16 @@ pub fn started(sim: &Sim, config: Config) -> Result<Master, String> {
     Ok(master)
 }
 
+/// CPU time (user + system) of process `pid`, s (/proc, USER_HZ = 100).
+#[allow(dead_code)] // the benches with clients in their own process only
+pub fn cpu_seconds_of(pid: u32) -> f64 {
+    let stat = std::fs::read_to_string(format!("/proc/{pid}/stat")).unwrap_or_default();
+    let rest = stat.rsplit_once(')').map_or("", |(_, r)| r);
+    let f: Vec<&str> = rest.split_whitespace().collect();
+    let field = |n: usize| f.get(n - 3).and_then(|v| v.parse::<u64>().ok()).unwrap_or(0);
+    (field(14) + field(15)) as f64 / 100.0
+}
+
 /// This process's CPU time (user + system), s.
 pub fn cpu_seconds() -> f64 {
     let u = nix::sys::resource::getrusage(nix::sys::resource::UsageWho::RUSAGE_SELF);
@@ -85,4 +95,90 @@ pub fn cpu_seconds() -> f64 {
         let t = |tv: nix::sys::time::TimeVal| tv.tv_sec() as f64 + tv.tv_usec() as f64 / 1e6;
         t(u.user_time()) + t(u.system_time())
     })
+}
+
+/// A plant for the front-end benches: `slaves` simulated IO slaves (the
+/// network file written in `dir`) run by the engine at `cycle_us` in this
+/// process, with a tokio runtime (2 workers, as ecmxfd's) that keeps the
+/// image built and runs the plant's application: every output byte
+/// changes every 100 ms under a lease (the IO slaves loop it back to their
+/// inputs). Drop the runtime before stopping the master.
+#[allow(dead_code)] // the front-end benches only
+pub fn io_plant(
+    dir: &Path,
+    slaves: usize,
+    cycle_us: u32,
+) -> Result<(Sim, std::sync::Arc<Master>, tokio::runtime::Runtime), String> {
+    use std::sync::Arc;
+    let network = dir.join(format!("net{slaves}.toml"));
+    let list: String = (0..slaves).map(|_| "[[slave]]\nprofile = \"digital-io\"\n").collect();
+    std::fs::write(&network, format!("version = 1\n{list}")).map_err(|e| e.to_string())?;
+    let sim = serve(Some(&network))?;
+    let mut config =
+        Config { link: ecmxfd::config::LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
+    config.cycle.sync0_us = cycle_us;
+    let master = Arc::new(started(&sim, config)?);
+    let rt = tokio::runtime::Builder::new_multi_thread()
+        .worker_threads(2)
+        .enable_all()
+        .build()
+        .map_err(|e| e.to_string())?;
+    rt.spawn(Arc::clone(&master).keep_image_built());
+    let image = rt.block_on(master.image(ecmxfd::master::Call::anonymous(None))).map_err(|e| e.to_string())?;
+    let outputs: Vec<usize> =
+        image.entries.iter().enumerate().filter(|(_, e)| e.output && e.index == 0x7000).map(|(i, _)| i).collect();
+    let lease = master.acquire_lease(&[], Some(Duration::from_secs(5)), "bench").map_err(|e| e.to_string())?;
+    rt.spawn({
+        let (master, image) = (Arc::clone(&master), Arc::clone(&image));
+        async move {
+            let mut tick = tokio::time::interval(Duration::from_millis(100));
+            for n in 0u64.. {
+                tick.tick().await;
+                let mut staging = ecmxfd::master::entry_writes::Staging::new(&master, &image);
+                for &i in &outputs {
+                    let _ = staging.entry(&image.entries[i], &[(n % 255) as u8 + 1]);
+                }
+                if let Err(e) = staging.commit(master.leases(), &lease.id, "bench") {
+                    eprintln!("writer: {e}");
+                }
+            }
+        }
+    });
+    Ok((sim, master, rt))
+}
+
+/// The median of `v` (not empty).
+#[allow(dead_code)] // the front-end benches only
+pub fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The repository holding `file` (a client script the bench runs), from
+/// this binary's place in target/<profile>/.
+#[allow(dead_code)] // the benches with Python clients only
+pub fn repo_with(file: &str) -> Result<PathBuf, String> {
+    let exe = std::env::current_exe().map_err(|e| e.to_string())?;
+    exe.ancestors()
+        .find(|d| d.join(file).is_file())
+        .map(PathBuf::from)
+        .ok_or_else(|| format!("{file} not found above this binary"))
+}
+
+/// The Python the client scripts run on ($ECMXF_PYTHON, else the venv
+/// `.ci/run` makes), if it imports `module`.
+#[allow(dead_code)] // the benches with Python clients only
+pub fn python_with(repo: &Path, module: &str) -> Result<PathBuf, String> {
+    let p =
+        std::env::var_os("ECMXF_PYTHON").map(PathBuf::from).unwrap_or_else(|| repo.join("target/py-venv/bin/python"));
+    let ok = Command::new(&p).args(["-c", &format!("import {module}")]).output().is_ok_and(|o| o.status.success());
+    if ok {
+        Ok(p)
+    } else {
+        Err(format!(
+            "{} cannot import {module}: python3 -m venv target/py-venv && target/py-venv/bin/pip install -r \
+             tests/python/requirements.txt (or set $ECMXF_PYTHON)",
+            p.display()
+        ))
+    }
 }

@@ -37,6 +37,22 @@ pub enum BringUpError {
         /// What was found.
         found: String,
     },
+    /// A slave's `[[slave]] esi` file has several devices and none has
+    /// the identity the slave reports, so which init commands it needs is
+    /// unknown (engine/bringup/esi_choice.rs). Retried as an identity
+    /// mismatch is: the slave may be swapped for the right one.
+    EsiDevice {
+        /// Slave position.
+        position: usize,
+        /// Its name: the entry's, else the one it reports.
+        name: String,
+        /// Vendor, product code and revision it reports.
+        found: (u32, u32, u32),
+        /// The ESI file.
+        file: String,
+        /// The file's candidate devices: name, product code, revision.
+        candidates: Vec<(String, u32, u32)>,
+    },
     /// The SPI link can never carry this network's process data at this
     /// cycle (see `link_budget`): no retry can change that, only the
     /// configuration can.
@@ -86,6 +102,20 @@ impl fmt::Display for BringUpError {
             Self::Count { found, expected } => write!(f, "{found} slaves answer, {expected}"),
             Self::Identity { position, expected, found } => {
                 write!(f, "slave {position} is {found}, the configuration expects {expected}")
+            }
+            Self::EsiDevice { position, name, found: (vendor, product, revision), file, candidates } => {
+                let each = candidates
+                    .iter()
+                    .map(|(n, p, r)| format!("{n:?} product {p:#010x} revision {r:#010x}"))
+                    .collect::<Vec<_>>()
+                    .join("; ");
+                write!(
+                    f,
+                    "slave {position} ({name:?}) is vendor {vendor:#010x} product {product:#010x} revision \
+                     {revision:#010x}: no device of its ESI {file} has that identity, so its init commands are \
+                     unknown (the file's {} candidates: {each})",
+                    candidates.len()
+                )
             }
             Self::SlavesMissing { found, before, axis, slave } => {
                 let missing = match (*found, before.saturating_sub(1)) {

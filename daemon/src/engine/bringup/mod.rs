@@ -62,6 +62,7 @@ use super::layout::{NetworkLayout, SlaveSummary};
 
 mod calls;
 mod error;
+mod esi_choice;
 mod pdos;
 pub(crate) use calls::blocking;
 use calls::{FAILED_ON_CHIP, SLOW, sdo_download};
@@ -201,6 +202,10 @@ pub(crate) fn bring_up<L: Link>(
     let count = init_network(port, config)?;
     let mut slaves = identify(port, count)?;
     check_identity(config, &slaves)?;
+    // A multi-device ESI's init commands are those of the device the slave
+    // says it is: from here on the run's configuration has them.
+    let chosen = esi_choice::esi_device_sdos(config, &slaves)?;
+    let config = &*chosen;
     axes_present(&config.axes, slaves.len(), seen)?;
     if config.cycle.wkc_error_limit != 255 {
         port.call(&WkcErrorLimitSet(WkcErrorLimit(config.cycle.wkc_error_limit.max(1))))?;
@@ -284,12 +289,6 @@ fn slave_dc<L: Link>(port: &mut Port<L>, config: &Config) -> Result<(), BringUpE
     Ok(())
 }
 
-/// Whether an object is a PDO assignment (0x1C12/0x1C13) or mapping
-/// (0x1600-0x17FF, 0x1A00-0x1BFF): writing one changes the frames.
-fn is_pdo_object(index: u16) -> bool {
-    matches!(index, 0x1C12 | 0x1C13 | 0x1600..=0x17FF | 0x1A00..=0x1BFF)
-}
-
 /// The register writes of one transition (an ENI's watchdog settings,
 /// config/eni.rs), before its SDOs: one APWR each, by raw datagram
 /// (RAW_ECAT_FUNC_REQ 137 / GET 138) to the slave's position, which must
@@ -324,29 +323,55 @@ fn startup_registers<L: Link>(port: &mut Port<L>, config: &Config, at: InitTrans
 }
 
 /// Step 4: the start-up SDOs of one transition, slave by slave, in the
-/// order the configuration (or its ENI) lists them. Returns whether one
-/// wrote a PDO assignment or mapping object.
+/// order the configuration (or its ENI) lists them. A run of writes to PDO
+/// assignment and mapping objects (an ENI's PDO init commands) is written
+/// as a whole by [`pdos::write_pdo_objects`]: what the slave holds already
+/// is not written again. Returns whether a PDO object was written.
 fn startup_sdos<L: Link>(port: &mut Port<L>, config: &Config, at: InitTransition) -> Result<bool, BringUpError> {
     startup_registers(port, config, at)?;
     let mut pdo_objects = false;
     for (i, s) in config.slaves.iter().enumerate() {
-        for sdo in s.sdos.iter().filter(|s| s.transition == at) {
-            let data = sdo.payload();
+        let sdos: Vec<&crate::config::StartupSdo> = s.sdos.iter().filter(|s| s.transition == at).collect();
+        let refused = |sdo: &crate::config::StartupSdo, code| {
+            let from = if sdo.origin.is_empty() { String::new() } else { format!(", {}", sdo.origin) };
+            step(
+                "start-up SDO",
+                format!(
+                    "slave {i} {:#06x}:{:02x} (transition {}{from}): {code}",
+                    sdo.index,
+                    sdo.subindex,
+                    at.letters()
+                ),
+            )
+        };
+        let mut k = 0;
+        while k < sdos.len() {
+            let run = sdos[k..].iter().take_while(|s| pdos::is_pdo_object(s.index)).count();
+            if run > 0 {
+                let writes: Vec<pdos::PdoWrite> = sdos[k..k + run]
+                    .iter()
+                    .map(|s| pdos::PdoWrite {
+                        index: s.index,
+                        subindex: s.subindex,
+                        complete_access: s.complete_access,
+                        data: s.payload(),
+                        timeout: Duration::from_millis(u64::from(s.timeout_ms.unwrap_or(1000))),
+                    })
+                    .collect();
+                match pdos::write_pdo_objects(port, i as u8, &writes)? {
+                    Ok(wrote) => pdo_objects |= wrote,
+                    Err((n, code)) => return Err(refused(sdos[k + n], code)),
+                }
+                k += run;
+                continue;
+            }
+            let sdo = sdos[k];
             let timeout = Duration::from_millis(u64::from(sdo.timeout_ms.unwrap_or(1000)));
             let object = (sdo.index, sdo.subindex, sdo.complete_access);
-            if let Err(code) = sdo_download(port, i as u8, object, &data, timeout)? {
-                let from = if sdo.origin.is_empty() { String::new() } else { format!(", {}", sdo.origin) };
-                return Err(step(
-                    "start-up SDO",
-                    format!(
-                        "slave {i} {:#06x}:{:02x} (transition {}{from}): {code}",
-                        sdo.index,
-                        sdo.subindex,
-                        at.letters()
-                    ),
-                ));
+            if let Err(code) = sdo_download(port, i as u8, object, &sdo.payload(), timeout)? {
+                return Err(refused(sdo, code));
             }
-            pdo_objects |= is_pdo_object(sdo.index);
+            k += 1;
         }
     }
     Ok(pdo_objects)
@@ -423,6 +448,14 @@ fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, B
         }
         other => other.map_err(BringUpError::Refused)?,
     };
+    // A budget the packets as measured now cannot hold (the offline check
+    // had only the clock's bound): said, not refused, as a loaded host may
+    // have slowed the measurement.
+    if let Some(why) =
+        c.output_latency_us.and_then(|us| super::link_budget::latency_refusal(us, budget.packet_ns, cycle_ns))
+    {
+        warn!("cycle.output_latency_us: {why}");
+    }
     if budget.load() > super::link_budget::WARN_LOAD {
         warn!(
             load_percent = (budget.load() * 100.0) as u32,

@@ -4,7 +4,7 @@
 
 use ecmxf_wire::payload::eeprom::{EepromAccess, EepromGet, EepromRequest};
 
-use super::handler::{Cx, Fetch, Handler, Next, fill};
+use super::handler::{Cx, Fetch, Handler, Next, fetched_or_call, fill};
 use crate::engine::error::EngineError;
 use crate::link::Link;
 use crate::port::PortError;
@@ -58,11 +58,7 @@ impl Handler for Eeprom {
             self.verifying = true;
             return Ok(Next::Started { refused: false });
         }
-        let fetched = cx.fetched;
-        let a = match cx.port.previous().filter(|_| fetched) {
-            Some(a) => a,
-            None => cx.port.call(&EepromGet)?,
-        };
+        let a = fetched_or_call(cx.port, cx.fetched, &EepromGet)?;
         let reply = a.answer_to(&EepromGet).ok();
         Ok(Next::Done(match reply {
             Some(r) if r.error == 0 && r.data.len() >= 2 => match self.write {

@@ -123,6 +123,16 @@ impl Handler for Foe {
 
     fn ended<L: Link>(&mut self, cx: &mut Cx<'_, L>, failed: bool) -> Result<Next, PortError> {
         if failed {
+            // The slave-side steps are the slave's to refuse; staging and
+            // reading the chip's flash are the chip's.
+            if matches!(self.phase, Phase::Send | Phase::Upload) {
+                let name = cx.request.file_name().to_owned();
+                return Ok(Next::Done(Err(EngineError::FoeRefused {
+                    slave: self.slave,
+                    name,
+                    write: self.read.is_none(),
+                })));
+            }
             return Ok(Next::Done(Err(EngineError::Failed(cx.what()))));
         }
         match self.phase {

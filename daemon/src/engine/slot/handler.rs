@@ -72,9 +72,23 @@ pub(super) struct Cx<'a, L: Link> {
     pub(super) buffer: &'a mut Vec<u8>,
     /// Where a long transfer reports how far it is.
     pub(super) progress: Option<&'a TransferProgress>,
-    /// The newest answer ([`Port::previous`]) is this step's GET poll,
-    /// run after the operation ended: the result, without another call.
-    pub(super) fetched: bool,
+    /// The index of this step's GET poll whose answer, built after the
+    /// operation ended, is the result ([`Cx::fetched_answer`]): no other
+    /// call needed.
+    pub(super) fetched: Option<u8>,
+}
+
+/// The result's GET answer the polls already brought (`fetched`, see
+/// [`Cx::fetched`]), else the GET called now.
+pub(super) fn fetched_or_call<'p, 'r, L: Link, R: Request<'r>>(
+    port: &'p mut Port<L>,
+    fetched: Option<u8>,
+    get: &R,
+) -> Result<Answer<'p>, PortError> {
+    match fetched.filter(|&i| port.answer_to(i, R::CODE).is_some()) {
+        Some(i) => port.answer_to(i, R::CODE).ok_or(PortError::NoAnswer { code: R::CODE, attempts: 0, last: None }),
+        None => port.call(get),
+    }
 }
 
 impl<L: Link> Cx<'_, L> {

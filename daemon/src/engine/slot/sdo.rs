@@ -6,7 +6,7 @@ use ecmxf_wire::payload::sdo::{
     SDO_REQ_HEADER_LEN, SdoAbortCode, SdoAbortCodeGet, SdoAccess, SdoGet, SdoGetReply, SdoRequest,
 };
 
-use super::handler::{Cx, Fetch, Handler, Next, fill};
+use super::handler::{Cx, Fetch, Handler, Next, fetched_or_call, fill};
 use crate::engine::error::EngineError;
 use crate::link::Link;
 use crate::port::PortError;
@@ -67,11 +67,7 @@ impl Handler for Sdo {
         if self.write {
             return Ok(Next::Done(Ok(Vec::new())));
         }
-        let fetched = cx.fetched;
-        let a = match cx.port.previous().filter(|_| fetched) {
-            Some(a) => a,
-            None => cx.port.call(&SdoGet)?,
-        };
+        let a = fetched_or_call(cx.port, cx.fetched, &SdoGet)?;
         // SDO_GET's return value is the read's error code: data with a
         // nonzero code is not this read's value.
         Ok(Next::Done(match a.answer_to(&SdoGet) {

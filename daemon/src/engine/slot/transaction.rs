@@ -167,7 +167,7 @@ impl Active {
         if self.orphaned() {
             return Ok((None, Progress::Done));
         }
-        let next = self.handle(port, now, None, false)?;
+        let next = self.handle(port, now, None, None)?;
         self.follow(next, port, now)
     }
 
@@ -178,7 +178,7 @@ impl Active {
         port: &mut Port<L>,
         now: Instant,
         ended: Option<bool>,
-        fetched: bool,
+        fetched: Option<u8>,
     ) -> Result<Next, PortError> {
         let mut cx = Cx {
             port,
@@ -241,8 +241,8 @@ impl Active {
         if polled_now {
             self.poll(port, now)?;
         }
-        match port.previous() {
-            Some(a) if a.header.index == index && a.header.code == code && !a.header.is_nop() => {
+        match port.answer_to(index, code) {
+            Some(a) => {
                 if refused(&a) {
                     return Ok(Ok(self.refused_by_chip(port)));
                 }
@@ -287,8 +287,8 @@ impl Active {
     fn waited<L: Link>(mut self, port: &mut Port<L>, now: Instant) -> Result<(Option<Self>, Progress), PortError> {
         // The GET poll that ran after the end is the newest word on the
         // operation; else the newest header.
-        let fetched = self.fetched(port).map(|a| a.header);
-        let status = fetched.unwrap_or(*port.status());
+        let fetched = self.fetched(port).map(|(index, a)| (index, a.header));
+        let status = fetched.map_or(*port.status(), |(_, h)| h);
         if status.blocking_busy() {
             if self.orphaned() && now >= self.deadline + GRACE {
                 // Overstayed: abandon it so the slot is free.
@@ -316,7 +316,7 @@ impl Active {
             self.poll(port, now)?;
             return Ok((Some(self), Progress::Sent));
         }
-        let next = self.handle(port, now, Some(failed), fetched.is_some())?;
+        let next = self.handle(port, now, Some(failed), fetched.map(|(index, _)| index))?;
         self.follow(next, port, now)
     }
 }

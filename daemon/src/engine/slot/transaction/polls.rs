@@ -137,10 +137,10 @@ impl Active {
     /// The answer to one of this step's GET polls, when an exchange since
     /// the poll brought it and the chip ran the GET after the operation
     /// ended (its own header says not busy): header and data.
-    pub(super) fn fetched<'p, L: Link>(&self, port: &'p Port<L>) -> Option<Answer<'p>> {
+    pub(super) fn fetched<'p, L: Link>(&self, port: &'p Port<L>) -> Option<(u8, Answer<'p>)> {
         let code = self.fetch()?.code();
-        let a = port.previous()?;
-        let ours = self.polls.contains(&Some(a.header.index));
-        (ours && a.header.code == code && !a.header.is_nop() && !a.header.blocking_busy()).then_some(a)
+        // The newest poll answered first: an older one says less.
+        let (index, a) = self.polls.iter().flatten().find_map(|&i| Some((i, port.answer_to(i, code)?)))?;
+        (!a.header.blocking_busy()).then_some((index, a))
     }
 }
