@@ -134,7 +134,7 @@ fn write_msg(w: &mut impl Write, kind: u8, flags: u8, payload: &[u8]) -> io::Res
 /// ioctl while the kernel clocks the bytes, so the daemon's CPU time
 /// measured against the socket simulator is its own work (when the client
 /// spun instead, that was most of the daemon's idle CPU).
-const SERVER_SPIN: Duration = Duration::from_millis(2);
+pub const SERVER_SPIN: Duration = Duration::from_millis(2);
 
 /// Fills `buf` from the stream, polling (non-blocking, yielding) for up to
 /// `spin` before blocking.
@@ -179,6 +179,10 @@ fn read_msg(r: &mut UnixStream, spin: Duration) -> io::Result<(u8, u8, Vec<u8>)>
     Ok((h[0], h[1], payload))
 }
 
+/// The longest a wait goes without looking at the chip, ns: control
+/// commands (faults) change it from other connections.
+const LOOK_EVERY_NS: u64 = 1_000_000;
+
 /// GPIO lines claimed by connections: (chip, offset) -> (connection,
 /// consumer).
 type Claims = HashMap<(String, u32), (u64, String)>;
@@ -190,12 +194,46 @@ pub struct Server {
     epoch: Instant,
     claims: Mutex<Claims>,
     connections: AtomicU64,
+    /// How long it polls for a message, and yields instead of sleeping
+    /// before a modelled moment ([`SERVER_SPIN`] unless told otherwise).
+    spin: Duration,
 }
 
 impl Server {
     /// Starts the clock at 0 now.
     pub fn new(chip: Chip) -> Self {
-        Self { chip: Mutex::new(chip), epoch: Instant::now(), claims: Mutex::default(), connections: AtomicU64::new(0) }
+        Self {
+            chip: Mutex::new(chip),
+            epoch: Instant::now(),
+            claims: Mutex::default(),
+            connections: AtomicU64::new(0),
+            spin: SERVER_SPIN,
+        }
+    }
+
+    /// Spins for `spin` instead of [`SERVER_SPIN`]: less CPU for later
+    /// answers (zero: blocks for every message and sleeps through every
+    /// modelled wait, its CPU then the simulation's work alone).
+    pub fn with_spin(mut self, spin: Duration) -> Self {
+        self.spin = spin;
+        self
+    }
+
+    /// Waits from `now` towards `until` (ns of simulated time), briefly:
+    /// callers loop. Sleeps while `until` is further than the spin
+    /// window away, to within it (a sleep can overshoot by milliseconds
+    /// on a busy machine); yields inside it; with no spin window, sleeps
+    /// all the way.
+    fn pause(&self, now: u64, until: u64) {
+        let left = Duration::from_nanos(until.saturating_sub(now));
+        let window = self.spin.min(Duration::from_millis(1));
+        if left > self.spin {
+            thread::sleep(left - window);
+        } else if self.spin.is_zero() {
+            thread::sleep(left);
+        } else {
+            thread::yield_now();
+        }
     }
 
     fn claims(&self) -> MutexGuard<'_, Claims> {
@@ -276,21 +314,17 @@ impl Server {
             if now >= at {
                 return;
             }
-            if at - now > 2_000_000 {
-                thread::sleep(Duration::from_nanos(at - now - 1_000_000));
-            } else {
-                thread::yield_now();
-            }
+            self.pause(now, at);
         }
     }
 
     fn wait(&self, timeout_us: u32, mut done: impl FnMut(&Chip, u64) -> bool) -> bool {
         let deadline = self.now_ns() + u64::from(timeout_us) * 1000;
         loop {
-            let (ok, ready_at) = {
+            let (ok, ready_at, next_event) = {
                 let c = self.chip();
                 let now = self.now_ns();
-                (done(&c, now), c.ready_at())
+                (done(&c, now), c.ready_at(), c.next_event_at())
             };
             let now = self.now_ns();
             if ok {
@@ -299,14 +333,15 @@ impl Server {
             if now >= deadline {
                 return false;
             }
-            // Short waits yield: a short sleep can overshoot by milliseconds
-            // on a busy or virtual machine.
-            let until = ready_at.max(now).min(deadline);
-            if until - now > 2_000_000 {
-                thread::sleep(Duration::from_nanos(until - now - 1_000_000));
-            } else {
-                thread::yield_now();
-            }
+            // The next moment the answer may change: the chip ready
+            // again, its next cycle or blocking command's end (INT1
+            // sources), the deadline; and a look at least every
+            // millisecond for what a control command changed (a fault).
+            let until = [Some(ready_at).filter(|&t| t > now), next_event.filter(|&t| t > now)]
+                .into_iter()
+                .flatten()
+                .fold(deadline.min(now + LOOK_EVERY_NS), u64::min);
+            self.pause(now, until);
         }
     }
 
@@ -321,7 +356,7 @@ impl Server {
 
     fn serve_connection(&self, connection: u64, mut stream: UnixStream) -> io::Result<()> {
         loop {
-            let (kind, _flags, payload) = match read_msg(&mut stream, SERVER_SPIN) {
+            let (kind, _flags, payload) = match read_msg(&mut stream, self.spin) {
                 Ok(m) => m,
                 Err(e) if e.kind() == io::ErrorKind::UnexpectedEof => return Ok(()),
                 Err(e) => {

@@ -196,6 +196,11 @@ impl Simulator {
         child
     }
 
+    /// Its process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// The daemon's `[link]` lines for this simulator.
     pub fn link(&self) -> String {
         format!("backend = \"sim-socket\"\nsocket = \"{}\"", self.socket.display())

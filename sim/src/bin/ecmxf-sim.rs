@@ -8,6 +8,7 @@ use std::path::PathBuf;
 use std::process::ExitCode;
 use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
+use std::time::Duration;
 
 use clap::{Parser, Subcommand};
 use ecmxf_sim::config::NetworkFile;
@@ -39,6 +40,13 @@ enum Command {
         /// and is counted (`ctl status`: length_mismatches).
         #[arg(long)]
         strict_lengths: bool,
+        /// Microseconds the server polls for the next message, and yields
+        /// instead of sleeping before a modelled moment: answers on time
+        /// on a busy or virtual machine, for a core's worth of CPU. 0
+        /// blocks and sleeps: the CPU is then the simulation's own work
+        /// (scale benches), the answers later by a wake-up each.
+        #[arg(long, default_value_t = 2000)]
+        spin_us: u64,
     },
     /// Send a control command to a serving simulator (e.g. "unplug 2").
     Ctl {
@@ -198,7 +206,7 @@ fn load(network: Option<&PathBuf>) -> Result<(Network, ChipConfig), Failure> {
 
 fn run(cli: Cli) -> Result<(), Failure> {
     match cli.command {
-        Command::Serve { socket, network, seed, strict_lengths } => {
+        Command::Serve { socket, network, seed, strict_lengths, spin_us } => {
             let (net, mut config) = load(network.as_ref())?;
             config.strict_lengths |= strict_lengths;
             let slaves = net.slaves.len();
@@ -208,7 +216,8 @@ fn run(cli: Cli) -> Result<(), Failure> {
             let lengths = if chip.config.strict_lengths { "strict (v049 only)" } else { "as the chip takes them" };
             eprintln!("ecmxf-sim: {slaves} slaves, serving on {}, data lengths {lengths}", socket.display());
             let stop = Arc::new(AtomicBool::new(false));
-            Ok(Arc::new(Server::new(chip)).serve(listener, stop).map_err(|e| e.to_string())?)
+            let server = Server::new(chip).with_spin(Duration::from_micros(spin_us));
+            Ok(Arc::new(server).serve(listener, stop).map_err(|e| e.to_string())?)
         }
         Command::Hardware { network, socket, library, seed, command } => {
             let (net, config) = load(network.as_ref())?;

@@ -389,6 +389,14 @@ impl Chip {
         self.busy_until_ns
     }
 
+    /// When something happens next without the host: the next DC cycle
+    /// or the end of the running blocking command, if any.
+    pub fn next_event_at(&self) -> Option<u64> {
+        let cycle = self.master.inited.then_some(self.master.next_cycle_ns);
+        let done = self.pending.as_ref().map(|(_, t)| *t);
+        cycle.into_iter().chain(done).min()
+    }
+
     /// INT0's electrical level at `now_ns` (polarity from command 58;
     /// active-high after power-up).
     pub fn int0_level(&self, now_ns: u64) -> bool {
