@@ -95,10 +95,27 @@ impl Image {
     pub(crate) async fn named_by_devices(&self, master: &Arc<Master>, key: &LayoutKey) -> Option<Self> {
         let mut mappings = self.mappings.clone();
         let mut named = false;
+        // Each identity's device is asked once; its twins take its names
+        // (`SlavePdos::named_as`): a line of 100 identical IO slaves
+        // costs one device's questions, not a hundred.
+        let mut asked: Vec<((u32, u32, u32), SlavePdos)> = Vec::new();
         for (slave, m) in mappings.iter_mut().enumerate().filter(|(_, m)| m.device_can_name) {
             let mut pdos = SlavePdos::clone(m);
             pdos.device_can_name = false;
-            master.name_from_device(slave as u8, &mut pdos, Call::daemon()).await;
+            let identity = key.slaves.get(slave).map(|s| (s.vendor_id, s.product_code, s.revision));
+            let twin = asked.iter().find(|(id, _)| Some(*id) == identity).map(|(_, t)| t);
+            if let Some(twin) = twin {
+                pdos.named_as(twin);
+            }
+            // A twin mapping the same objects was asked already: what it
+            // could not name, this device cannot either.
+            if !pdos.all_named() && !twin.is_some_and(|t| same_objects(t, &pdos)) {
+                master.name_from_device(slave as u8, &mut pdos, Call::daemon()).await;
+                if let Some(id) = identity {
+                    asked.retain(|(known, _)| *known != id);
+                    asked.push((id, pdos.clone()));
+                }
+            }
             if pdos != **m {
                 *m = Arc::new(pdos);
                 named = true;
@@ -357,6 +374,14 @@ async fn read_all_pdos(master: &Arc<Master>, slaves: &[SlaveSummary]) -> Result<
         }
     }
     Ok(out.into_iter().map(|p| p.unwrap_or_else(|| Arc::new(SlavePdos::none("not read")))).collect())
+}
+
+/// Whether two slaves map the same objects, PDO by PDO.
+fn same_objects(a: &SlavePdos, b: &SlavePdos) -> bool {
+    let objects = |l: &[PdoDescription]| -> Vec<(u16, Vec<(u16, u8)>)> {
+        l.iter().map(|p| (p.index, p.entries.iter().map(|e| (e.index, e.subindex)).collect())).collect()
+    };
+    objects(&a.rx) == objects(&b.rx) && objects(&a.tx) == objects(&b.tx)
 }
 
 /// What an image is valid for: the configuration in force and the network

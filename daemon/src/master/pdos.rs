@@ -131,6 +131,38 @@ pub struct SlavePdos {
 }
 
 impl SlavePdos {
+    /// Names this slave's unnamed PDOs and entries as `twin`, a device of
+    /// the same identity, names the same objects (a device's dictionary,
+    /// names included, is its firmware's: the same for every device of
+    /// one vendor id, product code and revision, as one ESI describes
+    /// them all). True when a name was added.
+    pub(crate) fn named_as(&mut self, twin: &Self) -> bool {
+        let before = count_named(&self.rx, &self.tx);
+        for (mine, theirs) in [(&mut self.rx, &twin.rx), (&mut self.tx, &twin.tx)] {
+            for p in mine.iter_mut() {
+                let Some(q) = theirs.iter().find(|q| q.index == p.index) else { continue };
+                if p.name.is_empty() {
+                    p.name.clone_from(&q.name);
+                }
+                for e in p.entries.iter_mut().filter(|e| e.index != 0 && e.name.is_empty()) {
+                    if let Some(x) = q.entries.iter().find(|x| (x.index, x.subindex) == (e.index, e.subindex)) {
+                        e.name.clone_from(&x.name);
+                    }
+                }
+            }
+        }
+        let added = count_named(&self.rx, &self.tx) > before;
+        if added && self.names_from == NameSource::None {
+            self.names_from = twin.names_from;
+        }
+        added
+    }
+
+    /// Whether every PDO and entry (gaps left out) has a name.
+    pub(crate) fn all_named(&self) -> bool {
+        all_named(&self.rx, &self.tx)
+    }
+
     /// A slave with nothing to list, and why.
     pub(crate) fn none(note: impl Into<String>) -> Self {
         Self {
