@@ -218,6 +218,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         let ctx = Arc::clone(&ctx);
         async move { Arc::clone(&ctx.master).keep_image_built().await }
     });
+    let setups_reader = tokio::spawn(Arc::clone(&master).keep_slave_setups_read());
     let (stop_api, api_stopped) = tokio::sync::watch::channel(());
     // Front ends beside the API, each ending when the API stops; joined at
     // shutdown.
@@ -282,6 +283,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
                 };
                 notifier.send(&format!("STOPPING=1\nSTATUS=failed: {why}"));
                 layout_builder.abort();
+                setups_reader.abort();
                 let m = Arc::clone(&master);
                 tokio::task::spawn_blocking(move || m.stop()).await.map_err(|e| DaemonError::Task("stopping the engine", e))?;
                 return Err(why);
@@ -327,6 +329,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
     // NDEATH while the bus goes down (at most a second or so).
     sparkplug_node.stop().await;
     layout_builder.abort();
+    setups_reader.abort();
     if tokio::time::timeout(STREAM_GRACE, &mut server).await.is_err() {
         server.abort();
         let _ = server.await;
@@ -337,6 +340,7 @@ pub async fn run_with(config: Config, options: Options, shutdown: impl Future<Ou
         front_ends.shutdown().await;
     }
     let _ = layout_builder.await;
+    let _ = setups_reader.await;
     bus.await.map_err(|e| DaemonError::Task("stopping the engine", e))?;
     info!(took_ms = started.elapsed().as_millis() as u64, "stopped");
     Ok(())

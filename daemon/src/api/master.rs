@@ -229,9 +229,9 @@ pub(crate) async fn list_slaves(
         let why = crate::master::NotRunning::Phase { phase, last_error: m.last_error() };
         return Err(to_status(crate::master::EngineError::Unavailable(why)));
     }
+    let readings = m.slave_readings(layout.slaves.len(), fresh_identity, call).await.map_err(to_status)?;
     let mut slaves = Vec::with_capacity(layout.slaves.len());
-    for (i, s) in layout.slaves.iter().enumerate() {
-        let live = m.slave_reading(i as u8, fresh_identity, call).await.map_err(to_status)?;
+    for (i, (s, live)) in layout.slaves.iter().zip(readings).enumerate() {
         let ((vendor_id, product_code, revision), name) =
             live.identity.unwrap_or_else(|| ((s.vendor_id, s.product_code, s.revision), s.name.clone()));
         let mut slave = pb::Slave {

@@ -1,12 +1,11 @@
 //! What the chip and the slaves tell of their health, read live: the
-//! chip's CoE emergency history (COE_EMERGENCY, v049 83) and each slave's
-//! state, AL status, addresses, identity and distributed clock
-//! (SLV_INFO_GET, v049 15).
+//! chip's CoE emergency history (COE_EMERGENCY, v049 83), and what a
+//! slave reads as (SLV_INFO_GET, v049 15; read for listings in
+//! `slave_listing.rs`).
 
 pub(crate) use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 pub(crate) use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::payload::emergency::{CoeEmergencyReply, EMERGENCY_MAX};
-use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use ecmxf_wire::{EcatState, PayloadError};
 
 use super::{Call, Identity, Master};
@@ -80,39 +79,5 @@ impl Master {
         let mut out: Vec<EmergencyRecord> = reply.records().filter(|r| !r.is_empty()).collect();
         out.sort_by_key(|r| std::cmp::Reverse(r.number));
         Ok(out)
-    }
-
-    /// A slave's state, AL status, addresses and distributed clock, read
-    /// live; with `fresh_identity`, its identity and name too (else
-    /// [`SlaveReading::identity`] is `None`: the layout has them).
-    pub(crate) async fn slave_reading(
-        &self,
-        slave: u8,
-        fresh_identity: bool,
-        call: Call,
-    ) -> Result<SlaveReading, EngineError> {
-        let number = |item| self.slave_number(slave, item, call);
-        let state = EcatState::from_u8(number(SlaveInfoCode::State).await? as u8);
-        let al_status = number(SlaveInfoCode::AlStatus).await? as u16;
-        let identity = if fresh_identity {
-            let name = self.slave_name(slave, call).await?;
-            let vendor = number(SlaveInfoCode::VendorId).await?;
-            let product = number(SlaveInfoCode::ProductCode).await?;
-            let revision = number(SlaveInfoCode::Revision).await?;
-            Some(((vendor, product, revision), name))
-        } else {
-            None
-        };
-        Ok(SlaveReading {
-            state,
-            al_status,
-            identity,
-            alias: number(SlaveInfoCode::Alias).await?,
-            configured_address: number(SlaveInfoCode::ConfiguredAddress).await?,
-            dc_supported: number(SlaveInfoCode::HasDc).await? != 0,
-            dc_active: number(SlaveInfoCode::DcActive).await? != 0,
-            dc_cycle_ns: number(SlaveInfoCode::DcCycle).await?,
-            dc_shift_ns: number(SlaveInfoCode::DcShift).await? as i32,
-        })
     }
 }

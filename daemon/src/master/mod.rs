@@ -52,6 +52,7 @@ pub mod pdos;
 mod per_slave;
 pub(crate) mod peripherals;
 pub(crate) mod sii;
+mod slave_listing;
 pub(crate) mod sparkplug_state;
 pub(crate) mod states;
 pub(crate) mod transactions;
@@ -319,6 +320,8 @@ pub struct Master {
     shadow: Mutex<Vec<u8>>,
     /// The process image, named, kept built ([`Master::keep_image_built`]).
     image: image::ImageCache,
+    /// The slaves' addresses and clocks as this run set them.
+    slave_setups: slave_listing::SetupCache,
     /// The output ranges open frame streams feed.
     frame_claims: Arc<frame_claims::FrameClaims>,
     config: Mutex<Config>,
@@ -403,6 +406,7 @@ impl Master {
             outputs,
             shadow: Mutex::default(),
             image: image::ImageCache::default(),
+            slave_setups: slave_listing::SetupCache::default(),
             frame_claims: Arc::default(),
             config: Mutex::new(config),
             config_generation: AtomicU64::new(0),

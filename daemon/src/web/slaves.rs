@@ -88,9 +88,9 @@ async fn read_list(master: &Master) -> Result<Value, Refusal> {
     } else {
         0
     });
+    let readings = master.slave_readings(present, false, call).await?;
     let mut slaves = Vec::new();
-    for (i, s) in layout.slaves.iter().enumerate().take(present) {
-        let live = master.slave_reading(i as u8, false, call).await?;
+    for (i, (s, live)) in layout.slaves.iter().zip(readings).enumerate() {
         // The ESC's error counters: one datagram; a slave that does not
         // answer it shows none rather than zeros.
         let errors = match master.esc_errors(i as u8, call).await {
