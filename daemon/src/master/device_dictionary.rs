@@ -30,6 +30,10 @@ use super::mailbox_channel::{ANSWER_TIMEOUT, MailboxFailure};
 use super::{Call, Identity, Master};
 use crate::engine::error::EngineError;
 
+/// Leftover answers (to questions given up on) one SDO Information
+/// exchange passes over before it calls a wrong answer garbled.
+const LEFTOVERS_PASSED_OVER: usize = 2;
+
 /// One entry as the slave describes it.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
 pub struct DeviceEntry {
@@ -443,11 +447,22 @@ impl Master {
         let mut answer = self.mailbox_exchange(slave, MailboxType::Coe, &body[..n], ANSWER_TIMEOUT, call).await?;
         let mut joined = Vec::new();
         let mut expected_left: Option<u16> = None;
+        let mut passed_over = 0;
         loop {
             let (_, message) = answer.map_err(DictionaryError::Mailbox)?;
             let f = InfoFragment::decode(&message).map_err(|e| DictionaryError::Garbled(format!("{what}: {e}")))?;
             if let Some(code) = f.abort_code() {
                 return Err(DictionaryError::Aborted { what: what.to_string(), code: SdoAbortCode(code) });
+            }
+            // An answer to another question, left in the mailbox by an
+            // exchange given up on (a deadline, a re-init meanwhile): its
+            // own answer follows it. Passed over, a few at most: one
+            // leftover must not make every later answer one behind.
+            if f.header.opcode != want && expected_left.is_none() && passed_over < LEFTOVERS_PASSED_OVER {
+                tracing::debug!(slave, opcode = f.header.opcode.code(), "{what}: a leftover SDO Information answer passed over");
+                passed_over += 1;
+                answer = self.mailbox_next(slave, ANSWER_TIMEOUT, call).await?;
+                continue;
             }
             if f.header.opcode != want {
                 return Err(DictionaryError::Garbled(format!("{what}: opcode {} answers it", f.header.opcode.code())));

@@ -485,6 +485,9 @@ impl Master {
         self.engine.send(Command::Job(job))?;
         match tokio::time::timeout_at(deadline.into(), rx).await {
             Ok(Ok(r)) => r,
+            // The engine drops a job it took too late, unanswered: at
+            // the deadline that is the caller's time-out, not a stop.
+            Ok(Err(_)) if Instant::now() >= deadline => Err(EngineError::Timeout),
             Ok(Err(_)) => Err(EngineError::Unavailable(NotRunning::Stopped)),
             // Dropping `rx` here tells the engine.
             Err(_) => Err(EngineError::Timeout),

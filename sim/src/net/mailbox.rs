@@ -155,6 +155,17 @@ impl Mailboxes {
         }
     }
 
+    /// The mailbox sync managers deactivated (the slave back in INIT):
+    /// what was written and every answer not read yet are gone, as an
+    /// ESC's buffers are when their sync manager is switched off
+    /// (ETG.1000.4, the mailbox lives only from PRE-OP on). The counters
+    /// stay: the slave's next message is counted on.
+    pub fn reset(&mut self) {
+        self.written.fill(0);
+        self.outbox.clear();
+        self.last_read = None;
+    }
+
     /// Whether an answer waits in the send mailbox (SM1 status bit 3).
     pub fn full(&self) -> bool {
         !self.outbox.is_empty()
@@ -208,6 +219,19 @@ mod tests {
         assert_eq!(m.write(0x1000, &r[..20]), None);
         assert_eq!(m.write(0x1000 + 20, &r[20..]).as_deref(), Some(&r[..]));
         assert_eq!(m.write(0x1000, &r).as_deref(), Some(&r[..]), "counter 0 is never a repetition");
+    }
+
+    #[test]
+    fn a_reset_drops_what_was_not_read_and_takes_the_next_request_whole() {
+        let mut m = Mailboxes::new(area());
+        m.post(MailboxType::Coe, 0, &[6, 0, 0, 0]);
+        let r = request(0);
+        assert_eq!(m.write(0x1000, &r[..20]), None);
+        m.reset();
+        assert!(!m.full(), "an answer left over from before INIT is gone");
+        let mut out = [0u8; 32];
+        assert_eq!(m.read(0x1080, &mut out), Some(false));
+        assert_eq!(m.write(0x1000, &r).as_deref(), Some(&r[..]), "the half-written request is gone too");
     }
 
     #[test]

@@ -208,6 +208,9 @@ impl Slave {
         if self.esm.state == AlState::Op && before != AlState::Op {
             self.since_outputs_ns = 0;
         }
+        if matches!(self.esm.state, AlState::Init | AlState::Boot) && before >= AlState::PreOp {
+            self.mailboxes.reset();
+        }
         self.sync_registers();
         ok
     }
