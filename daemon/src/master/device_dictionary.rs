@@ -459,7 +459,11 @@ impl Master {
             // own answer follows it. Passed over, a few at most: one
             // leftover must not make every later answer one behind.
             if f.header.opcode != want && expected_left.is_none() && passed_over < LEFTOVERS_PASSED_OVER {
-                tracing::debug!(slave, opcode = f.header.opcode.code(), "{what}: a leftover SDO Information answer passed over");
+                tracing::debug!(
+                    slave,
+                    opcode = f.header.opcode.code(),
+                    "{what}: a leftover SDO Information answer passed over"
+                );
                 passed_over += 1;
                 answer = self.mailbox_next(slave, ANSWER_TIMEOUT, call).await?;
                 continue;
