@@ -236,8 +236,8 @@ pub(crate) async fn list_slaves(
             live.identity.unwrap_or_else(|| ((s.vendor_id, s.product_code, s.revision), s.name.clone()));
         let mut slave = pb::Slave {
             position: i as u32,
-            alias: live.alias,
-            configured_address: live.configured_address,
+            alias: live.setup.alias,
+            configured_address: live.setup.configured_address,
             vendor_id,
             product_code,
             revision,
@@ -250,10 +250,10 @@ pub(crate) async fn list_slaves(
             input_bytes: s.tx_bytes as u32,
             input_offset: s.tx_offset as u32,
             dc: Some(pb::DcInfo {
-                supported: live.dc_supported,
-                active: live.dc_active,
-                cycle_ns: live.dc_cycle_ns,
-                shift_ns: live.dc_shift_ns,
+                supported: live.setup.dc_supported,
+                active: live.setup.dc_active,
+                cycle_ns: live.setup.dc_cycle_ns,
+                shift_ns: live.setup.dc_shift_ns,
             }),
             expected: None,
             mismatch: String::new(),

@@ -1,14 +1,13 @@
-//! What the chip and the slaves tell of their health, read live: the
-//! chip's CoE emergency history (COE_EMERGENCY, v049 83), and what a
-//! slave reads as (SLV_INFO_GET, v049 15; read for listings in
-//! `slave_listing.rs`).
+//! What the chip tells of the slaves' health, read live: its CoE
+//! emergency history (COE_EMERGENCY, v049 83). Each slave as a listing
+//! shows it: `slave_listing.rs`.
 
+use ecmxf_wire::PayloadError;
 pub(crate) use ecmxf_wire::flags::{ErrorFlags, StatusFlags};
 pub(crate) use ecmxf_wire::payload::emergency::EmergencyRecord;
 use ecmxf_wire::payload::emergency::{CoeEmergencyReply, EMERGENCY_MAX};
-use ecmxf_wire::{EcatState, PayloadError};
 
-use super::{Call, Identity, Master};
+use super::{Call, Master};
 use crate::engine::error::EngineError;
 use crate::engine::slot::Immediate;
 
@@ -37,29 +36,6 @@ impl std::fmt::Display for HistoryError {
 }
 
 impl std::error::Error for HistoryError {}
-
-/// A slave as read live from the chip.
-#[derive(Clone, Debug, PartialEq, Eq)]
-pub(crate) struct SlaveReading {
-    /// Its EtherCAT state.
-    pub state: EcatState,
-    /// Its AL status code.
-    pub al_status: u16,
-    /// Its identity and name, when asked for fresh ones.
-    pub identity: Option<(Identity, String)>,
-    /// Its station alias.
-    pub alias: u32,
-    /// Its configured station address.
-    pub configured_address: u32,
-    /// Whether it has distributed clocks.
-    pub dc_supported: bool,
-    /// Whether its distributed clock is active.
-    pub dc_active: bool,
-    /// Its SYNC0 cycle, ns.
-    pub dc_cycle_ns: u32,
-    /// Its SYNC0 shift, ns.
-    pub dc_shift_ns: i32,
-}
 
 impl Master {
     /// The chip's last `count` emergency records (`None`: as many as it

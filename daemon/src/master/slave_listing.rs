@@ -16,14 +16,26 @@ use ecmxf_wire::EcatState;
 use ecmxf_wire::payload::slave_info::SlaveInfoCode;
 use futures_util::{StreamExt, TryStreamExt, stream};
 
-use super::diagnostics::SlaveReading;
-use super::{Call, Master, Phase};
+use super::{Call, Identity, Master, Phase};
 use crate::engine::error::EngineError;
 
 /// Items one listing keeps queued for the chip: enough that the slot
 /// never waits for the next, few enough to leave most of the engine's
 /// request queue to other clients.
 const READS_IN_FLIGHT: usize = 16;
+
+/// A slave as read live from the chip.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub(crate) struct SlaveReading {
+    /// Its EtherCAT state.
+    pub state: EcatState,
+    /// Its AL status code.
+    pub al_status: u16,
+    /// Its identity and name, when asked for fresh ones.
+    pub identity: Option<(Identity, String)>,
+    /// Its addresses and distributed clock, as this run set them.
+    pub setup: SlaveSetup,
+}
 
 /// What bring-up set on a slave and a run does not change.
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
@@ -183,12 +195,7 @@ impl Master {
                     state: EcatState::from_u8(live[i * LIVE_ITEMS.len()] as u8),
                     al_status: live[i * LIVE_ITEMS.len() + 1] as u16,
                     identity,
-                    alias: setup.alias,
-                    configured_address: setup.configured_address,
-                    dc_supported: setup.dc_supported,
-                    dc_active: setup.dc_active,
-                    dc_cycle_ns: setup.dc_cycle_ns,
-                    dc_shift_ns: setup.dc_shift_ns,
+                    setup,
                 }
             })
             .collect())

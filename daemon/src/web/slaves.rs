@@ -114,8 +114,8 @@ async fn read_list(master: &Master) -> Result<Value, Refusal> {
         });
         slaves.push(json!({
             "position": i,
-            "alias": live.alias,
-            "configured_address": live.configured_address,
+            "alias": live.setup.alias,
+            "configured_address": live.setup.configured_address,
             "vendor_id": s.vendor_id,
             "product_code": s.product_code,
             "revision": s.revision,
@@ -128,10 +128,10 @@ async fn read_list(master: &Master) -> Result<Value, Refusal> {
             "input_bytes": s.tx_bytes,
             "input_offset": s.tx_offset,
             "dc": {
-                "supported": live.dc_supported,
-                "active": live.dc_active,
-                "cycle_ns": live.dc_cycle_ns,
-                "shift_ns": live.dc_shift_ns,
+                "supported": live.setup.dc_supported,
+                "active": live.setup.dc_active,
+                "cycle_ns": live.setup.dc_cycle_ns,
+                "shift_ns": live.setup.dc_shift_ns,
             },
             "expected": expected,
             "mismatch": differs.join("; "),
