@@ -74,18 +74,23 @@ const IDENTITY_ITEMS: [SlaveInfoCode; 3] =
 /// another, and bring-up may then set other addresses or clocks.
 type RunKey = (u64, u64, usize);
 
-/// The setups of the run in force, read by the first listing of a run.
+/// The setups of the run in force, and the one read of them at a time.
 #[derive(Debug, Default)]
-pub(crate) struct SetupCache(Mutex<Option<(RunKey, Arc<[SlaveSetup]>)>>);
+pub(crate) struct SetupCache {
+    held: Mutex<Option<(RunKey, Arc<[SlaveSetup]>)>>,
+    /// Held while they are read: a listing that comes meanwhile waits for
+    /// that read instead of asking the chip the same again.
+    reading: tokio::sync::Mutex<()>,
+}
 
 impl SetupCache {
     fn get(&self, key: RunKey) -> Option<Arc<[SlaveSetup]>> {
-        let held = self.0.lock().unwrap_or_else(|e| e.into_inner());
+        let held = self.held.lock().unwrap_or_else(|e| e.into_inner());
         held.as_ref().filter(|(k, _)| *k == key).map(|(_, s)| Arc::clone(s))
     }
 
     fn put(&self, key: RunKey, setups: Arc<[SlaveSetup]>) {
-        *self.0.lock().unwrap_or_else(|e| e.into_inner()) = Some((key, setups));
+        *self.held.lock().unwrap_or_else(|e| e.into_inner()) = Some((key, setups));
     }
 }
 
@@ -113,6 +118,16 @@ impl Master {
     /// ([`SetupCache`]), or read now.
     async fn setups(&self, slaves: usize, fresh: bool, call: Call) -> Result<Arc<[SlaveSetup]>, EngineError> {
         let key = self.run_key();
+        if let Some(s) = self.slave_setups.get(key).filter(|_| !fresh) {
+            return Ok(s);
+        }
+        let _reading = match call.deadline {
+            Some(end) => tokio::time::timeout_at(end.into(), self.slave_setups.reading.lock())
+                .await
+                .map_err(|_| EngineError::Timeout)?,
+            None => self.slave_setups.reading.lock().await,
+        };
+        // Read by the one this waited for.
         if let Some(s) = self.slave_setups.get(key).filter(|_| !fresh) {
             return Ok(s);
         }
