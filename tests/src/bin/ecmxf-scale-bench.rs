@@ -38,6 +38,9 @@ use ecmxf_proto::v1 as pb;
 use pb::master_client::MasterClient;
 use pb::process_data_client::ProcessDataClient;
 
+/// `ecmxf-sim serve --spin-us` when not given.
+const SIM_DEFAULT_SPIN_US: u64 = 2000;
+
 /// The drives of the network; the rest are digital IO slaves.
 const DRIVES: usize = 10;
 
@@ -151,8 +154,15 @@ async fn round(a: &Args, cycle_us: u32) -> Result<Round, String> {
     let dir = temp_dir("scale");
     let net = dir.join("net.toml");
     std::fs::write(&net, network(a.slaves)).map_err(|e| e.to_string())?;
-    let spin = a.sim_spin_us.to_string();
-    let sim = Simulator::serve(&dir, &["--network", &net.display().to_string(), "--spin-us", &spin]);
+    let (net, spin) = (net.display().to_string(), a.sim_spin_us.to_string());
+    // The simulator's own default is not passed: a simulator built before
+    // --spin-us existed can be measured too.
+    let args: &[&str] = if a.sim_spin_us == SIM_DEFAULT_SPIN_US {
+        &["--network", &net]
+    } else {
+        &["--network", &net, "--spin-us", &spin]
+    };
+    let sim = Simulator::serve(&dir, args);
     let start = Instant::now();
     let daemon = Daemon::binary_with_config(&config(&sim, cycle_us, a.rt));
     let mut r = Round::default();
