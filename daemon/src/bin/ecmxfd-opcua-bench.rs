@@ -21,13 +21,11 @@
 #[path = "bench_support/mod.rs"]
 mod support;
 
-use std::io::{BufRead, BufReader, Read};
-use std::process::{Command, Stdio};
 use std::sync::Arc;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use ecmxfd::config::OpcuaConfig;
-use support::{cpu_seconds, cpu_seconds_of, io_plant, median, python_with, repo_with};
+use support::{cpu_over, io_plant, median, python_load, python_with, repo_with};
 
 const SLAVES: usize = 64;
 
@@ -44,12 +42,6 @@ fn main() -> Result<(), String> {
     let alarms = || master.status().fifo_alarms;
     let (mut off, mut on, mut rates, mut client_cpu) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let window = Duration::from_secs(secs);
-    let cpu_over = |w: Duration, client: Option<u32>| {
-        let (c0, k0, t0) = (cpu_seconds(), client.map_or(0.0, cpu_seconds_of), Instant::now());
-        std::thread::sleep(w);
-        let wall = t0.elapsed().as_secs_f64();
-        ((cpu_seconds() - c0) / wall, client.map_or(0.0, |p| (cpu_seconds_of(p) - k0) / wall))
-    };
     for round in 0..rounds {
         let a0 = alarms();
         let (cpu_off, _) = cpu_over(window, None);
@@ -62,26 +54,17 @@ fn main() -> Result<(), String> {
         let server = rt.spawn(ecmxfd::opcua::serve(Arc::clone(&master), opcua, listeners, stopped));
         let url = format!("opc.tcp://{port}/");
         let load_secs = (secs + 1).to_string();
-        let mut clients = Command::new(&python)
-            .arg(repo.join("tests/python/opcua_client.py"))
-            .args([url.as_str(), "load", &sessions.to_string(), &items.to_string(), "100", &load_secs])
-            .stdout(Stdio::piped())
-            .stderr(Stdio::null())
-            .spawn()
-            .map_err(|e| format!("python: {e}"))?;
-        let mut out = BufReader::new(clients.stdout.take().ok_or("no client output")?);
-        let mut line = String::new();
-        out.read_line(&mut line).map_err(|e| e.to_string())?;
-        if line.trim() != "subscribed" {
-            return Err(format!("the clients did not subscribe: {line:?}"));
-        }
-        let a0 = alarms();
-        let (cpu_on, cpu_clients) = cpu_over(window, Some(clients.id()));
-        alarms_on += alarms() - a0;
-        let mut rest = String::new();
-        out.read_to_string(&mut rest).map_err(|e| e.to_string())?;
-        let _ = clients.wait();
-        let counted: serde_json::Value = serde_json::from_str(rest.lines().last().unwrap_or("")).unwrap_or_default();
+        let script = repo.join("tests/python/opcua_client.py");
+        let loaded = python_load(
+            &master,
+            &python,
+            &script,
+            &[url.as_str(), "load", &sessions.to_string(), &items.to_string(), "100", &load_secs],
+            window,
+            "subscriptions",
+        )?;
+        alarms_on += loaded.alarms;
+        let (cpu_on, cpu_clients, counted) = (loaded.cpu, loaded.client_cpu, loaded.counted);
         let rate = counted["per_second"].as_f64().unwrap_or(0.0);
         let _ = stop.send(());
         let _ = rt.block_on(server);

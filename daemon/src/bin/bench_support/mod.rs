@@ -182,3 +182,64 @@ pub fn python_with(repo: &Path, module: &str) -> Result<PathBuf, String> {
         ))
     }
 }
+
+/// This process's CPU, and the `client` process's if given, in cores over
+/// `window` (slept through).
+#[allow(dead_code)] // the benches with Python clients only
+pub fn cpu_over(window: Duration, client: Option<u32>) -> (f64, f64) {
+    let (c0, k0, t0) = (cpu_seconds(), client.map_or(0.0, cpu_seconds_of), Instant::now());
+    std::thread::sleep(window);
+    let wall = t0.elapsed().as_secs_f64();
+    ((cpu_seconds() - c0) / wall, client.map_or(0.0, |p| (cpu_seconds_of(p) - k0) / wall))
+}
+
+/// What a load client measured against a front end.
+#[allow(dead_code)] // the benches with Python clients only
+pub struct Loaded {
+    /// This process's CPU while the clients ran, in cores.
+    pub cpu: f64,
+    /// The clients' CPU, in cores.
+    pub client_cpu: f64,
+    /// FIFO alarms meanwhile.
+    pub alarms: u64,
+    /// The clients' closing JSON line (their counts).
+    pub counted: serde_json::Value,
+}
+
+/// Runs a Python load client (`script` with `args`, from `repo`): waits for
+/// its first line to say "subscribed", measures over `window`, then reads
+/// its counts from its last line. `what` names its streams in errors.
+#[allow(dead_code)] // the benches with Python clients only
+pub fn python_load(
+    master: &Master,
+    python: &Path,
+    script: &Path,
+    args: &[&str],
+    window: Duration,
+    what: &str,
+) -> Result<Loaded, String> {
+    use std::io::{BufRead, BufReader, Read};
+    use std::process::Stdio;
+    let mut clients = Command::new(python)
+        .arg(script)
+        .args(args)
+        .stdout(Stdio::piped())
+        .stderr(Stdio::null())
+        .spawn()
+        .map_err(|e| format!("python: {e}"))?;
+    let mut out = BufReader::new(clients.stdout.take().ok_or("no client output")?);
+    let mut line = String::new();
+    out.read_line(&mut line).map_err(|e| e.to_string())?;
+    if line.trim() != "subscribed" {
+        let _ = clients.kill();
+        return Err(format!("the clients did not open their {what}: {line:?}"));
+    }
+    let a0 = master.status().fifo_alarms;
+    let (cpu, client_cpu) = cpu_over(window, Some(clients.id()));
+    let alarms = master.status().fifo_alarms - a0;
+    let mut rest = String::new();
+    out.read_to_string(&mut rest).map_err(|e| e.to_string())?;
+    let _ = clients.wait();
+    let counted = serde_json::from_str(rest.lines().last().unwrap_or("")).unwrap_or_default();
+    Ok(Loaded { cpu, client_cpu, alarms, counted })
+}
