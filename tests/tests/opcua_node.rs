@@ -10,7 +10,8 @@
 //!   docs/opcua.md gives; nothing node-opcua reads there is odd to it (an
 //!   attribute that does not read Good, a value of another type than its
 //!   variable's DataType, a failed browse); every slave has its methods,
-//!   every endpoint the address the client reached.
+//!   every endpoint the address the client reached. The same for seven
+//!   Elmo drives known only from what they say of themselves.
 //! - A subscription at 100 ms sampling sees values flow: the exchange
 //!   counter arrives Good and increasing, an input arrives Good.
 
@@ -68,6 +69,38 @@ fn node_opcua_browses_every_slave_and_entry_of_the_demo_as_ecmxfctl_lists_them()
         }
     });
     assert_eq!(d.stop(), Some(0), "{}", d.log());
+}
+
+/// Seven Elmo Gold drives known only from what they say of themselves
+/// (the simulator has the vendor's ESI, the daemon none): node-opcua
+/// browses them as `ecmxfctl` lists them, with nothing odd to it.
+#[test]
+fn node_opcua_browses_seven_elmo_drives_as_ecmxfctl_lists_them() {
+    let Some(modules) = ecmxf_e2e::node_modules("node-opcua-client") else { return };
+    let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
+    let dir = ecmxf_e2e::temp_dir("opcua-node-elmo");
+    let device = format!("[[slave]]\nesi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n", elmo.display());
+    let link = ecmxf_e2e::sim_network(&dir, &device.repeat(7));
+    let port = free_port();
+    let url = format!("opc.tcp://127.0.0.1:{port}/");
+    let mut d = Daemon::binary_with_config(&config(&link, &format!("[opcua]\nlisten = \"127.0.0.1:{port}\"\n")));
+    run(async {
+        d.connect().await;
+        assert!(d.logged("process image laid out", Duration::from_secs(20)).await, "{}", d.log());
+        // Names the SII lacks come from the drives just after; when the
+        // SII names them all, nothing is logged.
+        let _ = d.logged(NAMED, Duration::from_secs(5)).await;
+        let slaves = d.ctl(&["--json", "slaves"]).json();
+        let pdos = d.ctl(&["--json", "pdos"]).json();
+        let mut browse = client(&modules, &d, &[&url, "browse"]);
+        let out = tokio::task::spawn_blocking(move || browse.output()).await.unwrap().expect("node");
+        let space = last_json(&out);
+        assert_eq!(space["odd"], serde_json::json!([]), "what node-opcua found odd");
+        assert_eq!(space["slaves"].as_array().map(Vec::len), Some(7), "{}", space["slaves"]);
+        ecmxf_e2e::opcua::browsed_as_ecmxfctl_says(&space, &slaves, &pdos, false);
+    });
+    assert_eq!(d.stop(), Some(0), "{}", d.log());
+    let _ = std::fs::remove_dir_all(&dir);
 }
 
 #[test]
