@@ -37,7 +37,7 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
         Some(us) => format!(", output latency budget {us} us"),
         None => String::new(),
     };
-    if let Some(Err(e)) = &budget {
+    if let Ok(Err(e)) = &budget {
         let _ = writeln!(err, "{}: the network cannot run: link budget: {e}", path.display());
         return crate::lifecycle::EXIT_REFUSED;
     }
@@ -49,7 +49,7 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
         c.cycle.sync0_us
     );
     let _ = match budget {
-        Some(Ok(b)) => writeln!(
+        Ok(Ok(b)) => writeln!(
             out,
             "link budget: the process data needs {:.0}% of the SPI link ({} cycle(s) of frames a packet, {:.0} \
              exchanges/s at least)",
@@ -57,10 +57,10 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
             b.frames_per_packet,
             b.min_exchanges_per_s()
         ),
-        _ => writeln!(
+        Ok(Err(_)) => Ok(()),
+        Err(why) => writeln!(
             out,
-            "link budget: not known offline (no ENI or simulated network describes the frames: the slaves' own \
-             mapping is read at bring-up, which checks it)"
+            "link budget: not known offline ({why}: the slaves' own mapping is read at bring-up, which checks it)"
         ),
     };
     if let Some(w) = &c.web {
@@ -72,9 +72,9 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
     0
 }
 
-/// The offline link budget: `None` where the frame sizes are known only
-/// from the slaves.
-type Budget = Option<Result<LinkBudget, BudgetError>>;
+/// The offline link budget, or why the frame sizes are known only from
+/// the slaves.
+type Budget = Result<Result<LinkBudget, BudgetError>, String>;
 
 type Checked = (Config, Vec<String>, Budget);
 
@@ -142,11 +142,19 @@ fn latency_fits(c: &Config, path: &Path, simulated_packet_ns: Option<u64>) -> Re
 /// sizes of its ENI (which lists every slave's PDOs), else of the simulated
 /// network it runs on (its file, or the demo network `--sim` runs:
 /// `simulated`, checked against the configuration by
-/// [`simulated_frames`]), with the packet time its link gives; `None` where
-/// only the slaves can tell (a chip with no ENI: their mapping is read at
-/// bring-up). What bring-up would refuse, said offline.
+/// [`simulated_frames`]), else of its `[[slave]]` list (config/slave_frames.rs),
+/// with the packet time its link gives; where only the slaves can tell
+/// (their mapping is read at bring-up), why. What bring-up would refuse,
+/// said offline.
 fn link_budget(c: &Config, simulated: Option<(usize, usize, u64)>) -> Budget {
-    let (rx, tx) = c.eni_frames.or(simulated.map(|(rx, tx, _)| (rx, tx)))?;
+    let (rx, tx) = match (c.eni_frames, simulated) {
+        (Some(frames), _) => frames,
+        (None, Some((rx, tx, _))) => (rx, tx),
+        (None, None) if c.eni.is_some() => {
+            return Err("the ENI does not give every slave's process data".into());
+        }
+        (None, None) => c.slave_frames()?,
+    };
     let data_size = c.chip.data_size;
     let packet_ns = match (&c.link, simulated) {
         (_, Some((_, _, packet_ns))) => packet_ns,
@@ -154,9 +162,9 @@ fn link_budget(c: &Config, simulated: Option<(usize, usize, u64)>) -> Budget {
         (LinkConfig::Spidev { spi_hz, .. }, None) => {
             crate::master::link_budget::clocked_ns(data_size, u64::from(*spi_hz))
         }
-        _ => return None,
+        _ => return Err("the simulator's network is not known offline".into()),
     };
-    Some(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
+    Ok(crate::master::link_budget::check(data_size, rx, tx, packet_ns, u64::from(c.cycle.sync0_us) * 1000))
 }
 
 /// The simulated network's frame sizes (each slave's default mapping) and

@@ -151,6 +151,30 @@ fn check_config_says_what_an_eni_applies_and_what_it_does_not() {
     assert!(text.contains("has Ccs 2 with data: written, as SOEM's files mean it"), "{text}");
 }
 
+/// Without an ENI, the `[[slave]]` list is the network: one Elmo drive
+/// and seven give two budgets from the ESI's assigned PDOs, and a slave
+/// only the bus can describe is named as the reason there is none.
+#[test]
+fn check_config_budgets_a_slave_list_from_its_devices_or_names_the_slave_it_cannot() {
+    let Some(elmo) = ecmxf_e2e::fixture("esi_elmo_gold_Elmo_ECAT_00010420_V11.xml") else { return };
+    let spidev = "[link]\nbackend = \"spidev\"\ndevice = \"/dev/spidev0.0\"\nspi_hz = 20000000\n";
+    let drive = format!("[[slave]]\nesi = \"{}\"\nproduct_code = 0x30924\nrevision = 0x10420\n", elmo.display());
+    let budget = |slaves: &str| {
+        let (code, text) = check_config(&format!("version = 1\n{spidev}{slaves}"));
+        assert_eq!(code, 0, "{text}");
+        text.lines().find(|l| l.starts_with("link budget:")).map(str::to_owned).unwrap_or_else(|| panic!("{text}"))
+    };
+    let (one, seven) = (budget(&drive), budget(&drive.repeat(7)));
+    assert!(one.starts_with("link budget: the process data needs"), "{one}");
+    assert!(seven.starts_with("link budget: the process data needs"), "{seven}");
+    assert_ne!(one, seven, "budgets from each list's own devices");
+    let unknown = budget(&format!("{drive}[[slave]]\nname = \"coupler\"\nvendor_id = 2\n"));
+    assert!(
+        unknown.contains("not known offline (slave[1] (coupler) has neither an ESI nor a PDO mapping"),
+        "{unknown}"
+    );
+}
+
 #[test]
 fn a_malformed_eni_is_refused_naming_element_and_line() {
     let dir = temp_dir("eni-bad");

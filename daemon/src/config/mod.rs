@@ -15,6 +15,7 @@ mod manual;
 pub mod opcua;
 #[cfg(feature = "sim")]
 pub(crate) mod sim_network;
+mod slave_frames;
 pub mod sparkplug;
 pub mod web;
 
