@@ -1,7 +1,10 @@
 """Drives the ecmxfd dashboard in a real browser (headless Chromium through
-Selenium and chromium-driver) for tests/tests/web.rs, and prints what the
-page showed as one JSON line. The Rust test compares it with what ecmxfctl
-and the gRPC API say.
+Selenium and chromium-driver, or with `--browser firefox` headless Firefox
+ESR through geckodriver) for tests/tests/web.rs, and prints what the page
+showed as one JSON line. The Rust test compares it with what ecmxfctl and
+the gRPC API say.
+
+Usage: web_check.py [--browser chromium|firefox] MODE URL ARGS...
 
 Modes:
   pages URL SHOTS_DIR            every view at 1280x800 and 768x1024: the
@@ -28,12 +31,25 @@ import time
 from selenium import webdriver
 from selenium.webdriver.chrome.service import Service
 from selenium.webdriver.common.by import By
+from selenium.webdriver.firefox.service import Service as FirefoxService
 
 VIEWS = ["overview", "topology", "slaves", "slave/1", "plots", "events", "axes", "config"]
 SIZES = [(1280, 800), (768, 1024)]
+REPO = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+# The browser the modes drive: main() sets it from --browser.
+BROWSER = "chromium"
 
 
 def browser(width=1280, height=800):
+    driver = firefox(width, height) if BROWSER == "firefox" else chromium(width, height)
+    # The window's inner size is what a screen of that size shows.
+    driver.set_window_size(width, height)
+    inner = driver.execute_script("return [window.innerWidth, window.innerHeight]")
+    driver.set_window_size(width + (width - inner[0]), height + (height - inner[1]))
+    return driver
+
+
+def chromium(width, height):
     options = webdriver.ChromeOptions()
     options.binary_location = os.environ.get("ECMXF_CHROMIUM", shutil.which("chromium") or "/usr/bin/chromium")
     for arg in ("--headless=new", "--no-sandbox", "--disable-dev-shm-usage", "--disable-gpu",
@@ -41,11 +57,48 @@ def browser(width=1280, height=800):
         options.add_argument(arg)
     options.set_capability("goog:loggingPrefs", {"browser": "ALL"})
     driver_path = os.environ.get("ECMXF_CHROMEDRIVER", shutil.which("chromedriver") or "/usr/bin/chromedriver")
-    driver = webdriver.Chrome(service=Service(driver_path), options=options)
-    # The window's inner size is what a screen of that size shows.
-    driver.set_window_size(width, height)
-    inner = driver.execute_script("return [window.innerWidth, window.innerHeight]")
-    driver.set_window_size(width + (width - inner[0]), height + (height - inner[1]))
+    return webdriver.Chrome(service=Service(driver_path), options=options)
+
+
+# Firefox's driver has no browser log (get_log): its console errors come
+# over WebDriver BiDi instead, where the session subscribes before the
+# first page loads, so nothing a page logs while it loads is missed.
+PROBE = "ecmxf-console-probe"
+
+
+def firefox(width, height):
+    options = webdriver.FirefoxOptions()
+    options.binary_location = os.environ.get(
+        "ECMXF_FIREFOX", shutil.which("firefox-esr") or shutil.which("firefox") or "/usr/bin/firefox-esr")
+    for arg in ("-headless", f"--width={width}", f"--height={height}"):
+        options.add_argument(arg)
+    options.enable_bidi = True
+    driver_path = os.environ.get("ECMXF_GECKODRIVER", os.path.join(REPO, "target/tools/bin/geckodriver"))
+    driver = webdriver.Firefox(service=FirefoxService(driver_path), options=options)
+    errors = driver.ecmxf_errors = []
+    try:
+        # What the console shows as an error: uncaught exceptions, CSP and
+        # nosniff refusals (BiDi's "javascript" entries) and console.error.
+        driver.script.add_javascript_error_handler(lambda e: errors.append(e.text))
+        driver.script.add_console_message_handler(
+            lambda e: errors.append(e.text) if e.level == "error" else None)
+        # Chromium logs an HTTP error answer to any request as an error;
+        # Firefox shows it only in its network panel: said here in
+        # Chromium's words, so the same `expected` filters apply.
+        driver.network.add_event_handler("response_started", lambda e: errors.append(
+            f"{e['request']['url']} - Failed to load resource: the server responded with a status of "
+            f"{e['response']['status']} ({e['response'].get('statusText', '')})")
+            if e["response"]["status"] >= 400 else None)
+        # A check that would find nothing because no entry ever arrives
+        # (BiDi off, a handler the driver ignores) fails here instead.
+        driver.execute_script(f"console.error('{PROBE}'); setTimeout(() => {{ throw new Error('{PROBE}'); }});")
+        probes = lambda: [e for e in errors if PROBE in e]  # noqa: E731
+        wait_for(driver, lambda: len(probes()) == 2, timeout=5, what="a console error and an exception over BiDi")
+        for e in probes():
+            errors.remove(e)
+    except BaseException:
+        driver.quit()
+        raise
     return driver
 
 
@@ -69,11 +122,18 @@ def text(driver, css):
 
 
 def console_errors(driver, expected=()):
-    """The console's errors, but for `expected` ones: Chromium logs every
-    HTTP error answer to a fetch as an error, a refusal the test provokes
-    too."""
-    return [e["message"] for e in driver.get_log("browser")
-            if e["level"] == "SEVERE" and not any(x in e["message"] for x in expected)]
+    """The console's errors since the last call, but for `expected` ones:
+    Chromium logs every HTTP error answer to a fetch as an error, a refusal
+    the test provokes too."""
+    if BROWSER == "firefox":
+        # Entries arrive over BiDi a moment after the page logs them, on
+        # another thread: taken one by one, none is lost in between.
+        time.sleep(0.2)
+        errors = driver.ecmxf_errors
+        found = [errors.pop(0) for _ in range(len(errors))]
+    else:
+        found = [e["message"] for e in driver.get_log("browser") if e["level"] == "SEVERE"]
+    return [m for m in found if not any(x in m for x in expected)]
 
 
 # Read in one script: the live summary redraws four times a second, and
@@ -355,8 +415,14 @@ def load(url, sessions, seconds):
 
 
 def main():
-    mode, url = sys.argv[1], sys.argv[2]
-    args = sys.argv[3:]
+    global BROWSER
+    argv = sys.argv[1:]
+    if argv[:1] == ["--browser"]:
+        BROWSER, argv = argv[1], argv[2:]
+        if BROWSER not in ("chromium", "firefox"):
+            raise SystemExit(f"unknown browser {BROWSER} (chromium or firefox)")
+    mode, url = argv[0], argv[1]
+    args = argv[2:]
     if mode == "pages":
         result = pages(url, args[0])
     elif mode == "unplug":

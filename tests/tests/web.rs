@@ -7,6 +7,8 @@
 //!   --json slaves`; the overview's summary is `ecmxfctl --json diag`'s;
 //!   screenshots of every view at 1280x800 and 768x1024 land in
 //!   target/web-screenshots, with no text past the page's edge or cut off;
+//!   the same in headless Firefox ESR through geckodriver, its screenshots
+//!   in target/web-screenshots-firefox;
 //! - an unplugged slave shows lost within 1 s, without a reload, on the
 //!   overview and the topology;
 //! - a plot gains points, and its CSV is the values StreamInputs gave for
@@ -42,6 +44,30 @@ fn browser_tools() -> Option<PathBuf> {
     ecmxf_e2e::installed_tool("ECMXF_PYTHON", "target/py-venv/bin/python", usable, "ECMXF_REQUIRE_BROWSER", install)
 }
 
+/// The venv's Python with Selenium, Debian's Firefox ESR, and geckodriver
+/// (crates.io's, which `.ci/run` installs into target/tools): (python,
+/// geckodriver).
+fn firefox_tools() -> Option<(PathBuf, PathBuf)> {
+    let python =
+        std::env::var_os("ECMXF_PYTHON").map(PathBuf::from).unwrap_or_else(|| repo().join("target/py-venv/bin/python"));
+    let usable = |geckodriver: &std::path::Path| {
+        let runs = |cmd: &mut Command| cmd.output().is_ok_and(|o| o.status.success());
+        runs(Command::new(geckodriver).arg("--version"))
+            && runs(Command::new(&python).args(["-c", "import selenium"]))
+            && runs(Command::new("sh").args(["-c", "command -v firefox-esr || command -v firefox"]))
+    };
+    let install = "apt-get install firefox-esr; cargo install --locked geckodriver@0.37.1 --root target/tools; \
+                   target/py-venv/bin/pip install -r tests/python/requirements.txt";
+    let geckodriver = ecmxf_e2e::installed_tool(
+        "ECMXF_GECKODRIVER",
+        "target/tools/bin/geckodriver",
+        usable,
+        "ECMXF_REQUIRE_FIREFOX",
+        install,
+    )?;
+    Some((python, geckodriver))
+}
+
 fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").unwrap().local_addr().unwrap().port()
 }
@@ -67,9 +93,15 @@ fn sha256_hex(text: &str) -> String {
 
 /// Runs web_check.py `args`; its JSON.
 fn check(python: &PathBuf, args: &[&str]) -> Value {
+    check_with(python, &[], args)
+}
+
+/// Runs web_check.py `args` with the environment variables `env`; its JSON.
+fn check_with(python: &PathBuf, env: &[(&str, &PathBuf)], args: &[&str]) -> Value {
     let out = Command::new(python)
         .arg(repo().join("tests/python/web_check.py"))
         .args(args)
+        .envs(env.iter().copied())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .output()
@@ -137,12 +169,30 @@ fn ready(d: &mut Daemon) {
 #[test]
 fn every_view_opens_clean_and_shows_what_ecmxfctl_says() {
     let Some(python) = browser_tools() else { return };
-    let (mut d, sim, url) = daemon("web-pages");
+    every_view_shows_what_ecmxfctl_says("web-pages", "target/web-screenshots", |url, shots| {
+        check(&python, &["pages", url, shots])
+    });
+}
+
+#[test]
+fn every_view_opens_clean_in_firefox_too() {
+    let Some((python, geckodriver)) = firefox_tools() else { return };
+    let started = std::time::Instant::now();
+    every_view_shows_what_ecmxfctl_says("web-pages-firefox", "target/web-screenshots-firefox", |url, shots| {
+        check_with(&python, &[("ECMXF_GECKODRIVER", &geckodriver)], &["--browser", "firefox", "pages", url, shots])
+    });
+    eprintln!("Firefox: every view at both sizes in {:.1} s", started.elapsed().as_secs_f64());
+}
+
+/// The pages check on a daemon of its own: `pages(url, shots_dir)` runs
+/// web_check.py's `pages` in one browser; what it saw is what ecmxfctl says.
+fn every_view_shows_what_ecmxfctl_says(tag: &str, shots: &str, pages: impl Fn(&str, &str) -> Value) {
+    let (mut d, sim, url) = daemon(tag);
     ready(&mut d);
     // Errors on the drive's port 1, as a bad cable into it makes them.
     sim.ctl("port-errors 1 1 5 2");
-    let shots = repo().join("target/web-screenshots");
-    let r = check(&python, &["pages", &url, &shots.display().to_string()]);
+    let shots = repo().join(shots);
+    let r = pages(&url, &shots.display().to_string());
     no_console_errors(&r);
     assert_eq!(r["shots"].as_array().map(Vec::len), Some(16), "8 views at 2 sizes: {}", r["shots"]);
     assert_eq!(r["overflow"], serde_json::json!({}), "text past the edge or cut off: {}", r["overflow"]);
