@@ -2,9 +2,12 @@
 //! ETG.1000.6 table 2): an SDO to a slave without CoE is answered at once,
 //! naming the slave, instead of being sent and timing out in the chip a
 //! second later as "SDO protocol timeout", which names neither the slave
-//! nor the cause. Read once per slave
-//! (one EEPROM request) the first time an SDO goes to it, and kept while
-//! the same device sits at that position.
+//! nor the cause. Read once per device identity (one EEPROM request) the
+//! first time an SDO goes to a slave of it, and kept while the same device
+//! sits at that position: its twins on the line take the word it gave
+//! (the protocols are the product's, written into the SII per product and
+//! revision), so a line of 100 identical slaves costs one request, not a
+//! hundred, when the process image is laid out.
 
 use ecmxf_devices::sii::protocol;
 
@@ -47,6 +50,10 @@ impl Master {
     async fn protocols(&self, slave: u8, call: Call) -> Option<u16> {
         let identity = self.identity(slave)?;
         if let Some(p) = self.mailbox.get(slave, identity) {
+            return Some(p);
+        }
+        if let Some(p) = self.mailbox.of_identity(identity) {
+            self.mailbox.put(slave, identity, p);
             return Some(p);
         }
         let words = self.eeprom_read(slave, PROTOCOLS_WORD, call).await.ok()?;
