@@ -144,6 +144,7 @@ return {
   healthy: document.getElementById('summary').dataset.healthy,
   health: t('summary-health'), state: t('summary-state'), slaves: t('summary-slaves'), lost: t('summary-lost'),
   problems: Array.from(document.querySelectorAll('#problems li'), (li) => li.textContent.trim()),
+  link: t('chart-exchanges-now'),
 };
 """
 

@@ -246,6 +246,23 @@ fn every_view_shows_what_ecmxfctl_says(tag: &str, shots: &str, pages: impl Fn(&s
     assert_eq!(summary["state"], state.as_str(), "{summary}");
     let op = diag["slaves"].as_array().unwrap().iter().filter(|s| s["state"] == "OP").count();
     assert_eq!(summary["slaves"], format!("{op} / {} slaves in OP", expected.len()).as_str(), "{summary}");
+    // Link use as a share of the link: exchanges per second times the
+    // packet time bring-up measured, which on this link is tens to
+    // hundreds of microseconds (a share off by a unit is far outside).
+    let link = summary["link"].as_str().unwrap_or_default();
+    let numbers: Vec<f64> =
+        link.split(|c: char| !c.is_ascii_digit()).filter(|w| !w.is_empty()).filter_map(|w| w.parse().ok()).collect();
+    assert!(link.contains(" % (") && link.ends_with(" exchanges/s)") && numbers.len() == 2, "{link:?}");
+    let (percent, per_second) = (numbers[0], numbers[1]);
+    assert!(percent <= 100.0, "{link:?}");
+    // A loaded host may stall the exchange for the second read: no
+    // exchanges, no use.
+    if per_second > 0.0 {
+        let packet_us = percent.max(0.5) / 100.0 / per_second * 1e6;
+        assert!((10.0..2000.0).contains(&packet_us), "{link:?}: {packet_us:.0} us a packet");
+    } else {
+        assert_eq!(percent, 0.0, "{link:?}");
+    }
     eprintln!("screenshots in {}", shots.display());
     assert_eq!(d.stop(), Some(0), "{}", d.log());
 }

@@ -27,6 +27,10 @@ pub struct NetworkLayout {
     pub fifo_low: u8,
     /// High mark in force.
     pub fifo_high: u8,
+    /// How long one SPI packet takes on this link, as bring-up measured
+    /// it for the link budget, ns: exchanges per second times this is the
+    /// share of the link in use.
+    pub packet_ns: u64,
 }
 
 /// One slave as found.

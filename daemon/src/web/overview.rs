@@ -279,6 +279,8 @@ pub(super) fn summary(master: &Master, feed: &Feed) -> Value {
         },
         "axes": { "enabled": axes_enabled, "total": axes_total },
         "cycle_us": config.cycle.sync0_us,
+        // The link's share per exchange: the charts' link use.
+        "packet_ns": layout.packet_ns,
         "rx_fifo": s.rx_fifo,
         "tx_fifo": s.tx_fifo,
         "counters": {

@@ -240,6 +240,7 @@ pub(crate) fn bring_up<L: Link>(
         fifo_tx_depth: fifo.tx_depth,
         fifo_low: fifo.low,
         fifo_high: fifo.high,
+        packet_ns: fifo.packet_ns,
     })
 }
 
@@ -413,6 +414,7 @@ struct FifoPlan {
     tx_depth: u8,
     low: u8,
     high: u8,
+    packet_ns: u64,
 }
 
 /// Step 7: frame sizes from the chip, the link budget for them (a network
@@ -473,7 +475,7 @@ fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, B
     port.call(&FifoSetTxCount(tx_depth))?;
     blocking(port, &FifoInit, SLOW)
         .map_err(|e| step("FIFO_INIT", format!("{e}: {rx_depth} x {rx_size} + {tx_depth} x {tx_size} bytes")))?;
-    Ok(FifoPlan { rx_size, tx_size, rx_depth, tx_depth, low, high })
+    Ok(FifoPlan { rx_size, tx_size, rx_depth, tx_depth, low, high, packet_ns: budget.packet_ns })
 }
 
 /// Each slave's bytes and where they sit in the output and input frames.

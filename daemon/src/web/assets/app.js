@@ -686,7 +686,7 @@
       el('p', { id: 'problems-none', class: 'muted', hidden: true }, 'None: the network does what its configuration asks.'),
       el('h2', null, 'Last 5 minutes'),
       el('div', { class: 'charts' },
-        chart('chart-exchanges', 'Link use: SPI exchanges per second'),
+        chart('chart-exchanges', 'Link use: share of the SPI link'),
         chart('chart-fifo', 'RxFIFO / TxFIFO level', fifoNow),
         chart('chart-alarms', 'FIFO alarms')),
       el('h2', null, 'Counters'),
@@ -746,14 +746,20 @@
       }
       const xs = s.map((p) => x(p.t));
       const range = { xmin: -300, xmax: 0, zeroBased: true, xFormat: (v) => (v === 0 ? 'now' : `${v} s`) };
-      drawChart($('#chart-exchanges'), { ...range, series: [{ ...rate, color: PALETTE[0] }] });
+      // Each exchange holds the link for one packet's time (measured at
+      // bring-up): the share in use. Before bring-up, exchanges per second.
+      const packet = Number(live.overview && live.overview.packet_ns) / 1e9 || 0;
+      const use = packet ? { xs: rate.xs, ys: rate.ys.map((r) => Math.min(100, r * packet * 100)) } : rate;
+      drawChart($('#chart-exchanges'), { ...range, series: [{ ...use, color: PALETTE[0] }] });
       drawChart($('#chart-fifo'), {
         ...range,
         series: [{ xs, ys: s.map((p) => p.rx), color: PALETTE[0] }, { xs, ys: s.map((p) => p.tx), color: PALETTE[3] }],
       });
       drawChart($('#chart-alarms'), { ...range, series: [{ ...alarms, color: PALETTE[1] }] });
       const last = s[s.length - 1];
-      $('#chart-exchanges-now').textContent = rate.ys.length ? `${Math.round(rate.ys[rate.ys.length - 1])} /s` : '';
+      const perSecond = rate.ys.length ? Math.round(rate.ys[rate.ys.length - 1]) : null;
+      $('#chart-exchanges-now').textContent =
+        perSecond === null ? '' : packet ? `${Math.round(use.ys[use.ys.length - 1])} % (${perSecond} exchanges/s)` : `${perSecond} exchanges/s`;
       $('#fifo-rx').textContent = `Rx ${valueText(last.rx)}`;
       $('#fifo-tx').textContent = `Tx ${valueText(last.tx)}`;
       $('#chart-alarms-now').textContent = `${grouped(last.alarms)} in all`;
