@@ -45,6 +45,18 @@ fn client(modules: &Path, d: &Daemon, args: &[&str]) -> Command {
     c
 }
 
+/// What node-opcua browses on `url`, checked to hold nothing odd to it,
+/// with what `ecmxfctl` says of the slaves and PDOs: (space, slaves, pdos).
+async fn browse(modules: &Path, d: &Daemon, url: &str) -> (Value, Value, Value) {
+    let slaves = d.ctl(&["--json", "slaves"]).json();
+    let pdos = d.ctl(&["--json", "pdos"]).json();
+    let mut browse = client(modules, d, &[url, "browse"]);
+    let out = tokio::task::spawn_blocking(move || browse.output()).await.unwrap().expect("node");
+    let space = last_json(&out);
+    assert_eq!(space["odd"], serde_json::json!([]), "what node-opcua found odd");
+    (space, slaves, pdos)
+}
+
 #[test]
 fn node_opcua_browses_every_slave_and_entry_of_the_demo_as_ecmxfctl_lists_them() {
     let Some(modules) = ecmxf_e2e::node_modules("node-opcua-client") else { return };
@@ -52,13 +64,7 @@ fn node_opcua_browses_every_slave_and_entry_of_the_demo_as_ecmxfctl_lists_them()
     run(async {
         d.connect().await;
         assert!(d.logged(NAMED, Duration::from_secs(10)).await, "{}", d.log());
-        let slaves = d.ctl(&["--json", "slaves"]).json();
-        let pdos = d.ctl(&["--json", "pdos"]).json();
-        let mut browse = client(&modules, &d, &[&url, "browse"]);
-        let out = tokio::task::spawn_blocking(move || browse.output()).await.unwrap().expect("node");
-        let space = last_json(&out);
-
-        assert_eq!(space["odd"], serde_json::json!([]), "what node-opcua found odd");
+        let (space, slaves, pdos) = browse(&modules, &d, &url).await;
         // Every endpoint is offered where the client reached it (not where
         // the server listens behind the daemon's connection gate).
         let endpoints = space["endpoints"].as_array().expect("endpoints");
@@ -90,12 +96,7 @@ fn node_opcua_browses_seven_elmo_drives_as_ecmxfctl_lists_them() {
         // Names the SII lacks come from the drives just after; when the
         // SII names them all, nothing is logged.
         let _ = d.logged(NAMED, Duration::from_secs(5)).await;
-        let slaves = d.ctl(&["--json", "slaves"]).json();
-        let pdos = d.ctl(&["--json", "pdos"]).json();
-        let mut browse = client(&modules, &d, &[&url, "browse"]);
-        let out = tokio::task::spawn_blocking(move || browse.output()).await.unwrap().expect("node");
-        let space = last_json(&out);
-        assert_eq!(space["odd"], serde_json::json!([]), "what node-opcua found odd");
+        let (space, slaves, pdos) = browse(&modules, &d, &url).await;
         assert_eq!(space["slaves"].as_array().map(Vec::len), Some(7), "{}", space["slaves"]);
         ecmxf_e2e::opcua::browsed_as_ecmxfctl_says(&space, &slaves, &pdos, false);
     });
