@@ -2,7 +2,11 @@
 //! come back through the simulated IO slave's loopback, at several
 //! `cycle.output_latency_us` budgets and DC cycles. Run it with
 //! `cargo run --release -p ecmxf-e2e --bin ecmxf-latency-bench` (`--secs N`
-//! per configuration, default 5).
+//! per configuration, default 5; `--rt` runs the engine with the daemon's
+//! default real-time settings, those a configuration without `[realtime]`
+//! gets: SCHED_FIFO priority 80, memory locked, 2000 us of spin before
+//! each exchange; they need root or the unit's limits, without which the
+//! daemon warns and runs without them).
 //!
 //! For each (cycle, budget) it checks the configuration as `ecmxfd
 //! --check-config` does (a budget the link cannot hold is refused there,
@@ -40,10 +44,20 @@ struct Outcome {
     late: u64,
 }
 
+/// What the tests' configuration says of real-time settings (none); taken
+/// out (`--rt`), the daemon's defaults apply.
+const NO_REALTIME: &str = "priority = 0\nlock_memory = false\nspin_us = 0\n";
+
 /// The configuration of one run, refused as `--check-config` refuses it.
-fn checked_config(cycle_us: u32, budget_us: u32) -> Result<String, String> {
+fn checked_config(cycle_us: u32, budget_us: u32, realtime: bool) -> Result<String, String> {
     let extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
-    let config = ecmxf_e2e::config_with_cycle("backend = \"sim\"", &extra, "");
+    let mut config = ecmxf_e2e::config_with_cycle("backend = \"sim\"", &extra, "");
+    if realtime {
+        if !config.contains(NO_REALTIME) {
+            return Err("--rt: the test configuration's [realtime] is not the one this bench takes out".into());
+        }
+        config = config.replace(NO_REALTIME, "");
+    }
     let dir = ecmxf_e2e::temp_dir("latency-check");
     let path = dir.join("ecmxfd.toml");
     std::fs::write(&path, &config).map_err(|e| e.to_string())?;
@@ -121,6 +135,7 @@ async fn measure(config: &str, secs: u64) -> Result<Outcome, String> {
 fn main() {
     let mut secs = 5u64;
     let mut only: Option<(u32, u32)> = None;
+    let mut realtime = false;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -130,10 +145,15 @@ fn main() {
                 let (c, b) = v.split_once(':').expect("--only CYCLE_US:BUDGET_US");
                 only = Some((c.parse().expect("cycle"), b.parse().expect("budget")));
             }
-            other => panic!("unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US"),
+            "--rt" => realtime = true,
+            other => panic!("unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US, --rt"),
         }
     }
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
+    println!(
+        "{secs} s per configuration; engine real-time settings {}",
+        if realtime { "the defaults (SCHED_FIFO 80, memory locked, 2000 us spin)" } else { "off (no spin)" }
+    );
     println!(
         "{:>8} {:>9} {:>7} | {:>24} | {:>20} {:>6} {:>9} {:>7}",
         "cycle", "budget", "writes", "write->loopback p50/p99/max", "daemon wire p50/p99", "late", "underruns", "cpu %"
@@ -152,7 +172,7 @@ fn main() {
     // `--only` runs that pair, listed or not.
     let pairs: Vec<(u32, u32)> = only.map_or_else(|| all.to_vec(), |o| vec![o]);
     for (cycle_us, budget_us) in pairs {
-        let run = checked_config(cycle_us, budget_us).map(|config| rt.block_on(measure(&config, secs)));
+        let run = checked_config(cycle_us, budget_us, realtime).map(|config| rt.block_on(measure(&config, secs)));
         let o = match run.and_then(|r| r) {
             Ok(o) => o,
             Err(why) => {
