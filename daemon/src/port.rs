@@ -100,6 +100,10 @@ impl From<LinkError> for PortError {
     }
 }
 
+/// Guarded attempts of a first contact ([`Port::find_chip`]) before the
+/// search: a chip at the port's settings answers the first.
+const FIRST_CONTACT_ATTEMPTS: u32 = 2;
+
 /// The longest single wait for INT0: how soon an abort is seen.
 pub const WAIT_SLICE: Duration = Duration::from_millis(100);
 
@@ -535,6 +539,27 @@ impl<L: Link> Port<L> {
         } else {
             Err(PortError::NoAnswer { code: CommandCode::SpiReconfig, attempts: self.max_attempts, last: None })
         }
+    }
+
+    /// The first contact with a chip in a state the host does not know (as
+    /// `ecmxfd probe`, another driver or a daemon stopped mid-way left it:
+    /// another packet size, CRC-32): one InfoUpdate with few attempts, and
+    /// at the first failure the search ([`Port::synchronize`]). The garbled
+    /// answers of a first contact at the wrong packet size and check are
+    /// the host's ignorance of the chip's settings, not link errors: they
+    /// are not counted (a start after a probe counted 33 corrupt answers
+    /// and as many retries).
+    pub fn find_chip(&mut self) -> Result<(), PortError> {
+        let before = self.stats;
+        let attempts = std::mem::replace(&mut self.max_attempts, FIRST_CONTACT_ATTEMPTS);
+        let first = self.call(&InfoUpdate).map(|_| ());
+        self.max_attempts = attempts;
+        if first.is_err() {
+            self.synchronize()?;
+            self.stats.corrupt = before.corrupt;
+            self.stats.retries = before.retries;
+        }
+        Ok(())
     }
 
     /// Finds the packet size and check type of a chip in an unknown state:

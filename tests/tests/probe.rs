@@ -86,6 +86,10 @@ fn on_the_simulator_socket_each_fault_fails_its_step_and_the_daemon_starts_after
         tokio::time::sleep(Duration::from_millis(200)).await;
         let status = master.get_status(pb::GetStatusRequest {}).await.unwrap().into_inner();
         assert_eq!(status.ecat_state, pb::EcatState::Op as i32, "{status:?}");
+        // Finding the chip at the probe's packet size and CRC is no link
+        // error: none is counted.
+        let counters = status.counters.clone().unwrap_or_default();
+        assert_eq!(counters.corrupt_answers, 0, "{counters:?}");
         assert!(frames(status) > before, "no input frames after the probe");
 
         // A daemon using the chip: the probe refuses to break in.

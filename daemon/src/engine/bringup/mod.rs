@@ -247,9 +247,7 @@ pub(crate) fn bring_up<L: Link>(
 /// Link: finds where the chip is, then CRC-32, the packet size and the
 /// interrupt polarity; returns the firmware version.
 fn link_setup<L: Link>(port: &mut Port<L>, config: &Config) -> Result<u8, BringUpError> {
-    if port.call(&InfoUpdate).is_err() {
-        port.synchronize()?;
-    }
+    port.find_chip()?;
     if config.chip.crc32 && port.check() != CheckType::Crc32 {
         port.set_check(CheckType::Crc32)?;
     }
