@@ -88,7 +88,7 @@ fn on_the_simulator_socket_each_fault_fails_its_step_and_the_daemon_starts_after
         assert_eq!(status.ecat_state, pb::EcatState::Op as i32, "{status:?}");
         // Finding the chip at the probe's packet size and CRC is no link
         // error: none is counted.
-        let counters = status.counters.clone().unwrap_or_default();
+        let counters = status.counters.unwrap_or_default();
         assert_eq!(counters.corrupt_answers, 0, "{counters:?}");
         assert!(frames(status) > before, "no input frames after the probe");
 
