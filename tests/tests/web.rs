@@ -30,6 +30,16 @@ use serde_json::Value;
 /// The operator's token (its SHA-256 is in the configuration).
 const TOKEN: &str = "web-operator-secret";
 
+/// One browser test at a time: two browsers, their daemons and
+/// simulators at once on 2 cores measure the machine, not the page (the
+/// unplug test's bound is one second, and a starved exchange reads as
+/// "process data stalled").
+static ONE_AT_A_TIME: std::sync::Mutex<()> = std::sync::Mutex::new(());
+
+fn turn() -> std::sync::MutexGuard<'static, ()> {
+    ONE_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner())
+}
+
 /// The venv's Python with Selenium, and Chromium with its driver.
 fn browser_tools() -> Option<PathBuf> {
     let usable = |python: &std::path::Path| {
@@ -169,6 +179,7 @@ fn ready(d: &mut Daemon) {
 #[test]
 fn every_view_opens_clean_and_shows_what_ecmxfctl_says() {
     let Some(python) = browser_tools() else { return };
+    let _turn = turn();
     every_view_shows_what_ecmxfctl_says("web-pages", "target/web-screenshots", |url, shots| {
         check(&python, &["pages", url, shots])
     });
@@ -177,6 +188,7 @@ fn every_view_opens_clean_and_shows_what_ecmxfctl_says() {
 #[test]
 fn every_view_opens_clean_in_firefox_too() {
     let Some((python, geckodriver)) = firefox_tools() else { return };
+    let _turn = turn();
     let started = std::time::Instant::now();
     every_view_shows_what_ecmxfctl_says("web-pages-firefox", "target/web-screenshots-firefox", |url, shots| {
         check_with(&python, &[("ECMXF_GECKODRIVER", &geckodriver)], &["--browser", "firefox", "pages", url, shots])
@@ -270,6 +282,7 @@ fn every_view_shows_what_ecmxfctl_says(tag: &str, shots: &str, pages: impl Fn(&s
 #[test]
 fn an_unplugged_slave_shows_lost_within_a_second_without_a_reload() {
     let Some(python) = browser_tools() else { return };
+    let _turn = turn();
     let (mut d, sim, url) = daemon("web-unplug");
     ready(&mut d);
     let sim_bin = ecmxf_e2e::sim_binary().display().to_string();
@@ -294,6 +307,7 @@ fn an_unplugged_slave_shows_lost_within_a_second_without_a_reload() {
 #[test]
 fn a_plot_and_its_csv_are_the_frames_stream_inputs_gives() {
     let Some(python) = browser_tools() else { return };
+    let _turn = turn();
     let (mut d, _sim, url) = daemon("web-plot");
     ready(&mut d);
     let (input, output) = ("2.0x6000:01", "2.0x7000:01");
@@ -371,6 +385,7 @@ fn a_plot_and_its_csv_are_the_frames_stream_inputs_gives() {
 #[test]
 fn sdo_reads_match_ecmxfctl_and_only_an_operator_writes() {
     let Some(python) = browser_tools() else { return };
+    let _turn = turn();
     let (mut d, _sim, url) = daemon("web-writes");
     ready(&mut d);
     // 0x6083, the drive's profile acceleration (UNSIGNED32).
