@@ -37,10 +37,14 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
         Some(us) => format!(", output latency budget {us} us"),
         None => String::new(),
     };
-    if let Ok(Err(e)) = &budget {
-        let _ = writeln!(err, "{}: the network cannot run: link budget: {e}", path.display());
-        return crate::lifecycle::EXIT_REFUSED;
-    }
+    let budget = match budget {
+        Ok(Ok(b)) => Ok(b),
+        Ok(Err(e)) => {
+            let _ = writeln!(err, "{}: the network cannot run: link budget: {e}", path.display());
+            return crate::lifecycle::EXIT_REFUSED;
+        }
+        Err(why) => Err(why),
+    };
     let _ = writeln!(
         out,
         "{}: ok ({link}, {} expected slaves, {} us cycle{latency})",
@@ -49,7 +53,7 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
         c.cycle.sync0_us
     );
     let _ = match budget {
-        Ok(Ok(b)) => writeln!(
+        Ok(b) => writeln!(
             out,
             "link budget: the process data needs {:.0}% of the SPI link ({} cycle(s) of frames a packet, {:.0} \
              exchanges/s at least)",
@@ -57,7 +61,6 @@ pub fn check_config(path: &Path, out: &mut dyn Write, err: &mut dyn Write) -> u8
             b.frames_per_packet,
             b.min_exchanges_per_s()
         ),
-        Ok(Err(_)) => Ok(()),
         Err(why) => writeln!(
             out,
             "link budget: not known offline ({why}: the slaves' own mapping is read at bring-up, which checks it)"
@@ -82,7 +85,8 @@ type Checked = (Config, Vec<String>, Budget);
 /// the frame sizes are known only from the slaves).
 fn load(path: &Path) -> Result<Checked, ConfigError> {
     let c = Config::load(path)?;
-    let (notes, budget) = checked(&c, path)?;
+    let (notes, simulated) = checked(&c, path)?;
+    let budget = link_budget(&c, simulated);
     Ok((c, notes, budget))
 }
 
@@ -98,8 +102,15 @@ pub fn preflight(c: &Config, path: &Path) -> Result<(), (u8, String)> {
     checked(c, path).map(|_| ()).map_err(|e| (EXIT_CONFIG, e.to_string()))
 }
 
-/// The notes and the offline link budget of a loaded configuration.
-fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError> {
+/// The simulated network's frame sizes and packet time, where the link is
+/// the in-process simulator ([`simulated_frames`]).
+type Simulated = Option<(usize, usize, u64)>;
+
+/// The notes of a loaded configuration and its simulated network's frames.
+/// The link budget is `--check-config`'s alone ([`link_budget`]): a start
+/// leaves it to bring-up, and would read every `[[slave]] esi` file again
+/// for it.
+fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Simulated), ConfigError> {
     let notes = c.check_files(path)?;
     // The Sparkplug node's certificates and credentials load as at start.
     if let Some(s) = &c.sparkplug {
@@ -110,9 +121,8 @@ fn checked(c: &Config, path: &Path) -> Result<(Vec<String>, Budget), ConfigError
         })?;
     }
     let simulated = simulated_frames(c, path)?;
-    let budget = link_budget(c, simulated);
     latency_fits(c, path, simulated.map(|(_, _, packet_ns)| packet_ns))?;
-    Ok((notes, budget))
+    Ok((notes, simulated))
 }
 
 /// `cycle.output_latency_us` against the link's floor
@@ -146,7 +156,7 @@ fn latency_fits(c: &Config, path: &Path, simulated_packet_ns: Option<u64>) -> Re
 /// with the packet time its link gives; where only the slaves can tell
 /// (their mapping is read at bring-up), why. What bring-up would refuse,
 /// said offline.
-fn link_budget(c: &Config, simulated: Option<(usize, usize, u64)>) -> Budget {
+fn link_budget(c: &Config, simulated: Simulated) -> Budget {
     let (rx, tx) = match (c.eni_frames, simulated) {
         (Some(frames), _) => frames,
         (None, Some((rx, tx, _))) => (rx, tx),
@@ -171,7 +181,7 @@ fn link_budget(c: &Config, simulated: Option<(usize, usize, u64)>) -> Budget {
 /// the packet time its SPI clock gives, after checking it against the
 /// configuration; `None` when the link is not the in-process simulator.
 #[cfg(feature = "sim")]
-fn simulated_frames(c: &Config, path: &Path) -> Result<Option<(usize, usize, u64)>, ConfigError> {
+fn simulated_frames(c: &Config, path: &Path) -> Result<Simulated, ConfigError> {
     let Some((net, chip)) = crate::config::sim_network::load(c, path)? else { return Ok(None) };
     crate::config::sim_network::check_count(c, &net, path)?;
     crate::config::sim_network::check_axes(c, &net, path)?;
@@ -182,6 +192,6 @@ fn simulated_frames(c: &Config, path: &Path) -> Result<Option<(usize, usize, u64
 }
 
 #[cfg(not(feature = "sim"))]
-fn simulated_frames(_: &Config, _: &Path) -> Result<Option<(usize, usize, u64)>, ConfigError> {
+fn simulated_frames(_: &Config, _: &Path) -> Result<Simulated, ConfigError> {
     Ok(None)
 }

@@ -38,8 +38,8 @@ use ecmxf_proto::v1 as pb;
 use pb::master_client::MasterClient;
 use pb::process_data_client::ProcessDataClient;
 
-/// `ecmxf-sim serve --spin-us` when not given.
-const SIM_DEFAULT_SPIN_US: u64 = 2000;
+/// `ecmxf-sim serve --spin-us` when not given: the simulator's own.
+const SIM_DEFAULT_SPIN_US: u64 = ecmxf_sim::server::SERVER_SPIN.as_micros() as u64;
 
 /// The drives of the network; the rest are digital IO slaves.
 const DRIVES: usize = 10;
