@@ -18,10 +18,15 @@
 //!   the last [`ONCE_KEPT`] packets sent once are kept as they arrive,
 //!   whatever exchange brings them: a FIFO call (two exchanges) or two
 //!   between a read and its next look must not take its answer away, or
-//!   the read runs again, and again while the FIFO keeps pressing. Cyclic FIFO
-//!   data goes guarded: its reads are destructive (v049 PDO_DATA_FIFO_OP
-//!   takes the input frames out of the TxFIFO), so a lost answer would
-//!   lose its input frames.
+//!   the read runs again, and again while the FIFO keeps pressing.
+//! - **Pipelined** ([`Port::send_pipelined`]): for the cyclic FIFO call,
+//!   whose reads are destructive (v049 PDO_DATA_FIFO_OP takes the input
+//!   frames out of the TxFIFO). Its answer rides on the next exchange,
+//!   whoever makes it; the port keeps it and says what became of the call
+//!   ([`Fate`]). While the call is still the last packet sent, a resend
+//!   fetches its answer as a guarded call would ([`Port::fetch_pipelined`]);
+//!   once another packet went out, a corrupt answer is lost for good.
+//!   Sent and fetched at once, a pipelined call is a guarded one.
 //!
 //! A packet the chip was not ready for comes back with the "not ready" check
 //! word and was not taken: it is resent as is.
@@ -64,6 +69,12 @@ pub enum PortError {
     /// The daemon is stopping: the wait was abandoned (see
     /// [`Port::set_abort`]).
     Aborted,
+    /// A pipelined packet's answer was asked for again after another packet
+    /// went out: resending it would run it twice.
+    NotLastSent {
+        /// The command.
+        code: CommandCode,
+    },
     /// An intact answer whose data does not read as its command's reply.
     BadAnswer {
         /// The command.
@@ -87,6 +98,9 @@ impl std::fmt::Display for PortError {
             }
             Self::Unsynchronized => f.write_str("no packet boundary found in the chip's byte stream"),
             Self::Aborted => f.write_str("stopped while waiting for the chip"),
+            Self::NotLastSent { code } => {
+                write!(f, "the answer to {code} can no longer be fetched: another packet went out")
+            }
             Self::BadAnswer { code, error } => write!(f, "the chip's answer to {code} does not read: {error}"),
         }
     }
@@ -166,6 +180,57 @@ struct OnceAnswer {
     data: Vec<u8>,
 }
 
+/// What became of a packet sent pipelined ([`Port::send_pipelined`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Fate {
+    /// No exchange has brought its answer yet.
+    Waiting,
+    /// Its answer arrived intact ([`Port::pipelined`] gives it).
+    Answered,
+    /// The next exchange brought an intact answer to something else: the
+    /// chip refused the packet for its check word and never ran it
+    /// (docs/protocol.md §7).
+    Refused,
+    /// The next exchange brought a corrupt answer: the call ran (a packet
+    /// refused on the way in is answered intact), and what its answer
+    /// carried is gone unless the packet can still be resent.
+    Lost,
+}
+
+/// A packet sent pipelined, as the port follows it.
+#[derive(Clone, Copy, Debug)]
+pub struct Pipelined<'a> {
+    /// What became of it.
+    pub fate: Fate,
+    /// Its answer, once it arrived intact.
+    pub answer: Option<Answer<'a>>,
+    /// How many times the packet had been resent when that answer was
+    /// made: 0, made as the packet ran; 1, by its first resend; and so on.
+    /// The chip answers a repeat with fresh counts, taken as the packet
+    /// before the repeat arrived (docs/protocol.md §12): from 2 on, after
+    /// the packet itself ran.
+    pub resends: u32,
+}
+
+/// How many pipelined packets the port follows at once: the one whose
+/// answer the next exchange brings, and the one before it, until the
+/// engine has taken its answer.
+const PIPELINED_KEPT: usize = 2;
+
+/// A packet sent pipelined and what became of it; the answer's data is
+/// copied into a buffer of the largest data section (nothing is allocated
+/// once running).
+#[derive(Debug)]
+struct PipelinedAnswer {
+    sent: Option<(u8, CommandCode)>,
+    fate: Fate,
+    /// How many times the packet had been resent when the answer that
+    /// arrived was made (see [`Pipelined::resends`]).
+    resends: u32,
+    header: Option<ResponseHeader>,
+    data: Vec<u8>,
+}
+
 /// The chip's packet port over a link.
 #[derive(Debug)]
 pub struct Port<L> {
@@ -180,8 +245,14 @@ pub struct Port<L> {
     /// the newest at `once_next - 1`.
     once: [OnceAnswer; ONCE_KEPT],
     once_next: usize,
+    /// Packets sent pipelined (see [`Port::send_pipelined`]).
+    pipelined: [PipelinedAnswer; PIPELINED_KEPT],
     next_index: u8,
     last_sent: Option<(u8, CommandCode)>,
+    /// How many times `last_sent` has been resent since it was first
+    /// taken (repeats, which the chip does not execute but answers again
+    /// with fresh counts).
+    repeats: u32,
     /// Control bits to send with the next packet (error clears).
     pub pending_control: ControlFlags,
     ready_timeout: Duration,
@@ -208,8 +279,16 @@ impl<L: Link> Port<L> {
             prev_header: None,
             once: std::array::from_fn(|_| OnceAnswer { sent: None, header: None, data: Vec::with_capacity(DATA_MAX) }),
             once_next: 0,
+            pipelined: std::array::from_fn(|_| PipelinedAnswer {
+                sent: None,
+                fate: Fate::Waiting,
+                resends: 0,
+                header: None,
+                data: Vec::with_capacity(DATA_MAX),
+            }),
             next_index: 0,
             last_sent: None,
+            repeats: 0,
             pending_control: ControlFlags::empty(),
             ready_timeout: Duration::from_millis(100),
             abort: None,
@@ -344,6 +423,9 @@ impl<L: Link> Port<L> {
     /// Waits for INT0, clocks `self.tx`, decodes into `self.rx`.
     fn clock(&mut self, decode_as: CheckType) -> Result<Received, PortError> {
         let began = Instant::now();
+        // The answer this exchange brings was made for the packet taken
+        // before it: `last_sent`, resent `repeats` times by then.
+        let made_for = (self.last_sent, self.repeats);
         if !self.wait_ready()? {
             return Err(PortError::NotReady(self.ready_timeout));
         }
@@ -365,6 +447,7 @@ impl<L: Link> Port<L> {
                 self.status = header;
                 self.status_exchange = self.stats.exchanges;
                 self.keep_once_answer(header);
+                self.note_pipelined(Some(header), made_for);
                 Received::Answer(header)
             }
             Err(DecodeError::ChipNotReady) => {
@@ -373,9 +456,38 @@ impl<L: Link> Port<L> {
             }
             Err(e) => {
                 self.stats.corrupt += 1;
+                self.note_pipelined(None, made_for);
                 Received::Corrupt(e)
             }
         })
+    }
+
+    /// Settles the packets sent pipelined with an exchange's answer
+    /// (`None`: corrupt). Its own answer settles a packet whatever came
+    /// before; anything else settles only one still waiting, as refused
+    /// (intact) or lost (corrupt): the first exchange after a packet brings
+    /// its answer or none. A "not ready" exchange carries no answer and
+    /// never comes here.
+    fn note_pipelined(&mut self, header: Option<ResponseHeader>, made_for: (Option<(u8, CommandCode)>, u32)) {
+        for slot in &mut self.pipelined {
+            let Some(sent) = slot.sent else { continue };
+            if slot.fate == Fate::Answered {
+                continue;
+            }
+            match header {
+                Some(h) if (h.index, h.code) == sent && !h.is_nop() => {
+                    let n = usize::from(h.data_len);
+                    slot.data.clear();
+                    slot.data.extend_from_slice(self.rx.get(HEADER_LEN..HEADER_LEN + n).unwrap_or(&[]));
+                    slot.header = Some(h);
+                    slot.fate = Fate::Answered;
+                    slot.resends = if made_for.0 == Some(sent) { made_for.1 } else { 0 };
+                }
+                Some(_) if slot.fate == Fate::Waiting => slot.fate = Fate::Refused,
+                None if slot.fate == Fate::Waiting => slot.fate = Fate::Lost,
+                _ => {}
+            }
+        }
     }
 
     /// Keeps `header`'s answer (in `self.rx`) if it answers a packet sent
@@ -452,7 +564,11 @@ impl<L: Link> Port<L> {
                 }
                 sent_once = true;
                 self.last_sent = Some((index, code));
+                self.repeats = 0;
                 continue;
+            }
+            if got != Received::NotReady {
+                self.repeats += 1;
             }
             match got {
                 Received::NotReady => {}
@@ -478,6 +594,41 @@ impl<L: Link> Port<L> {
     /// answered the packet before is dropped. Returns the packet's index,
     /// which its answer echoes.
     pub fn send_once<'a, R: Request<'a>>(&mut self, req: &R) -> Result<u8, PortError> {
+        let index = self.send_unwaited(req)?;
+        let slot = &mut self.once[self.once_next];
+        (slot.sent, slot.header) = (Some((index, R::CODE)), None);
+        self.once_next = (self.once_next + 1) % ONCE_KEPT;
+        Ok(index)
+    }
+
+    /// Sends `req` pipelined (see the module doc): one exchange, which
+    /// brings the answer to the packet before; this packet's answer comes
+    /// with the next exchange, whoever makes it, and is followed by
+    /// [`Port::pipelined`] until [`Port::forget_pipelined`]. Of the
+    /// packets followed, one already settled gives way when more are sent
+    /// than the port keeps. Returns the packet's index.
+    pub fn send_pipelined<'a, R: Request<'a>>(&mut self, req: &R) -> Result<u8, PortError> {
+        let index = self.send_unwaited(req)?;
+        let sent = Some((index, R::CODE));
+        // The index wrapped round to a packet still followed: that one is
+        // long settled, and must not be read as this one.
+        for p in self.pipelined.iter_mut().filter(|p| p.sent == sent) {
+            p.sent = None;
+        }
+        // A free slot, else one already settled: the engine forgets each
+        // packet once it has taken what became of it.
+        let at = (self.pipelined.iter().position(|p| p.sent.is_none()))
+            .or_else(|| self.pipelined.iter().position(|p| p.fate != Fate::Waiting))
+            .unwrap_or(0);
+        let slot = &mut self.pipelined[at];
+        (slot.sent, slot.fate, slot.header) = (sent, Fate::Waiting, None);
+        Ok(index)
+    }
+
+    /// Sends `req` with a fresh index until the chip takes it, without
+    /// waiting for its answer; the answer that exchange brought is kept as
+    /// [`Port::previous`].
+    fn send_unwaited<'a, R: Request<'a>>(&mut self, req: &R) -> Result<u8, PortError> {
         let index = self.fresh_index();
         self.encode(req, index, self.check)?;
         loop {
@@ -487,11 +638,71 @@ impl<L: Link> Port<L> {
                 Received::Corrupt(_) => self.keep_prev(None),
             }
             self.last_sent = Some((index, R::CODE));
-            let slot = &mut self.once[self.once_next];
-            (slot.sent, slot.header) = (Some((index, R::CODE)), None);
-            self.once_next = (self.once_next + 1) % ONCE_KEPT;
+            self.repeats = 0;
             return Ok(index);
         }
+    }
+
+    /// What became of the packet sent pipelined with `index` and `code`,
+    /// and its answer when it arrived intact; `None` for a packet not
+    /// followed.
+    pub fn pipelined(&self, index: u8, code: CommandCode) -> Option<Pipelined<'_>> {
+        let slot = self.pipelined.iter().find(|p| p.sent == Some((index, code)))?;
+        let answer = slot.header.map(|header| Answer { header, data: &slot.data });
+        Some(Pipelined { fate: slot.fate, answer, resends: slot.resends })
+    }
+
+    /// Stops following the packet sent pipelined with `index` and `code`.
+    pub fn forget_pipelined(&mut self, index: u8, code: CommandCode) {
+        if let Some(slot) = self.pipelined.iter_mut().find(|p| p.sent == Some((index, code))) {
+            slot.sent = None;
+        }
+    }
+
+    /// Whether the packet with `index` and `code` is the last one sent, so
+    /// that resending it only fetches its answer again.
+    pub fn is_last_sent(&self, index: u8, code: CommandCode) -> bool {
+        self.last_sent == Some((index, code))
+    }
+
+    /// Whether the last packet clocked was the first sending of the one
+    /// with `index` and `code` (not a resend): the chip executed it then,
+    /// after noting its FIFO levels, so the next answer's counts come from
+    /// before its effects (docs/protocol.md §12).
+    pub fn ran_last(&self, index: u8, code: CommandCode) -> bool {
+        self.last_sent == Some((index, code)) && self.repeats == 0
+    }
+
+    /// Fetches the answer to the packet sent pipelined with `index` and
+    /// `code` by resending it as a guarded call does, while it is still the
+    /// last packet sent ([`Port::is_last_sent`]; otherwise
+    /// [`PortError::NotLastSent`]): the resend never runs it twice, and a
+    /// packet the chip refused runs now. Its fate is then
+    /// [`Fate::Answered`].
+    pub fn fetch_pipelined(&mut self, index: u8, code: CommandCode) -> Result<(), PortError> {
+        if self.pipelined(index, code).is_some_and(|p| p.fate == Fate::Answered) {
+            return Ok(());
+        }
+        if !self.is_last_sent(index, code) {
+            return Err(PortError::NotLastSent { code });
+        }
+        let mut last = None;
+        for _ in 0..self.max_attempts * 2 {
+            let got = self.clock(self.check)?;
+            if got != Received::NotReady {
+                self.repeats += 1;
+            }
+            match got {
+                Received::NotReady => continue,
+                Received::Corrupt(e) => last = Some(e),
+                Received::Answer(_) => {}
+            }
+            if self.pipelined(index, code).is_some_and(|p| p.fate == Fate::Answered) {
+                return Ok(());
+            }
+            self.stats.retries += 1;
+        }
+        Err(PortError::NoAnswer { code, attempts: self.max_attempts * 2, last })
     }
 
     /// Switches the check type (command 25): the command goes out with the
@@ -505,6 +716,7 @@ impl<L: Link> Port<L> {
             self.encode(&CrcTypeSet(new), index, old)?;
             while let Received::NotReady = self.clock(old)? {}
             self.last_sent = Some((index, CommandCode::CrcTypeSet));
+            self.repeats = 0;
             self.check = new;
             if self.call(&InfoUpdate).is_ok() {
                 return Ok(());
@@ -529,6 +741,7 @@ impl<L: Link> Port<L> {
             self.encode(&SpiReconfig { data_size: data_size as u16 }, index, CheckType::Fixed)?;
             while let Received::NotReady = self.clock(self.check)? {}
             self.last_sent = Some((index, CommandCode::SpiReconfig));
+            self.repeats = 0;
             self.layout = new;
             if self.call(&InfoUpdate).is_err() {
                 self.synchronize()?;
@@ -592,6 +805,7 @@ impl<L: Link> Port<L> {
         self.transfer(&fill, &mut sink)?;
         self.layout = layout;
         self.last_sent = None;
+        self.repeats = 0;
         for _ in 0..self.max_attempts {
             let index = self.fresh_index();
             self.encode(&InfoUpdate, index, self.check)?;
@@ -601,6 +815,7 @@ impl<L: Link> Port<L> {
                 self.check = check;
             }
             self.last_sent = Some((index, CommandCode::InfoUpdate));
+            self.repeats = 0;
             if self.call(&InfoUpdate).is_ok() {
                 return Ok(());
             }

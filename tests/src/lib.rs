@@ -800,3 +800,39 @@ pub async fn closed_within(mut s: tokio::net::TcpStream, limit: std::time::Durat
         }
     }
 }
+
+/// An input stream's sequence numbers as a subscriber checks them: each
+/// jump must be told, as `lost` (this subscriber fell behind) or `gap`
+/// (cycles the daemon never received), and numbers never go back.
+#[derive(Debug, Default)]
+pub struct SeqCheck {
+    /// Samples received.
+    pub samples: u64,
+    /// The newest sequence number.
+    pub seq: u64,
+    /// Samples whose number did not rise.
+    pub backwards: u64,
+    /// Cycles told as never received.
+    pub gaps: u64,
+    /// Frames this subscriber was told it lost.
+    pub lost: u64,
+    /// Jumps neither `lost` nor `gap` explain: (previous, seq, lost, gap).
+    pub unexplained: Vec<(u64, u64, u64, u64)>,
+}
+
+impl SeqCheck {
+    /// Notes the next sample.
+    pub fn note(&mut self, sample: &pb::InputSample) {
+        self.samples += 1;
+        if sample.seq <= self.seq {
+            self.backwards += 1;
+        }
+        let jump = sample.seq.saturating_sub(self.seq + 1);
+        if self.samples > 1 && jump != sample.lost + sample.gap {
+            self.unexplained.push((self.seq, sample.seq, sample.lost, sample.gap));
+        }
+        self.seq = sample.seq;
+        self.gaps += sample.gap;
+        self.lost += sample.lost;
+    }
+}

@@ -8,9 +8,10 @@
 //! 3. RxFIFO level seen in the headers (min/max) and the longest gap between
 //!    FIFO exchanges;
 //! 4. the daemon process's CPU time per second of wall time;
-//! 5. the link's idle rate against the minimum the plan needs (two packets
-//!    per FIFO call, see `link_budget`), and the SPI exchanges each SDO
-//!    adds above it, from the simulator's own packet counter;
+//! 5. the link's idle rate against the minimum the plan needs (one packet
+//!    per FIFO call pipelined, the daemon's default; two guarded, see
+//!    `link_budget`), and the SPI exchanges each SDO adds above it, from
+//!    the simulator's own packet counter;
 //! 6. each demo slave's object dictionary read from the device (CoE SDO
 //!    Information through the host's mailbox channel, with cyclic data at
 //!    125 us), cold, then again from the daemon's memory; the SPI
@@ -26,7 +27,8 @@
 //! callers'; the idle figures are taken while only the engine runs.
 //! Nothing is built.
 //!
-//! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS]`
+//! Run: `cargo build --release -p ecmxf-sim && cargo run --release -p ecmxfd --bin ecmxfd-bench -- [SECONDS] [guarded|pipelined]`
+//! (the second argument sets `cycle.fifo_reads`; unset, the daemon's default).
 #![forbid(unsafe_code)]
 
 #[path = "bench_support/mod.rs"]
@@ -37,7 +39,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use ecmxf_wire::payload::control::InfoUpdate;
-use ecmxfd::config::{Config, LinkConfig};
+use ecmxfd::config::{Config, FifoReads, LinkConfig};
 use ecmxfd::link::socket::SocketLink;
 use ecmxfd::master::Call;
 use ecmxfd::master::Master;
@@ -55,8 +57,10 @@ fn percentiles(mut v: Vec<Duration>) -> String {
 
 fn main() -> Result<(), String> {
     let secs: u64 = std::env::args().nth(1).and_then(|s| s.parse().ok()).unwrap_or(10);
+    let reads = fifo_reads()?;
     let sim = serve(None)?;
-    let config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
+    let mut config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
+    config.cycle.fifo_reads = reads;
     let sim_config = ecmxf_sim::ChipConfig::default();
     let data_size = config.chip.data_size;
     let modelled_ns = ecmxfd::master::link_budget::clocked_ns(data_size, sim_config.spi_hz) + sim_config.processing_ns;
@@ -157,7 +161,10 @@ fn main() -> Result<(), String> {
     let (window_packets, window) = single_window;
     let above_idle = window_packets as f64 - idle_rate * window.as_secs_f64();
     println!(
-        "idle exchanges         : {idle_rate:.0}/s (simulator's packet count, cyclic data only, 3 s); the plan needs {plan_minimum:.0}/s ({:.2}x)",
+        "idle exchanges         : {idle_rate:.0}/s (simulator's packet count, cyclic data only, 3 s, cycle.fifo_reads = {:?}); the plan needs {:.0}/s pipelined ({:.2}x), {plan_minimum:.0}/s guarded ({:.2}x)",
+        master.config().cycle.fifo_reads,
+        plan_minimum / 2.0,
+        idle_rate / (plan_minimum / 2.0).max(1.0),
         idle_rate / plan_minimum.max(1.0)
     );
     println!(
@@ -218,6 +225,16 @@ fn main() -> Result<(), String> {
     Ok(())
 }
 
+/// `cycle.fifo_reads` as the second argument says.
+fn fifo_reads() -> Result<FifoReads, String> {
+    match std::env::args().nth(2).as_deref() {
+        None => Ok(FifoReads::default()),
+        Some("guarded") => Ok(FifoReads::Guarded),
+        Some("pipelined") => Ok(FifoReads::Pipelined),
+        Some(other) => Err(format!("{other:?}: the second argument is guarded or pipelined")),
+    }
+}
+
 /// The exchanges per second the plan needs at least (see `link_budget`)
 /// for the master's network, with the modelled packet time.
 fn plan_minimum(master: &Master, data_size: usize, packet_ns: u64) -> f64 {
@@ -239,6 +256,7 @@ fn many_slaves_idle(data_size: usize, packet_ns: u64) -> Result<(), String> {
     let sim = serve(Some(&network))?;
     let mut config = Config { link: LinkConfig::SimSocket { socket: sim.socket.clone() }, ..Config::simulator() };
     config.cycle.sync0_us = 1000;
+    config.cycle.fifo_reads = fifo_reads()?;
     let master = started(&sim, config)?;
     let mut packets = packet_counter(&sim.socket)?;
     // Settled first (the FIFO filled), then 3 s idle.

@@ -494,6 +494,25 @@ pub struct CycleConfig {
     /// names the smallest: 2125 us at 125 us with 512-byte packets at
     /// 20 MHz); unset: the FIFO is kept midway between its marks.
     pub output_latency_us: Option<u32>,
+    /// How the answer to a FIFO call is fetched (docs/protocol.md §7):
+    /// "pipelined" (the default) lets the next exchange bring it, one
+    /// exchange per call, and resends the call to fetch it when no exchange
+    /// came within 2 ms; "guarded" resends every call at once, two
+    /// exchanges per call. A corrupt answer fetched by another packet loses
+    /// its input frames (counted, numbered as a gap), so after any link
+    /// error pipelined calls go guarded for a second.
+    pub fifo_reads: FifoReads,
+}
+
+/// `cycle.fifo_reads`: how the answer to a FIFO call is fetched.
+#[derive(Clone, Copy, Debug, Default, Deserialize, schemars::JsonSchema, Serialize, PartialEq, Eq)]
+#[serde(rename_all = "lowercase")]
+pub enum FifoReads {
+    /// Every call resent at once until its answer arrives intact.
+    Guarded,
+    /// The answer rides on the next exchange; guarded after a link error.
+    #[default]
+    Pipelined,
 }
 
 impl CycleConfig {
@@ -563,6 +582,7 @@ impl Default for CycleConfig {
             wkc_error_limit: 255,
             target_state: TargetState::Op,
             output_latency_us: None,
+            fifo_reads: FifoReads::default(),
         }
     }
 }

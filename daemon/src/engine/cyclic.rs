@@ -4,10 +4,11 @@
 //! avoid.
 //!
 //! The header's FIFO counts are two exchanges late (vendor comment;
-//! docs/protocol.md §12): the answer to a FIFO call, fetched by its guarded
-//! resend, reports the level just before the call's own push. The estimate
-//! of the level therefore starts from that count, adds the push, and takes
-//! off one frame per cycle elapsed since then.
+//! docs/protocol.md §12): the answer to a FIFO call, whichever exchange
+//! brings it, reports the level just before the call's own push. The
+//! estimate of the level therefore starts from that count, adds that push
+//! and every one sent since (calls whose answers are still on their way,
+//! see `engine::fifo_reads`), and takes off one frame per cycle elapsed.
 //!
 //! How deep the RxFIFO is kept is the trade between latency and margin: a
 //! client's write reaches the wire after every frame queued before it has
@@ -118,6 +119,74 @@ impl Plan {
     }
 }
 
+/// A FIFO call sent whose answer the engine has not taken yet.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct InFlight {
+    /// The packet's index, which its answer echoes.
+    pub index: u8,
+    /// When it was sent.
+    pub sent_at: Instant,
+    /// Output frames it pushed.
+    pub pushed: u8,
+    /// The packet just before it was the previous FIFO call itself (sent
+    /// pipelined, not resent): the chip noted the counts this call's
+    /// answer reports before that call pushed and read (docs/protocol.md
+    /// §12), so its effects are added to them.
+    pub after_call: bool,
+}
+
+/// What an answer to a FIFO call reported, and which packet made it.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub(crate) struct Counts {
+    /// Output frames queued (header 0x07).
+    pub count: u8,
+    /// Input frames queued (header 0x06).
+    pub waiting: u8,
+    /// Input frames the answer carries.
+    pub read: usize,
+    /// The answer was made by the call's `resends`-th resend (0: as the
+    /// call ran; `port::Pipelined::resends`).
+    pub resends: u32,
+}
+
+/// When the counts an answer reports were taken, against the calls.
+#[derive(Clone, Copy, Debug)]
+enum Counted {
+    /// As the call before arrived, right before this one: before that
+    /// call pushed and read.
+    BeforeLast(Resolved),
+    /// After every earlier call, before this one pushed and read: the
+    /// answer made as the call ran, after another packet, or by its first
+    /// resend (counted as the call itself arrived).
+    BeforeOwn,
+    /// After the call itself pushed and read: made by its second resend
+    /// or a later one.
+    AfterOwn,
+}
+
+/// What the last call whose fate is known did.
+#[derive(Clone, Copy, Debug)]
+struct Resolved {
+    index: u8,
+    sent_at: Instant,
+    /// Frames it pushed (0 when the chip refused it).
+    pushed: u8,
+    /// Input frames read from its answer (0 when lost or refused).
+    read: usize,
+}
+
+/// The newest level the chip reported, and what was pushed since.
+#[derive(Clone, Copy, Debug)]
+struct Report {
+    /// When the call whose answer reported it was sent.
+    at: Instant,
+    /// The RxFIFO level just before that call's push.
+    level: u8,
+    /// Frames pushed by that call and every call sent after it (those
+    /// still unanswered included; a call the chip refused taken back).
+    pushed: u32,
+}
+
 /// The cyclic state.
 #[derive(Debug)]
 pub(crate) struct Cyclic {
@@ -132,16 +201,21 @@ pub(crate) struct Cyclic {
     pub outputs: Vec<u8>,
     push_buf: Vec<u8>,
     levels: Levels,
-    /// (time, frames pushed) of the last FIFO call.
-    last_push: (Instant, u8),
+    /// When the last FIFO call was sent.
+    last_call: Instant,
+    /// Calls sent whose answers are not taken yet, oldest first.
+    in_flight: [Option<InFlight>; 2],
+    /// The index of the last call sent.
+    last_index: Option<u8>,
+    /// The last call whose fate is known.
+    resolved: Option<Resolved>,
     /// Input frames the last FIFO call left in the TxFIFO: the answer's
     /// count (the level before the call's read) less the frames it read.
     /// A read that fills a packet with nothing left behind is no reason to
     /// exchange again at once (a one-frame-per-packet network once made
     /// four exchanges a cycle that way).
     backlog: u8,
-    /// Level reported just before that push.
-    reported: u8,
+    report: Report,
     started: Instant,
     /// Frames pushed and input frames read in this run so far.
     pushed_total: u64,
@@ -167,9 +241,12 @@ impl Cyclic {
             outputs,
             push_buf: Vec::with_capacity(data_size),
             levels: plan.levels(),
-            last_push: (now, 0),
+            last_call: now,
+            in_flight: [None; 2],
+            last_index: None,
+            resolved: None,
             backlog: 0,
-            reported: 0,
+            report: Report { at: now, level: 0, pushed: 0 },
             started: now,
             pushed_total: 0,
             read_total: 0,
@@ -201,7 +278,7 @@ impl Cyclic {
     /// a packet or so; two packets made every other SDO read wait for a
     /// FIFO exchange it did not need.
     pub(crate) fn inputs_pressing(&self, now: Instant, tx_room: usize) -> bool {
-        let waiting = u64::from(self.backlog) + self.cycles_since(self.last_push.0, now);
+        let waiting = u64::from(self.backlog) + self.cycles_since(self.last_call, now);
         let limit = (3 * tx_room.max(1) as u64).min(u64::from(self.tx_depth / 4).max(1));
         self.tx_size > 0 && waiting >= limit
     }
@@ -216,8 +293,8 @@ impl Cyclic {
 
     /// The estimated RxFIFO level now.
     pub(crate) fn estimate(&self, now: Instant) -> i64 {
-        let (at, pushed) = self.last_push;
-        i64::from(self.reported) + i64::from(pushed) - self.cycles_since(at, now) as i64
+        let Report { at, level, pushed } = self.report;
+        i64::from(level) + i64::from(pushed) - self.cycles_since(at, now) as i64
     }
 
     /// The level aimed at (see [`Plan::levels`]).
@@ -246,7 +323,7 @@ impl Cyclic {
             if self.rx_size == 0 { Duration::MAX } else { self.cycle * (self.estimate(now) - refill_at).max(0) as u32 };
         // Counted from the last exchange (one input frame per cycle since
         // it); the level is an estimate for `now` itself.
-        let since = self.last_push.0;
+        let since = self.last_call;
         let by_inputs = match self.tx_size {
             0 => since + MAX_EXCHANGE_INTERVAL,
             _ => since + self.cycle * (tx_room.max(1).saturating_sub(usize::from(self.backlog)) as u32),
@@ -271,16 +348,107 @@ impl Cyclic {
         &self.push_buf
     }
 
-    /// Records a FIFO call at `now` that pushed `pushed` frames, whose
-    /// answer reported `count` output frames queued just before the push
-    /// and `waiting` input frames queued before its read, and that read
-    /// `read` input frames.
-    pub(crate) fn answered(&mut self, now: Instant, pushed: u8, count: u8, waiting: u8, read: usize) {
-        self.last_push = (now, pushed);
-        self.reported = count;
-        self.backlog = usize::from(waiting).saturating_sub(read).min(usize::from(u8::MAX)) as u8;
-        self.pushed_total += u64::from(pushed);
+    /// Records a FIFO call sent (its push counts in the estimate at once).
+    pub(crate) fn sent(&mut self, call: InFlight) {
+        self.last_call = call.sent_at;
+        self.last_index = Some(call.index);
+        self.report.pushed += u32::from(call.pushed);
+        if self.in_flight[1].is_some() {
+            // The engine takes every answer before the next call but one;
+            // should it not, the oldest is forgotten, never the newest.
+            self.in_flight.rotate_left(1);
+            self.in_flight[1] = None;
+        }
+        let free = usize::from(self.in_flight[0].is_some());
+        self.in_flight[free] = Some(call);
+    }
+
+    /// The index of the last call sent, if any.
+    pub(crate) fn last_index(&self) -> Option<u8> {
+        self.last_index
+    }
+
+    /// The oldest call whose answer is not taken yet.
+    pub(crate) fn oldest_in_flight(&self) -> Option<InFlight> {
+        self.in_flight[0]
+    }
+
+    /// The newest call whose answer is not taken yet.
+    pub(crate) fn newest_in_flight(&self) -> Option<InFlight> {
+        self.in_flight[1].or(self.in_flight[0])
+    }
+
+    fn take(&mut self, index: u8) -> Option<InFlight> {
+        let at = self.in_flight.iter().position(|c| c.is_some_and(|c| c.index == index))?;
+        let call = self.in_flight[at].take();
+        self.in_flight.sort_by_key(Option::is_none);
+        call
+    }
+
+    /// The answer to call `index` arrived at `now` with `answer`'s counts
+    /// (see [`Counted`] for when they were taken).
+    pub(crate) fn answered(&mut self, index: u8, answer: Counts, now: Instant) {
+        let Some(call) = self.in_flight.iter().flatten().find(|c| c.index == index).copied() else { return };
+        let counted = self.counted(&call, answer.resends);
+        self.take(index);
+        let later: u32 = self.in_flight.iter().flatten().map(|c| u32::from(c.pushed)).sum();
+        let Counts { count, waiting, read, .. } = answer;
+        let (report, arrived) = match counted {
+            // Counted as the call before arrived: its push comes on top,
+            // its read off, and the cycles since it add input frames.
+            Counted::BeforeLast(prev) => (
+                Report {
+                    at: prev.sent_at,
+                    level: count,
+                    pushed: u32::from(prev.pushed) + u32::from(call.pushed) + later,
+                },
+                i64::from(waiting) + self.cycles_since(prev.sent_at, call.sent_at) as i64 - prev.read as i64,
+            ),
+            Counted::BeforeOwn => {
+                (Report { at: call.sent_at, level: count, pushed: u32::from(call.pushed) + later }, i64::from(waiting))
+            }
+            // Counted after the call ran: its push and read are in.
+            Counted::AfterOwn => (Report { at: now, level: count, pushed: later }, i64::from(waiting) + read as i64),
+        };
+        self.report = report;
+        self.backlog = (arrived - read as i64).clamp(0, i64::from(u8::MAX)) as u8;
+        self.pushed_total += u64::from(call.pushed);
         self.read_total += read as u64;
+        self.resolved = Some(Resolved { index, sent_at: call.sent_at, pushed: call.pushed, read });
+    }
+
+    /// When the counts in `call`'s answer were taken (docs/protocol.md
+    /// §12): the chip notes its levels as each packet arrives, before it
+    /// runs, and an answer reports those of the packet before the one that
+    /// made it.
+    fn counted(&self, call: &InFlight, resends: u32) -> Counted {
+        match resends {
+            0 => self
+                .resolved
+                .filter(|r| call.after_call && r.index != call.index)
+                .map_or(Counted::BeforeOwn, Counted::BeforeLast),
+            1 => Counted::BeforeOwn,
+            _ => Counted::AfterOwn,
+        }
+    }
+
+    /// The chip refused call `index` for its check word: it pushed and
+    /// read nothing.
+    pub(crate) fn refused(&mut self, index: u8) {
+        if let Some(call) = self.take(index) {
+            self.report.pushed = self.report.pushed.saturating_sub(u32::from(call.pushed));
+            self.resolved = Some(Resolved { index, sent_at: call.sent_at, pushed: 0, read: 0 });
+        }
+    }
+
+    /// The answer to call `index` was lost: the call ran (pushed its
+    /// frames and read input frames that are gone), and the next answer's
+    /// counts number the frames it took as lost ([`Cyclic::inputs_lost`]).
+    pub(crate) fn lost(&mut self, index: u8) {
+        if let Some(call) = self.take(index) {
+            self.pushed_total += u64::from(call.pushed);
+            self.resolved = Some(Resolved { index, sent_at: call.sent_at, pushed: call.pushed, read: 0 });
+        }
     }
 
     /// Input frames the chip dropped (its TxFIFO full: the oldest go)
@@ -294,10 +462,22 @@ impl Cyclic {
     /// RxFIFO did not run dry in between (fewer frames consumed than
     /// cycles: then it counts low, never high; a network without outputs
     /// consumes none and counts none). Call before [`Cyclic::answered`]
-    /// records this call.
-    pub(crate) fn inputs_lost(&mut self, ahead: u8, waiting: u8) -> u64 {
-        let consumed = self.pushed_total.saturating_sub(u64::from(ahead));
-        let seen = self.read_total + u64::from(waiting);
+    /// records this call. A call whose answer was lost read frames that are
+    /// neither read nor waiting: they count here too.
+    pub(crate) fn inputs_lost(&mut self, index: u8, answer: Counts) -> u64 {
+        let Counts { count: ahead, waiting, read, resends } = answer;
+        let call = self.in_flight.iter().flatten().find(|c| c.index == index).copied();
+        // The totals as of when the counts were taken.
+        let (pushed, read_before) = match call.map(|c| (c, self.counted(&c, resends))) {
+            Some((_, Counted::BeforeLast(prev))) => (
+                self.pushed_total.saturating_sub(u64::from(prev.pushed)),
+                self.read_total.saturating_sub(prev.read as u64),
+            ),
+            Some((c, Counted::AfterOwn)) => (self.pushed_total + u64::from(c.pushed), self.read_total + read as u64),
+            _ => (self.pushed_total, self.read_total),
+        };
+        let consumed = pushed.saturating_sub(u64::from(ahead));
+        let seen = read_before + u64::from(waiting);
         let lost =
             self.sample.map_or(0, |(c0, s0)| consumed.saturating_sub(c0).saturating_sub(seen.saturating_sub(s0)));
         self.sample = Some((consumed, seen));
@@ -306,8 +486,7 @@ impl Cyclic {
 
     /// When the last exchange was, if any.
     pub(crate) fn last_exchange(&self) -> Option<Instant> {
-        let (t, _) = self.last_push;
-        (t > self.started).then_some(t)
+        (self.last_call > self.started).then_some(self.last_call)
     }
 }
 
@@ -328,12 +507,24 @@ mod tests {
         (Cyclic::new(plan, 112, Vec::new()), ())
     }
 
+    /// A call sent at `t` and answered at once, as a guarded one is.
+    fn call(cy: &mut Cyclic, t: Instant, pushed: u8, count: u8, waiting: u8, read: usize) {
+        let index = 0;
+        cy.sent(InFlight { index, sent_at: t, pushed, after_call: false });
+        cy.answered(index, counts(count, waiting, read), t);
+    }
+
+    /// An answer made as its call ran.
+    fn counts(count: u8, waiting: u8, read: usize) -> Counts {
+        Counts { count, waiting, read, resends: 0 }
+    }
+
     #[test]
     fn estimate_counts_pushes_and_consumption_since_the_report() {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
-        cy.answered(t0, 5, 3, 0, 0);
-        cy.answered(t0 + Duration::from_micros(100), 10, 12, 0, 0);
+        call(&mut cy, t0, 5, 3, 0, 0);
+        call(&mut cy, t0 + Duration::from_micros(100), 10, 12, 0, 0);
         // 12 queued before this push, 10 pushed, 7 cycles gone 0.9 ms later;
         // the earlier push is in the 12 already.
         assert_eq!(cy.estimate(t0 + Duration::from_millis(1)), 12 + 10 - 7);
@@ -346,11 +537,11 @@ mod tests {
         let (mut cy, _) = cyclic();
         let t0 = Instant::now();
         // Target 14, packet room 4: refill when the level reaches 10.
-        cy.answered(t0, 0, 14, 0, 0);
+        call(&mut cy, t0, 0, 14, 0, 0);
         let at = cy.next_exchange(t0, 4, 100);
         assert_eq!(at.duration_since(t0), Duration::from_micros(125 * 4));
         // Far below target: now.
-        cy.answered(t0, 0, 2, 0, 0);
+        call(&mut cy, t0, 0, 2, 0, 0);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0);
     }
 
@@ -360,12 +551,12 @@ mod tests {
         let t0 = Instant::now();
         let cycles = |n: u64| t0 + Duration::from_micros(125 * n);
         // Target 14, packet room 4: due at 10, behind below 6.
-        cy.answered(t0, 0, 14, 0, 0);
+        call(&mut cy, t0, 0, 14, 0, 0);
         assert!(!cy.outputs_behind(cycles(8), 4));
         assert!(cy.outputs_behind(cycles(9), 4));
         // Inputs, 4 to a packet, TxFIFO 32: pressing at a quarter of it (8),
         // counting the 2 the last call left.
-        cy.answered(t0, 0, 14, 6, 4);
+        call(&mut cy, t0, 0, 14, 6, 4);
         assert!(!cy.inputs_pressing(cycles(5), 4));
         assert!(cy.inputs_pressing(cycles(6), 4));
         // Three packets when that is less than a quarter of the TxFIFO.
@@ -413,18 +604,18 @@ mod tests {
         };
         let mut cy = Cyclic::new(plan, 112, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 240, 0, 0);
+        call(&mut cy, t0, 0, 240, 0, 0);
         assert_eq!(cy.next_exchange(t0, 4, 100), t0 + MAX_EXCHANGE_INTERVAL, "56 cycles of margin, 20 ms at most");
         assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(3), "3 input frames per read");
-        cy.answered(t0, 0, 240, 3, 3);
+        call(&mut cy, t0, 0, 240, 3, 3);
         assert_eq!(
             cy.next_exchange(t0, 4, 3),
             t0 + Duration::from_millis(3),
             "a full packet read, none left: no hurry"
         );
-        cy.answered(t0, 0, 240, 4, 3);
+        call(&mut cy, t0, 0, 240, 4, 3);
         assert_eq!(cy.next_exchange(t0, 4, 3), t0 + Duration::from_millis(2), "one left behind: a cycle sooner");
-        cy.answered(t0, 0, 240, 9, 3);
+        call(&mut cy, t0, 0, 240, 9, 3);
         assert_eq!(cy.next_exchange(t0, 4, 3), t0, "a packet's worth left behind: now");
     }
 
@@ -441,7 +632,7 @@ mod tests {
         };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 0, 0, 0);
+        call(&mut cy, t0, 0, 0, 0, 0);
         assert!(!cy.outputs_low(t0), "an empty RxFIFO is no shortage without outputs");
         assert_eq!(cy.next_exchange(t0, 0, 9), t0 + Duration::from_millis(9), "inputs decide");
         // Counted from the last exchange, not from whenever it is asked.
@@ -449,7 +640,7 @@ mod tests {
         assert!(cy.next_exchange(later, 0, 472) <= later, "the cap has passed: due");
         let plan = Plan { rx_size: 4, ..plan };
         let mut cy = Cyclic::new(plan, 512, Vec::new());
-        cy.answered(t0, 0, 0, 0, 0);
+        call(&mut cy, t0, 0, 0, 0, 0);
         assert!(cy.outputs_low(t0));
     }
 
@@ -476,7 +667,7 @@ mod tests {
         // between target and floor, so it refills at the floor.
         let mut cy = Cyclic::new(plan(Some(2000)), 1024, Vec::new());
         let t0 = Instant::now();
-        cy.answered(t0, 0, 15, 0, 0);
+        call(&mut cy, t0, 0, 15, 0, 0);
         assert_eq!(cy.frames_to_push(t0, 19), 0);
         assert_eq!(cy.next_exchange(t0, 19, 1000), t0 + us(125 * 4), "the cap: half of 15 - 7 cycles");
         assert!(!cy.outputs_low(t0 + us(125 * 5)));
@@ -496,18 +687,96 @@ mod tests {
         let (mut cy, _) = cyclic();
         // First answer: a reference only.
         let t0 = Instant::now();
-        assert_eq!(cy.inputs_lost(0, 0), 0);
-        cy.answered(t0, 20, 0, 0, 0);
+        assert_eq!(cy.inputs_lost(0, counts(0, 0, 0)), 0);
+        call(&mut cy, t0, 20, 0, 0, 0);
         // 20 pushed, 12 still queued: 8 cycles; 8 input frames waiting.
-        assert_eq!(cy.inputs_lost(12, 8), 0);
-        cy.answered(t0, 10, 12, 8, 8);
+        assert_eq!(cy.inputs_lost(0, counts(12, 8, 0)), 0);
+        call(&mut cy, t0, 10, 12, 8, 8);
         // 30 pushed, 2 queued: 20 more cycles, so 20 input frames made;
         // 8 read, 5 waiting: 15 of them dropped.
-        assert_eq!(cy.inputs_lost(2, 5), 15);
-        cy.answered(t0, 0, 2, 5, 5);
+        assert_eq!(cy.inputs_lost(0, counts(2, 5, 0)), 15);
+        call(&mut cy, t0, 0, 2, 5, 5);
         // The last 2 output frames consumed, 3 input frames made since
         // (the RxFIFO ran dry for one cycle): never more than the output
         // side shows.
-        assert_eq!(cy.inputs_lost(0, 3), 0);
+        assert_eq!(cy.inputs_lost(0, counts(0, 3, 0)), 0);
+    }
+
+    #[test]
+    fn an_answer_on_its_way_keeps_its_push_in_the_estimate_and_counts_from_its_own_time() {
+        let (mut cy, _) = cyclic();
+        let t0 = Instant::now();
+        let at = |us: u64| t0 + Duration::from_micros(us);
+        call(&mut cy, t0, 0, 14, 0, 0);
+        // Two calls sent pipelined, 4 and 3 frames; no answer yet.
+        cy.sent(InFlight { index: 1, sent_at: at(250), pushed: 4, after_call: false });
+        cy.sent(InFlight { index: 2, sent_at: at(500), pushed: 3, after_call: false });
+        assert_eq!(cy.estimate(at(500)), 14 + 4 + 3 - 4);
+        assert_eq!(cy.last_exchange(), Some(at(500)));
+        assert_eq!(cy.oldest_in_flight().map(|c| c.index), Some(1));
+        assert_eq!(cy.newest_in_flight().map(|c| c.index), Some(2));
+        // The first answer, taken later, reports 12 just before its push
+        // (at 250 us): the second push is still on top of it.
+        cy.answered(1, counts(12, 2, 2), t0);
+        assert_eq!(cy.estimate(at(1000)), 12 + 4 + 3 - 6);
+        // The chip refused the second: its frames never went in.
+        cy.refused(2);
+        assert_eq!(cy.estimate(at(1000)), 12 + 4 - 6);
+        assert_eq!(cy.oldest_in_flight(), None);
+    }
+
+    #[test]
+    fn input_frames_of_a_lost_answer_are_counted_lost_by_the_next_one() {
+        let (mut cy, _) = cyclic();
+        let t0 = Instant::now();
+        assert_eq!(cy.inputs_lost(0, counts(0, 0, 0)), 0);
+        call(&mut cy, t0, 20, 0, 0, 0);
+        // 8 cycles: 8 input frames, read by a call whose answer is lost.
+        cy.sent(InFlight { index: 1, sent_at: t0, pushed: 8, after_call: false });
+        cy.lost(1);
+        // The next answer: 28 pushed, 20 queued, so 8 cycles; nothing
+        // read, nothing waiting: the 8 frames are lost.
+        assert_eq!(cy.inputs_lost(2, counts(20, 0, 0)), 8);
+    }
+
+    #[test]
+    fn counts_taken_as_the_call_before_arrived_get_its_push_and_read() {
+        let (mut cy, _) = cyclic();
+        let t0 = Instant::now();
+        let cycles = |n: u64| t0 + Duration::from_micros(125 * n);
+        assert_eq!(cy.inputs_lost(1, counts(0, 0, 0)), 0);
+        call(&mut cy, t0, 20, 0, 0, 0);
+        // 12 output frames queued and 8 input frames waiting as this call
+        // arrives: it pushes 10 and reads the 8.
+        cy.sent(InFlight { index: 2, sent_at: cycles(8), pushed: 10, after_call: false });
+        assert_eq!(cy.inputs_lost(2, counts(12, 8, 0)), 0);
+        cy.answered(2, counts(12, 8, 8), t0);
+        // The next call goes right behind it, 3 cycles later: the chip took
+        // its counts as the call before arrived (12 and 8 again).
+        cy.sent(InFlight { index: 3, sent_at: cycles(11), pushed: 5, after_call: true });
+        assert_eq!(cy.inputs_lost(3, counts(12, 8, 0)), 0, "the earlier call's read is not a loss");
+        cy.answered(3, counts(12, 8, 3), t0);
+        // 12 + 10 + 5 - 4 cycles since the earlier call.
+        assert_eq!(cy.estimate(cycles(12)), 12 + 10 + 5 - 4);
+        // 8 waiting then, 8 read by it, 3 made since, 3 read: none left.
+        assert!(!cy.inputs_pressing(cycles(11), 4));
+        assert_eq!(cy.backlog, 0);
+    }
+
+    #[test]
+    fn counts_made_by_a_second_resend_already_hold_the_call_itself() {
+        let (mut cy, _) = cyclic();
+        let t0 = Instant::now();
+        assert_eq!(cy.inputs_lost(1, counts(0, 0, 0)), 0);
+        call(&mut cy, t0, 20, 0, 0, 0);
+        // 12 queued and 8 waiting as it arrives; it pushes 10 and reads
+        // the 8. Its first answer and the first resend's were corrupt: the
+        // second resend's counts were taken after it ran.
+        cy.sent(InFlight { index: 2, sent_at: t0, pushed: 10, after_call: false });
+        let after = Counts { count: 22, waiting: 0, read: 8, resends: 2 };
+        assert_eq!(cy.inputs_lost(2, after), 0, "its own read is not a loss");
+        cy.answered(2, after, t0);
+        assert_eq!(cy.estimate(t0), 22);
+        assert_eq!(cy.backlog, 0);
     }
 }

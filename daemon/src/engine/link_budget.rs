@@ -10,10 +10,13 @@
 //! that reaches OP and then runs its RxFIFO dry while every request times
 //! out (an EL2262 oversampling terminal's ~1 KB of outputs at 1 ms).
 //!
-//! Each FIFO call costs two packets: it is guarded (see `port`), because
+//! A FIFO call is counted as two packets: guarded (see `port`), because
 //! its reads take the input frames out of the chip's TxFIFO and a lost
-//! answer would lose them. So a plan needs two packets per `frames per
-//! packet` cycles at least, and that is the load counted here (counted as
+//! answer would lose them. Pipelined calls (`cycle.fifo_reads`, the
+//! default) take one on a clean link, but go guarded for a second after
+//! any link error (`engine::fifo_reads`), and the plan must hold then too.
+//! So a plan needs two packets per `frames per packet` cycles at least,
+//! and that is the load counted here (counted as
 //! one packet, a network that needed 94 % of the link was once let through
 //! with no warning and ran its RxFIFO dry every 45 ms). Above
 //! [`MAX_LOAD`] the network is refused: what is left cannot absorb the

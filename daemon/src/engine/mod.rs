@@ -31,6 +31,7 @@ pub(crate) mod error;
 pub(crate) mod events;
 mod explain;
 pub(crate) mod failure;
+mod fifo_reads;
 pub(crate) mod frames;
 mod handle;
 pub(crate) mod held;

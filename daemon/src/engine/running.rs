@@ -14,7 +14,6 @@ use std::sync::atomic::Ordering::Relaxed;
 use std::sync::mpsc::{RecvTimeoutError, TryRecvError};
 use std::time::{Duration, Instant};
 
-use ecmxf_wire::EcatState;
 use ecmxf_wire::flags::ControlFlags;
 use ecmxf_wire::payload::cia402::{Cia402State, Cia402StateSet};
 use ecmxf_wire::payload::control::{InfoUpdate, WarmReset};
@@ -22,15 +21,17 @@ use ecmxf_wire::payload::fifo::FifoEnable;
 use ecmxf_wire::payload::pdo::{FifoOpFlags, PdoFifoOp};
 use ecmxf_wire::payload::slave_info::SlaveCountGet;
 use ecmxf_wire::payload::state::{SlaveSelector, StateCheck};
+use ecmxf_wire::{CommandCode, EcatState};
 use tracing::{info, warn};
 
 use super::bringup;
 use super::command::{Command, Taken};
 use super::core::Core;
-use super::cyclic::{self, Cyclic};
+use super::cyclic::{self, Counts, Cyclic, InFlight};
 use super::emergencies;
 use super::events::EventKind;
 use super::explain;
+use super::fifo_reads::{FetchRule, LinkErrors};
 use super::layout::NetworkLayout;
 use super::link_turn::{Fifo, PULL_FORWARD, Slot, fifo_goes_first};
 use super::network_action::NetworkAction;
@@ -41,7 +42,7 @@ use super::slot::{Active, Progress, SlotRequest};
 use super::supervisor::{INT0_SILENT_EXCHANGES, RecoverCause, RunShape, Supervisor, flow_limit};
 use super::telemetry::Phase;
 use crate::link::Link;
-use crate::port::PortError;
+use crate::port::{Fate, PortError};
 
 /// How long the loop idles at most when nothing is due (no cyclic
 /// exchange, no transaction).
@@ -122,6 +123,8 @@ struct Running<'a, L> {
     held_below_target: bool,
     /// The slaves bring-up found.
     slaves: usize,
+    /// Whether a FIFO call's answer is fetched at once.
+    fetch: FetchRule,
 }
 
 /// When the loop last did its periodic things.
@@ -158,7 +161,8 @@ impl<'a, L: Link> Running<'a, L> {
         if let Some(c) = cyclic {
             core.intake.start(c, &core.telemetry, now);
         }
-        Self { core, supervisor, held_below_target: false, slaves }
+        let fetch = FetchRule::new(core.config.cycle.fifo_reads, link_errors(core));
+        Self { core, supervisor, held_below_target: false, slaves, fetch }
     }
 
     /// Runs the network until a fault, a client's action or a stop.
@@ -180,6 +184,9 @@ impl<'a, L: Link> Running<'a, L> {
     fn turn(&mut self, cyclic: &mut Option<&mut Cyclic>, clocks: &mut Clocks) -> Result<(), Exit> {
         self.take_client_input(cyclic)?;
         let now = Instant::now();
+        if let Some(c) = cyclic.as_deref_mut() {
+            self.settle_fifo(c, now)?;
+        }
         self.count_slaves(now)?;
         self.ask_emergencies(cyclic.as_deref(), clocks, now)?;
         let progressed = match cyclic.as_deref_mut() {
@@ -363,6 +370,9 @@ impl<'a, L: Link> Running<'a, L> {
             Some(a) => wake.min(a.next_poll()),
             None => wake.min(emergency),
         };
+        // An answer no exchange has brought is fetched in time.
+        let fetch = cyclic.as_deref().and_then(Cyclic::newest_in_flight).map(|f| FetchRule::fetch_at(f.sent_at));
+        let until = fetch.map_or(until, |f| until.min(f));
         if let Some(c) = self.idle_until(until) {
             match self.core.take(c) {
                 Taken::Job(j) => self.core.queue.push(j),
@@ -455,15 +465,15 @@ impl<'a, L: Link> Running<'a, L> {
         now >= c.next_exchange(now, self.rx_room(c), self.tx_room(c)) || c.outputs_low(now)
     }
 
-    /// One FIFO exchange: pushes the output frames the level needs and
-    /// reads the input frames waiting, as a guarded call (see `port`): its
-    /// own answer comes back intact or the call fails, so a bit error on
-    /// the way to the host costs one more exchange, never the input frames
-    /// the answer carries (sent pipelined, a corrupt answer lost its batch
-    /// for good: 40% of them at a bit error rate of 1e-3). The count in the
-    /// answer is the RxFIFO level just before this push (v049: an answer
-    /// reports the level of the packet before, see the simulator's
-    /// `note_fifo_levels`).
+    /// One FIFO call: pushes the output frames the level needs and reads
+    /// the input frames waiting. Its answer is fetched at once (guarded) or
+    /// left for the next exchange to bring (pipelined), as `fifo_reads`
+    /// decides; `settle_fifo` takes it either way. Sent pipelined, a
+    /// corrupt answer loses its batch (40% of them at a bit error rate of
+    /// 1e-3 when every call went so, hence guarded after any error). The
+    /// count in the answer is the RxFIFO level just before this push
+    /// (v049: an answer reports the level of the packet before, see the
+    /// simulator's `note_fifo_levels`).
     fn fifo_exchange(&mut self, c: &mut Cyclic, now: Instant) -> Result<(), PortError> {
         if let Some(last) = c.last_exchange() {
             let gap = now.saturating_duration_since(last).as_micros() as u64;
@@ -477,39 +487,21 @@ impl<'a, L: Link> Running<'a, L> {
         }
         let room = self.core.port.data_size().checked_div(c.rx_size).unwrap_or(0);
         let n = if c.rx_size > 0 { c.frames_to_push(now, room) } else { 0 };
+        let guarded = self.fetch.guarded(link_errors(self.core), !self.core.frames.is_empty(), now);
         // Borrowed, not copied: this runs thousands of times a second.
         let mut op = FifoOpFlags::empty();
         op.set(FifoOpFlags::WRITE, c.rx_size > 0);
         op.set(FifoOpFlags::READ, c.tx_size > 0);
         // The first frame pushed now plays after the ones queued before it.
         let ahead = c.estimate(now).max(0) as u32;
+        // Right behind the last call, this one's counts come from before it.
+        let after_call = c.last_index().is_some_and(|i| self.core.port.ran_last(i, CommandCode::PdoDataFifoOp));
         let outputs = c.push_frames(n, &mut self.core.frames);
         let req = PdoFifoOp { op, frames: n, outputs };
-        let a = self.core.port.call(&req)?;
-        let count = a.header.rx_fifo_count;
-        let waiting = a.header.tx_fifo_count;
-        // Inputs out, their freshness noted and judged (a network without
-        // inputs counts the answer itself as the sign of life). Input
-        // frames the chip dropped are numbered as a gap before them, so
-        // `seq` keeps counting DC cycles.
-        let mut read = 0;
-        if let Ok(reply) = a.answer_to(&req) {
-            let lost = if c.tx_size > 0 { c.inputs_lost(count, waiting) } else { 0 };
-            if lost > 0 {
-                self.core.intake.inputs.lost(lost);
-                self.core.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
-                self.core.telemetry.recent_chip_drops.record(self.core.intake.ns(now), lost, 0);
-            }
-            read = self.core.intake.inputs.publish(reply.inputs, c.tx_size, now);
-            self.core.telemetry.input_frames.fetch_add(read as u64, Relaxed);
-            if self.supervisor.fifo_answer(read, c.tx_size > 0, now) {
-                self.core.telemetry.newest_input_ns.store(self.core.intake.ns(now), Relaxed);
-            }
-        }
-        c.answered(now, n, count, waiting, read);
-        self.core.telemetry.output_frames.fetch_add(u64::from(n), Relaxed);
-        if !self.core.frames.is_empty() {
-            outputs_gone::frames_played(self.core, c.tx_size > 0, read, waiting, count);
+        let index = self.core.port.send_pipelined(&req)?;
+        c.sent(InFlight { index, sent_at: now, pushed: n, after_call });
+        if guarded {
+            self.core.port.fetch_pipelined(index, CommandCode::PdoDataFifoOp)?;
         }
         if n > 0 {
             if let Some(written) = self.core.unplayed_write.take() {
@@ -517,10 +509,81 @@ impl<'a, L: Link> Running<'a, L> {
                 self.output_latency(on_wire.saturating_duration_since(written), now);
             }
         }
+        self.settle_fifo(c, now)
+    }
+
+    /// Takes what became of the FIFO calls sent, oldest first (see
+    /// `fifo_reads`): an answer that arrived, a call the chip refused, an
+    /// answer lost; one no exchange has brought is fetched once its time
+    /// is up.
+    fn settle_fifo(&mut self, c: &mut Cyclic, now: Instant) -> Result<(), PortError> {
+        const CODE: CommandCode = CommandCode::PdoDataFifoOp;
+        while let Some(call) = c.oldest_in_flight() {
+            let port = &mut self.core.port;
+            let fate = match port.pipelined(call.index, CODE).map(|p| p.fate) {
+                Some(Fate::Waiting) if port.is_last_sent(call.index, CODE) => {
+                    if now < FetchRule::fetch_at(call.sent_at) {
+                        return Ok(());
+                    }
+                    port.fetch_pipelined(call.index, CODE)?;
+                    continue;
+                }
+                Some(fate) => fate,
+                // Not followed any more (a recovery's search clocked raw
+                // bytes): nothing can fetch it now.
+                None => Fate::Lost,
+            };
+            match fate {
+                Fate::Answered => self.fifo_answered(c, call, now),
+                Fate::Refused => c.refused(call.index),
+                Fate::Waiting | Fate::Lost => {
+                    c.lost(call.index);
+                    self.core.telemetry.input_batches_lost.fetch_add(1, Relaxed);
+                    self.core.telemetry.output_frames.fetch_add(u64::from(call.pushed), Relaxed);
+                    self.fetch.answer_lost(now);
+                }
+            }
+            self.core.port.forget_pipelined(call.index, CODE);
+        }
+        Ok(())
+    }
+
+    /// The answer to FIFO call `call` arrived: input frames out, their
+    /// freshness noted and judged (a network without inputs counts the
+    /// answer itself as the sign of life), the plan told.
+    fn fifo_answered(&mut self, c: &mut Cyclic, call: InFlight, now: Instant) {
+        let Some(p) = self.core.port.pipelined(call.index, CommandCode::PdoDataFifoOp) else { return };
+        let Some(a) = p.answer else { return };
+        let asked = PdoFifoOp { op: FifoOpFlags::empty(), frames: 0, outputs: &[] };
+        let inputs = a.answer_to(&asked).map(|reply| reply.inputs);
+        let frames = inputs.map_or(0, |i| i.len().checked_div(c.tx_size).unwrap_or(0));
+        let counts =
+            Counts { count: a.header.rx_fifo_count, waiting: a.header.tx_fifo_count, read: frames, resends: p.resends };
+        // Input frames the chip dropped, or that went with a lost answer,
+        // are numbered as a gap before them, so `seq` keeps counting DC
+        // cycles.
+        let mut read = 0;
+        if let Ok(inputs) = inputs {
+            let lost = if c.tx_size > 0 { c.inputs_lost(call.index, counts) } else { 0 };
+            if lost > 0 {
+                self.core.intake.inputs.lost(lost);
+                self.core.telemetry.inputs_dropped_by_chip.fetch_add(lost, Relaxed);
+                self.core.telemetry.recent_chip_drops.record(self.core.intake.ns(now), lost, 0);
+            }
+            read = self.core.intake.inputs.publish(inputs, c.tx_size, now);
+            self.core.telemetry.input_frames.fetch_add(read as u64, Relaxed);
+            if self.supervisor.fifo_answer(read, c.tx_size > 0, now) {
+                self.core.telemetry.newest_input_ns.store(self.core.intake.ns(now), Relaxed);
+            }
+        }
+        c.answered(call.index, Counts { read, ..counts }, now);
+        self.core.telemetry.output_frames.fetch_add(u64::from(call.pushed), Relaxed);
+        if !self.core.frames.is_empty() {
+            outputs_gone::frames_played(self.core, c.tx_size > 0, read, counts.waiting, counts.count);
+        }
         if let Some(t) = &self.core.distributor {
             t.unpark();
         }
-        Ok(())
     }
 
     /// A client's write reaches the wire `latency` after it reached the
@@ -640,4 +703,9 @@ impl<'a, L: Link> Running<'a, L> {
         self.core.publish_status(Instant::now());
         Exit::Stop
     }
+}
+
+/// The link errors counted so far (see `fifo_reads::LinkErrors`).
+fn link_errors<L: Link>(core: &Core<L>) -> LinkErrors {
+    LinkErrors { corrupt: core.port.stats().corrupt, refused: core.port.status().crc_errors }
 }

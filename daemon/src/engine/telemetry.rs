@@ -89,8 +89,8 @@ pub(crate) struct Telemetry {
     pub not_ready: AtomicU64,
     /// Input frames received from the chip.
     pub input_frames: AtomicU64,
-    /// FIFO answers lost for good. Always 0 since FIFO calls are guarded
-    /// (a corrupt answer is fetched again); kept for API clients.
+    /// FIFO answers lost for good, their input frames numbered as a gap
+    /// (pipelined calls only: see `engine::fifo_reads`).
     pub input_batches_lost: AtomicU64,
     /// Input frames dropped because the distributor fell behind the engine.
     pub ring_overflows: AtomicU64,
@@ -141,7 +141,8 @@ pub(crate) struct Telemetry {
     pub output_latency: LatencyWindow,
     /// Writes that reached the wire later than the budget.
     pub output_latency_misses: AtomicU64,
-    /// Input frames the chip dropped (TxFIFO full).
+    /// Input frames never received: dropped by the chip (TxFIFO full) or
+    /// carried by a lost FIFO answer.
     pub inputs_dropped_by_chip: AtomicU64,
     /// The latest run of RxFIFO alarms (health, see [`RecentTrouble`]).
     pub recent_fifo_alarms: RecentTrouble,
