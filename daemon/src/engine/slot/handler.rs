@@ -46,6 +46,8 @@ pub(super) enum Fetch {
     Sdo,
     /// EEPROM_GET (v049 39).
     Eeprom,
+    /// PDO_CONFIG_GET (v049 9).
+    PdoConfig,
 }
 
 impl Fetch {
@@ -53,6 +55,7 @@ impl Fetch {
         match self {
             Self::Sdo => CommandCode::SdoGet,
             Self::Eeprom => CommandCode::EepromGet,
+            Self::PdoConfig => CommandCode::PdoConfigGet,
         }
     }
 }

@@ -1,10 +1,11 @@
 //! A slave's PDO assignment and mapping as the slave reports it: read
 //! into the chip (v049 ECAT_PDO_CONFIG_REQ 8, a read sent once), then
-//! fetched (ECAT_PDO_CONFIG_GET 9) and relayed as the chip gave it.
+//! fetched (ECAT_PDO_CONFIG_GET 9, which is also the poll: its answer
+//! after the read ended is the result) and relayed as the chip gave it.
 
 use ecmxf_wire::payload::pdo::{PdoConfigForm, PdoConfigGet, PdoConfigReq};
 
-use super::handler::{Cx, Handler, Next, fill};
+use super::handler::{Cx, Fetch, Handler, Next, fetched_or_call, fill};
 use crate::engine::error::EngineError;
 use crate::link::Link;
 use crate::port::PortError;
@@ -29,6 +30,10 @@ impl Handler for PdoConfig {
         cx.read(&PdoConfigReq { slave, assign_index, form: PdoConfigForm::Manual })
     }
 
+    fn fetch(&self) -> Option<Fetch> {
+        Some(Fetch::PdoConfig)
+    }
+
     fn ended<L: Link>(&mut self, cx: &mut Cx<'_, L>, failed: bool) -> Result<Next, PortError> {
         let (slave, assign_index) = (self.slave, self.assign_index);
         if failed {
@@ -37,7 +42,7 @@ impl Handler for PdoConfig {
         }
         // Relayed: the master reads it as PDO_CONFIG_GET's reply
         // (master/pdos.rs).
-        let a = cx.port.call(&PdoConfigGet)?;
+        let a = fetched_or_call(cx.port, cx.fetched, &PdoConfigGet)?;
         Ok(Next::Done(Ok(fill(cx.buffer, &[a.relayed()]))))
     }
 }

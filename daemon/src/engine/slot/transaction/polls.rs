@@ -1,6 +1,7 @@
 //! Polls cost one exchange each and say as much as they can: where the
-//! result is read with a repeatable GET (SDO_GET, EEPROM_GET: a non-blocking
-//! read of the chip's result buffer, v049 11/39), the GET itself is the
+//! result is read with a repeatable GET (SDO_GET, EEPROM_GET,
+//! PDO_CONFIG_GET: a non-blocking read of the chip's result buffer, v049
+//! 11/39/9), the GET itself is the
 //! poll, sent once ([`Port::send_once`]); its answer, brought by whatever
 //! exchange comes next, carries the busy bit *and* the result. The chip
 //! builds an answer when it processes the packet (v049 圖二: the answer to
@@ -23,6 +24,7 @@ use std::time::{Duration, Instant};
 
 use ecmxf_wire::payload::control::InfoUpdate;
 use ecmxf_wire::payload::eeprom::EepromGet;
+use ecmxf_wire::payload::pdo::PdoConfigGet;
 use ecmxf_wire::payload::sdo::SdoGet;
 
 use super::Active;
@@ -125,6 +127,7 @@ impl Active {
         let index = match self.fetch() {
             Some(Fetch::Sdo) => port.send_once(&SdoGet)?,
             Some(Fetch::Eeprom) => port.send_once(&EepromGet)?,
+            Some(Fetch::PdoConfig) => port.send_once(&PdoConfigGet)?,
             None => port.send_once(&InfoUpdate)?,
         };
         self.polls = [Some(index), self.polls[0]];
