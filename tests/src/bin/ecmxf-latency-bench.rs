@@ -6,7 +6,8 @@
 //! default real-time settings, those a configuration without `[realtime]`
 //! gets: SCHED_FIFO priority 80, memory locked, 2000 us of spin before
 //! each exchange; they need root or the unit's limits, without which the
-//! daemon warns and runs without them).
+//! daemon warns and runs without them; `--fifo-reads guarded|pipelined`
+//! sets `cycle.fifo_reads`, unset the daemon's default).
 //!
 //! For each (cycle, budget) it checks the configuration as `ecmxfd
 //! --check-config` does (a budget the link cannot hold is refused there,
@@ -49,8 +50,11 @@ struct Outcome {
 const NO_REALTIME: &str = "priority = 0\nlock_memory = false\nspin_us = 0\n";
 
 /// The configuration of one run, refused as `--check-config` refuses it.
-fn checked_config(cycle_us: u32, budget_us: u32, realtime: bool) -> Result<String, String> {
-    let extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
+fn checked_config(cycle_us: u32, budget_us: u32, realtime: bool, reads: Option<&str>) -> Result<String, String> {
+    let mut extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
+    if let Some(reads) = reads {
+        extra.push_str(&format!("fifo_reads = \"{reads}\"\n"));
+    }
     let mut config = ecmxf_e2e::config_with_cycle("backend = \"sim\"", &extra, "");
     if realtime {
         if !config.contains(NO_REALTIME) {
@@ -136,6 +140,7 @@ fn main() {
     let mut secs = 5u64;
     let mut only: Option<(u32, u32)> = None;
     let mut realtime = false;
+    let mut reads: Option<String> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -146,7 +151,10 @@ fn main() {
                 only = Some((c.parse().expect("cycle"), b.parse().expect("budget")));
             }
             "--rt" => realtime = true,
-            other => panic!("unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US, --rt"),
+            "--fifo-reads" => reads = Some(args.next().expect("--fifo-reads guarded|pipelined")),
+            other => panic!(
+                "unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US, --rt, --fifo-reads guarded|pipelined"
+            ),
         }
     }
     let rt = tokio::runtime::Builder::new_multi_thread().worker_threads(2).enable_all().build().expect("runtime");
@@ -172,7 +180,8 @@ fn main() {
     // `--only` runs that pair, listed or not.
     let pairs: Vec<(u32, u32)> = only.map_or_else(|| all.to_vec(), |o| vec![o]);
     for (cycle_us, budget_us) in pairs {
-        let run = checked_config(cycle_us, budget_us, realtime).map(|config| rt.block_on(measure(&config, secs)));
+        let run = checked_config(cycle_us, budget_us, realtime, reads.as_deref())
+            .map(|config| rt.block_on(measure(&config, secs)));
         let o = match run.and_then(|r| r) {
             Ok(o) => o,
             Err(why) => {
