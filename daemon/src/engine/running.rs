@@ -2,8 +2,9 @@
 //! fixed sequence of named steps ([`Running::turn`]): take what clients
 //! sent (requests, output writes, actions), count the slaves now and then,
 //! keep the emergency question going, exchange (a FIFO exchange when one is
-//! due, else one step of the blocking-slot transaction), then judge what
-//! the answers said, and idle until the next thing is due. The rules that
+//! due, else one step of the blocking-slot transaction), take the FIFO
+//! answers the exchanges brought (`settle_fifo`, see `fifo_reads`), then
+//! judge what the answers said, and idle until the next thing is due. The rules that
 //! decide when to go back to bring-up are the [`Supervisor`]'s: they take
 //! the time as a parameter and are unit-tested there. A step that ends the
 //! run returns the [`Exit`] as its error, so the turn reads top to bottom.
@@ -204,6 +205,11 @@ impl<'a, L: Link> Running<'a, L> {
                 self.transaction_step(clocks, now)?
             }
         };
+        // A transaction's packet or the emergency question may have brought
+        // a FIFO answer: its inputs go out now, not after the idle wait.
+        if let Some(c) = cyclic.as_deref_mut() {
+            self.settle_fifo(c, Instant::now())?;
+        }
         self.check_emergencies()?;
         self.watch_flow(cyclic.is_some(), Instant::now())?;
         self.watch_header(Instant::now())?;
