@@ -474,7 +474,7 @@ impl<'a, L: Link> Running<'a, L> {
     /// One FIFO call: pushes the output frames the level needs and reads
     /// the input frames waiting. Its answer is fetched at once (guarded) or
     /// left for the next exchange to bring (pipelined), as `fifo_reads`
-    /// decides; `settle_fifo` takes it either way. Sent pipelined, a
+    /// decides; the turn's `settle_fifo` takes it either way. Sent pipelined, a
     /// corrupt answer loses its batch (40% of them at a bit error rate of
     /// 1e-3 when every call went so, hence guarded after any error). The
     /// count in the answer is the RxFIFO level just before this push
@@ -515,7 +515,9 @@ impl<'a, L: Link> Running<'a, L> {
                 self.output_latency(on_wire.saturating_duration_since(written), now);
             }
         }
-        self.settle_fifo(c, now)
+        // Its answer (fetched) and the one before it (brought by this
+        // call's exchange) are taken by the turn's `settle_fifo` next.
+        Ok(())
     }
 
     /// Takes what became of the FIFO calls sent, oldest first (see
@@ -690,7 +692,8 @@ impl<'a, L: Link> Running<'a, L> {
             // Let the helper walk the axes down while outputs keep flowing.
             let until = Instant::now() + Duration::from_millis(50);
             while Instant::now() < until {
-                if self.fifo_exchange(c, Instant::now()).is_err() {
+                let now = Instant::now();
+                if self.fifo_exchange(c, now).and_then(|()| self.settle_fifo(c, now)).is_err() {
                     break;
                 }
                 std::thread::sleep(Duration::from_micros(500));
