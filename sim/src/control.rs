@@ -61,12 +61,13 @@ pub fn execute(chip: &mut Chip, line: &str) -> Result<String, String> {
         "status" => {
             let s = chip.stats;
             Ok(format!(
-                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={} tx_dropped={} length_mismatches={}",
+                "ok time_ns={} packets={} not_ready={} crc_failures={} executed={} fifo_packets={} cycles={} underruns={} rx_fifo={} tx_fifo={} state={} crc_errors={} wkc_errors={} tx_dropped={} length_mismatches={}",
                 chip.now_ns,
                 s.packets,
                 s.not_ready,
                 s.crc_failures,
                 s.executed,
+                s.fifo_packets,
                 s.cycles,
                 chip.fifo.underruns,
                 chip.fifo.rx.len(),

@@ -24,7 +24,7 @@ fn a_drive_fault_arrives_as_an_emergency_event() {
         tokio::time::sleep(Duration::from_millis(50)).await;
         sim.ctl("drive-fault 1 0 0x2310");
         // From when the fault is raised (ctl has answered): the engine reads
-        // the chip's newest record every 4 ms.
+        // the chip's records every 6-7 ms, and the next exchange brings them.
         let start = Instant::now();
         let (event, latency) = loop {
             let e =

@@ -106,7 +106,8 @@ pub enum EventKind {
         outputs: WriterGoneAction,
     },
     /// A CoE emergency the chip received (read within
-    /// `emergencies::POLL`; the event's time is when it was read).
+    /// `emergencies::POLL_LONGEST` and one exchange; the event's time is
+    /// when it was read).
     Emergency(EmergencyRecord),
     /// A client's write reached the wire later than
     /// `cycle.output_latency_us` allows (told at most every

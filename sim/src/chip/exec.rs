@@ -83,6 +83,9 @@ impl Chip {
                 return self.encode(&h, &[]);
             }
         };
+        if cmd.header.code == CommandCode::PdoDataFifoOp {
+            self.stats.fifo_packets += 1;
+        }
         if is_resize {
             self.crc_errors = self.crc_errors.wrapping_add(1);
         }

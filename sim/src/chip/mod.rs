@@ -274,6 +274,9 @@ pub struct Stats {
     pub crc_failures: u64,
     /// Commands executed (dedup repeats not counted).
     pub executed: u64,
+    /// Packets taken that carried a FIFO call (PDO_DATA_FIFO_OP), repeats
+    /// included: what the cyclic data costs the link, apart from the rest.
+    pub fifo_packets: u64,
     /// DC cycles run.
     pub cycles: u64,
     /// Commands whose declared data length differed from their layout's

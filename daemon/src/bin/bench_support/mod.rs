@@ -55,13 +55,31 @@ pub fn serve(network: Option<&Path>) -> Result<Sim, String> {
 /// whichever side of the daemon sent it.
 #[allow(dead_code)] // not every bench reads the link
 pub fn packet_counter(socket: &Path) -> Result<impl FnMut() -> Result<u64, String> + use<>, String> {
+    let mut counts = packet_counts(socket)?;
+    Ok(move || counts().map(|c| c.packets))
+}
+
+/// Packets the simulator clocked, in all and those carrying a FIFO call.
+#[allow(dead_code)] // not every bench reads the link
+#[derive(Clone, Copy, Debug)]
+pub struct PacketCounts {
+    pub packets: u64,
+    pub fifo_packets: u64,
+}
+
+/// The simulator's packet counts (see [`PacketCounts`]), read from its status.
+#[allow(dead_code)] // not every bench reads the link
+pub fn packet_counts(socket: &Path) -> Result<impl FnMut() -> Result<PacketCounts, String> + use<>, String> {
     let mut ctl = ecmxf_sim::server::SocketClient::connect(socket).map_err(|e| e.to_string())?;
-    Ok(move || -> Result<u64, String> {
+    Ok(move || -> Result<PacketCounts, String> {
         let text = ctl.control("status").map_err(|e| e.to_string())?.map_err(|e| e.to_string())?;
-        text.split_whitespace()
-            .find_map(|w| w.strip_prefix("packets="))
-            .and_then(|n| n.parse().ok())
-            .ok_or_else(|| format!("no packet count in {text:?}"))
+        let field = |name: &str| -> Result<u64, String> {
+            text.split_whitespace()
+                .find_map(|w| w.strip_prefix(name)?.strip_prefix('='))
+                .and_then(|n| n.parse().ok())
+                .ok_or_else(|| format!("no {name} in {text:?}"))
+        };
+        Ok(PacketCounts { packets: field("packets")?, fifo_packets: field("fifo_packets")? })
     })
 }
 
