@@ -449,7 +449,9 @@ pub struct RealtimeConfig {
     /// Waits shorter than this many us are spent yielding instead of
     /// sleeping: a short sleep can overshoot by milliseconds without
     /// PREEMPT_RT (or on a virtual machine), and the FIFO margin is made of
-    /// such times. 0: always sleep (idle core, RT kernel).
+    /// such times. At most half of each wait is spun, so the thread sleeps
+    /// between exchanges and the kernel's real-time throttling never stops
+    /// it. 0: always sleep (idle core, RT kernel).
     pub spin_us: u32,
 }
 

@@ -390,11 +390,18 @@ impl<'a, L: Link> Running<'a, L> {
     }
 
     /// Waits until `until` or the next command. The last `spin_us` of a
-    /// wait are spent yielding, not sleeping (see [`RealtimeConfig`]).
+    /// wait are spent yielding, not sleeping (see [`RealtimeConfig`]), but
+    /// never more than half of it: at 125 us the FIFO calls come about
+    /// every millisecond, so a 2000 us spin never slept, and a SCHED_FIFO
+    /// thread that never sleeps is stopped by the kernel's real-time
+    /// throttling (`sched_rt_runtime_us`, 950 ms a second by default) for
+    /// the rest of each second: 21 ms with no exchange, the RxFIFO dry at a
+    /// 20 ms budget (`ecmxf-latency-bench --rt`, 6 underruns in 20 s).
     ///
     /// [`RealtimeConfig`]: crate::config::RealtimeConfig
     fn idle_until(&mut self, until: Instant) -> Option<Command> {
-        let spin = Duration::from_micros(self.core.config.realtime.spin_us.into());
+        let wait = until.saturating_duration_since(Instant::now());
+        let spin = Duration::from_micros(self.core.config.realtime.spin_us.into()).min(wait / 2);
         loop {
             let now = Instant::now();
             let left = until.checked_duration_since(now).filter(|d| !d.is_zero())?;
