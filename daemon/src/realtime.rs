@@ -79,7 +79,7 @@ mod tests {
     #[test]
     fn refusals_are_not_failures() {
         // Whatever this machine allows, applying must return, not panic.
-        let a = apply(&RealtimeConfig { priority: 1, cpu: Some(0), lock_memory: false, spin_us: 0 });
+        let a = apply(&RealtimeConfig { priority: 1, cpu: Some(0), lock_memory: false, spin_us: 0, host_stall_us: 0 });
         assert!(!a.memory_locked);
     }
 }

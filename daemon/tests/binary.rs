@@ -56,10 +56,17 @@ fn check_config_accepts_the_examples_and_names_mistakes() {
             "cycle.output_latency_us",
         ),
         // The demo's 248 us packets at 125 us: a refill behind a
-        // transaction takes 8 cycles, so nothing under 17 holds.
+        // transaction takes 8 cycles and the host's 1 ms stall 8 more, so
+        // nothing under 33 holds; 2500 us, which the link alone holds, ran
+        // late writes under real-time settings.
         (
-            "version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 125\noutput_latency_us = 1000\n",
-            "the smallest budget this link holds is 2125 us",
+            "version = 1\n[link]\nbackend = \"sim\"\n[cycle]\nsync0_us = 125\noutput_latency_us = 2500\n",
+            "the smallest budget this link and host hold is 4125 us",
+        ),
+        (
+            "version = 1\n[link]\nbackend = \"sim\"\n[realtime]\nhost_stall_us = 0\n[cycle]\nsync0_us = 125\n\
+             output_latency_us = 1000\n",
+            "the smallest budget this link and host hold is 2125 us",
         ),
         (
             "version = 1\n[link]\nbackend = \"spidev\"\ndevice = \"/dev/null\"\nspi_hz = 20000000\n\

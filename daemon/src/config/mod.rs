@@ -453,11 +453,19 @@ pub struct RealtimeConfig {
     /// between exchanges and the kernel's real-time throttling never stops
     /// it. 0: always sleep (idle core, RT kernel).
     pub spin_us: u32,
+    /// The host stall an output latency budget must outlast, us: a
+    /// budget whose RxFIFO margin does not cover the link's refill and
+    /// this is refused (`cycle.output_latency_us`). 1000 by default: what a
+    /// stock kernel with SCHED_FIFO and memory locked held here (a 3 ms
+    /// budget at a 1 ms cycle, which the link alone allows, ran dry 5
+    /// times in 20 s). Lower it on a PREEMPT_RT kernel with an isolated
+    /// core, once measured (`ecmxf-latency-bench --rt`).
+    pub host_stall_us: u32,
 }
 
 impl Default for RealtimeConfig {
     fn default() -> Self {
-        Self { priority: 80, cpu: None, lock_memory: true, spin_us: 2000 }
+        Self { priority: 80, cpu: None, lock_memory: true, spin_us: 2000, host_stall_us: 1000 }
     }
 }
 
@@ -489,12 +497,14 @@ pub struct CycleConfig {
     /// midway between `fifo_low` and `fifo_high`), trading margin against
     /// host stalls for latency: a stall longer than the budget empties the
     /// FIFO (counted, with an event). 250..=1000000 and at least two DC
-    /// cycles, and no less than the link holds: a refill must land within
-    /// half the budget's frames after a transaction's packet, the emergency
-    /// question and a FIFO call (four packets), so a budget under
-    /// 2 x ceil(4 packets / cycle) + 1 cycles is refused (`--check-config`
-    /// names the smallest: 2125 us at 125 us with 512-byte packets at
-    /// 20 MHz); unset: the FIFO is kept midway between its marks.
+    /// cycles, and no less than the link and host hold: a refill must land
+    /// within half the budget's frames after a transaction's packet, the
+    /// emergency question and a FIFO call (four packets) and
+    /// `realtime.host_stall_us`, so a budget under 2 x ceil((4 packets +
+    /// host stall) / cycle) + 1 cycles is refused (`--check-config` names
+    /// the smallest: 4125 us at 125 us with 512-byte packets at 20 MHz and
+    /// the default 1 ms of host stall); unset: the FIFO is kept midway
+    /// between its marks.
     pub output_latency_us: Option<u32>,
     /// How the answer to a FIFO call is fetched (docs/protocol.md §7):
     /// "pipelined" (the default) lets the next exchange bring it, one
@@ -847,7 +857,13 @@ impl Config {
             // the CPU the API needs (ecmxf-api-bench on 2 cores: stream p99
             // 7 ms with 2000 us of spin, 0.6 ms without; the deep RxFIFO
             // below absorbs the longer sleeps).
-            realtime: RealtimeConfig { priority: 0, cpu: None, lock_memory: false, spin_us: 0 },
+            realtime: RealtimeConfig {
+                priority: 0,
+                cpu: None,
+                lock_memory: false,
+                spin_us: 0,
+                ..RealtimeConfig::default()
+            },
             // Without real-time priority, and on a virtual machine, a thread
             // can stall for 25 ms: keep about 17 ms of outputs queued (the
             // budget below) and room for 12 ms of inputs, so a stall runs
@@ -972,6 +988,9 @@ impl Config {
         }
         if self.realtime.spin_us > 100_000 {
             return bad("realtime.spin_us", format!("{} us is outside 0..=100000", self.realtime.spin_us));
+        }
+        if self.realtime.host_stall_us > 100_000 {
+            return bad("realtime.host_stall_us", format!("{} us is outside 0..=100000", self.realtime.host_stall_us));
         }
         if !SYNC0_US.contains(&self.cycle.sync0_us) {
             return bad(

@@ -40,22 +40,26 @@ pub const PACKETS_PER_CALL: u64 = 2;
 pub const REFILL_PACKETS: u64 = PACKETS_PER_CALL + 2;
 
 /// The shortest output latency budget (`cycle.output_latency_us`) that
-/// packets of `packet_ns` hold at a `cycle_ns` DC cycle, ns. For a budget
-/// the RxFIFO is kept `target` frames deep (a write waits for those and
-/// one cycle of the chip's own: budget = target + 1 cycles) and refilled
+/// packets of `packet_ns` hold at a `cycle_ns` DC cycle with `host_ns` of
+/// host stall allowed (`realtime.host_stall_us`), ns. For a budget the
+/// RxFIFO is kept `target` frames deep (a write waits for those and one
+/// cycle of the chip's own: budget = target + 1 cycles) and refilled
 /// before it falls to half of that (`cyclic::Plan::levels`); what is left
-/// then must outlast [`REFILL_PACKETS`] packets, or the slaves get their
-/// last outputs again (an underrun) each time a transaction's packet goes
-/// before the refill. Host stalls come on top: this is the link's floor.
-pub fn min_output_latency_ns(packet_ns: u64, cycle_ns: u64) -> u64 {
+/// then must outlast [`REFILL_PACKETS`] packets and the host's stall, or
+/// the slaves get their last outputs again (an underrun) each time a
+/// transaction's packet goes before a late refill. Without the host's
+/// part this is the link's floor, which a stock kernel does not hold:
+/// `ecmxf-latency-bench --rt` (SCHED_FIFO, memory locked) ran 5 underruns
+/// in 20 s at 3 ms and a 1 ms cycle, where the link alone allows 3 ms.
+pub fn min_output_latency_ns(packet_ns: u64, cycle_ns: u64, host_ns: u64) -> u64 {
     let cycle = cycle_ns.max(1);
-    let refill_cycles = (REFILL_PACKETS * packet_ns).div_ceil(cycle).max(1);
+    let refill_cycles = (REFILL_PACKETS * packet_ns + host_ns).div_ceil(cycle).max(1);
     (2 * refill_cycles + 1) * cycle
 }
 
 /// Why an output latency budget cannot hold, in words (`None`: it can).
-pub fn latency_refusal(budget_us: u32, packet_ns: u64, cycle_ns: u64) -> Option<String> {
-    let min_ns = min_output_latency_ns(packet_ns, cycle_ns);
+pub fn latency_refusal(budget_us: u32, packet_ns: u64, cycle_ns: u64, host_ns: u64) -> Option<String> {
+    let min_ns = min_output_latency_ns(packet_ns, cycle_ns, host_ns);
     if u64::from(budget_us) * 1000 >= min_ns {
         return None;
     }
@@ -65,10 +69,12 @@ pub fn latency_refusal(budget_us: u32, packet_ns: u64, cycle_ns: u64) -> Option<
         "{budget_us} us cannot hold at a {cycle_us} us cycle with SPI packets of {} us: the RxFIFO is kept {} \
          frame(s) deep for it and refilled at half of that, and a refill can land {refill_us} us after it is due \
          (a FIFO call of {PACKETS_PER_CALL} packets, with a transaction's packet and the emergency question \
-         before it), so the slaves would get repeated outputs; the smallest budget this link holds is {} us \
-         (or lengthen cycle.sync0_us, raise link.spi_hz, or lower chip.data_size)",
+         before it) plus the {} us of host stall allowed (realtime.host_stall_us), so the slaves would get \
+         repeated outputs; the smallest budget this link and host hold is {} us (or lengthen cycle.sync0_us, \
+         raise link.spi_hz, or lower chip.data_size)",
         packet_ns.div_ceil(1000),
         (budget_us as u64 * 1000 / cycle_ns.max(1)).saturating_sub(1).max(2),
+        host_ns / 1000,
         min_ns.div_ceil(1000)
     ))
 }
@@ -208,19 +214,27 @@ mod tests {
     fn a_latency_budget_needs_room_for_a_refill_behind_a_transaction() {
         // The demo network's packets (512-byte data at 20 MHz and the
         // chip's 30 us): 248 us. At 125 us, four packets are 8 cycles: a
-        // FIFO kept 16 deep, 17 cycles in all.
+        // FIFO kept 16 deep, 17 cycles in all, for the link alone.
         let packet = clocked_ns(512, 20_000_000) + 30_000;
-        assert_eq!(min_output_latency_ns(packet, 125_000), 17 * 125_000);
-        for refused in [250, 1000, 2000] {
-            let why = latency_refusal(refused, packet, 125_000).expect("refused");
-            assert!(why.contains("the smallest budget this link holds is 2125 us"), "{why}");
+        assert_eq!(min_output_latency_ns(packet, 125_000, 0), 17 * 125_000);
+        // With the default 1 ms of host stall: 992 + 1000 us are 16
+        // cycles behind, 33 in all.
+        let host = 1_000_000;
+        assert_eq!(min_output_latency_ns(packet, 125_000, host), 33 * 125_000);
+        for refused in [250, 1000, 2000, 2500, 4000] {
+            let why = latency_refusal(refused, packet, 125_000, host).expect("refused");
+            assert!(why.contains("the smallest budget this link and host hold is 4125 us"), "{why}");
+            assert!(why.contains("1000 us of host stall"), "{why}");
         }
-        assert_eq!(latency_refusal(2125, packet, 125_000), None);
-        // At 1 ms a refill fits in a cycle: 3 cycles.
-        assert_eq!(min_output_latency_ns(packet, 1_000_000), 3_000_000);
+        assert_eq!(latency_refusal(4125, packet, 125_000, host), None);
+        assert_eq!(latency_refusal(2125, packet, 125_000, 0), None, "an RT host that allows none");
+        // At 1 ms a refill fits in a cycle, the host's stall in another: 5.
+        assert_eq!(min_output_latency_ns(packet, 1_000_000, 0), 3_000_000);
+        assert_eq!(min_output_latency_ns(packet, 1_000_000, host), 5_000_000);
         // Large packets at 500 us (1024-byte data at 24 MHz): 3 cycles
-        // behind, 7 in all.
-        assert_eq!(min_output_latency_ns(clocked_ns(1024, 24_000_000), 500_000), 3_500_000);
+        // behind, 7 in all; 5 and 11 with the host's.
+        assert_eq!(min_output_latency_ns(clocked_ns(1024, 24_000_000), 500_000, 0), 3_500_000);
+        assert_eq!(min_output_latency_ns(clocked_ns(1024, 24_000_000), 500_000, host), 5_500_000);
     }
 
     #[test]
