@@ -264,6 +264,8 @@ pub struct Port<L> {
     stats: PortStats,
     /// How long an exchange takes, ns, averaged (1/8 weight for the newest).
     exchange_ns: u64,
+    /// When the last exchange began (None: none yet).
+    last_began: Option<Instant>,
 }
 
 impl<L: Link> Port<L> {
@@ -297,6 +299,7 @@ impl<L: Link> Port<L> {
             status_exchange: 0,
             stats: PortStats::default(),
             exchange_ns: 0,
+            last_began: None,
         }
     }
 
@@ -377,6 +380,13 @@ impl<L: Link> Port<L> {
         Duration::from_nanos(self.exchange_ns)
     }
 
+    /// When the last exchange began, if one did: the chip noted its FIFO
+    /// counts as that packet arrived, and the next answer reports them
+    /// (docs/protocol.md §12).
+    pub fn last_began(&self) -> Option<Instant> {
+        self.last_began
+    }
+
     /// Counters.
     pub fn stats(&self) -> PortStats {
         self.stats
@@ -402,6 +412,14 @@ impl<L: Link> Port<L> {
     /// Data-section size in force.
     pub fn data_size(&self) -> usize {
         self.layout.data_size()
+    }
+
+    /// Records `sent` as the last packet sent (its index and code, which a
+    /// repeat must match to be a poll), not resent yet; `None`: no packet
+    /// the chip may have taken is known (a resize).
+    fn took(&mut self, sent: Option<(u8, CommandCode)>) {
+        self.last_sent = sent;
+        self.repeats = 0;
     }
 
     fn fresh_index(&mut self) -> u8 {
@@ -436,6 +454,7 @@ impl<L: Link> Port<L> {
         (self.tx, self.rx) = (tx, rx);
         r?;
         self.stats.exchanges += 1;
+        self.last_began = Some(began);
         let took = began.elapsed().as_nanos().min(u128::from(u32::MAX)) as u64;
         self.exchange_ns = match self.exchange_ns {
             0 => took,
@@ -563,8 +582,7 @@ impl<L: Link> Port<L> {
                     }
                 }
                 sent_once = true;
-                self.last_sent = Some((index, code));
-                self.repeats = 0;
+                self.took(Some((index, code)));
                 continue;
             }
             if got != Received::NotReady {
@@ -637,8 +655,7 @@ impl<L: Link> Port<L> {
                 Received::Answer(h) => self.keep_prev(Some(h)),
                 Received::Corrupt(_) => self.keep_prev(None),
             }
-            self.last_sent = Some((index, R::CODE));
-            self.repeats = 0;
+            self.took(Some((index, R::CODE)));
             return Ok(index);
         }
     }
@@ -715,8 +732,7 @@ impl<L: Link> Port<L> {
             let index = self.fresh_index();
             self.encode(&CrcTypeSet(new), index, old)?;
             while let Received::NotReady = self.clock(old)? {}
-            self.last_sent = Some((index, CommandCode::CrcTypeSet));
-            self.repeats = 0;
+            self.took(Some((index, CommandCode::CrcTypeSet)));
             self.check = new;
             if self.call(&InfoUpdate).is_ok() {
                 return Ok(());
@@ -740,8 +756,7 @@ impl<L: Link> Port<L> {
             let index = self.fresh_index();
             self.encode(&SpiReconfig { data_size: data_size as u16 }, index, CheckType::Fixed)?;
             while let Received::NotReady = self.clock(self.check)? {}
-            self.last_sent = Some((index, CommandCode::SpiReconfig));
-            self.repeats = 0;
+            self.took(Some((index, CommandCode::SpiReconfig)));
             self.layout = new;
             if self.call(&InfoUpdate).is_err() {
                 self.synchronize()?;
@@ -804,8 +819,7 @@ impl<L: Link> Port<L> {
         }
         self.transfer(&fill, &mut sink)?;
         self.layout = layout;
-        self.last_sent = None;
-        self.repeats = 0;
+        self.took(None);
         for _ in 0..self.max_attempts {
             let index = self.fresh_index();
             self.encode(&InfoUpdate, index, self.check)?;
@@ -814,8 +828,7 @@ impl<L: Link> Port<L> {
             } else if let Some(check) = CheckType::ALL.into_iter().find(|c| decode_response(&self.rx, *c).is_ok()) {
                 self.check = check;
             }
-            self.last_sent = Some((index, CommandCode::InfoUpdate));
-            self.repeats = 0;
+            self.took(Some((index, CommandCode::InfoUpdate)));
             if self.call(&InfoUpdate).is_ok() {
                 return Ok(());
             }

@@ -141,6 +141,12 @@ pub(crate) struct InFlight {
     /// answer reports before that call pushed and read (docs/protocol.md
     /// §12), so its effects are added to them.
     pub after_call: bool,
+    /// When the packet before it went out (`sent_at` when there was none):
+    /// the counts of an answer made as the call ran are the chip's as that
+    /// packet arrived, however long before the call it was (an emergency
+    /// question, a resend 2 ms after the call before: 3 cycles at 1 ms,
+    /// which read as frames still queued made writes look 3 ms late).
+    pub counted_at: Instant,
 }
 
 /// What an answer to a FIFO call reported, and which packet made it.
@@ -163,10 +169,11 @@ enum Counted {
     /// As the call before arrived, right before this one: before that
     /// call pushed and read.
     BeforeLast(Resolved),
-    /// After every earlier call, before this one pushed and read: the
-    /// answer made as the call ran, after another packet, or by its first
-    /// resend (counted as the call itself arrived).
-    BeforeOwn,
+    /// After every earlier call, before this one pushed and read, at the
+    /// time given: the answer made as the call ran, after another packet
+    /// (counted as that packet arrived), or by its first resend (counted
+    /// as the call itself arrived).
+    BeforeOwn(Instant),
     /// After the call itself pushed and read: made by its second resend
     /// or a later one.
     AfterOwn,
@@ -426,9 +433,11 @@ impl Cyclic {
                 },
                 i64::from(waiting) + self.cycles_since(prev.sent_at, call.sent_at) as i64 - prev.read as i64,
             ),
-            Counted::BeforeOwn => {
-                (Report { at: call.sent_at, level: count, pushed: u32::from(call.pushed) + later }, i64::from(waiting))
-            }
+            // Counted when the packet before arrived: frames came in since.
+            Counted::BeforeOwn(at) => (
+                Report { at, level: count, pushed: u32::from(call.pushed) + later },
+                i64::from(waiting) + self.cycles_since(at, call.sent_at) as i64,
+            ),
             // Counted after the call ran: its push and read are in.
             Counted::AfterOwn => (Report { at: now, level: count, pushed: later }, i64::from(waiting) + read as i64),
         };
@@ -448,8 +457,8 @@ impl Cyclic {
             0 => self
                 .resolved
                 .filter(|r| call.after_call && r.index != call.index)
-                .map_or(Counted::BeforeOwn, Counted::BeforeLast),
-            1 => Counted::BeforeOwn,
+                .map_or(Counted::BeforeOwn(call.counted_at), Counted::BeforeLast),
+            1 => Counted::BeforeOwn(call.sent_at),
             _ => Counted::AfterOwn,
         }
     }
@@ -532,7 +541,7 @@ mod tests {
     /// A call sent at `t` and answered at once, as a guarded one is.
     fn call(cy: &mut Cyclic, t: Instant, pushed: u8, count: u8, waiting: u8, read: usize) {
         let index = 0;
-        cy.sent(InFlight { index, sent_at: t, pushed, after_call: false });
+        cy.sent(InFlight { index, sent_at: t, pushed, after_call: false, counted_at: t });
         cy.answered(index, counts(count, waiting, read), t);
     }
 
@@ -739,8 +748,8 @@ mod tests {
         let at = |us: u64| t0 + Duration::from_micros(us);
         call(&mut cy, t0, 0, 14, 0, 0);
         // Two calls sent pipelined, 4 and 3 frames; no answer yet.
-        cy.sent(InFlight { index: 1, sent_at: at(250), pushed: 4, after_call: false });
-        cy.sent(InFlight { index: 2, sent_at: at(500), pushed: 3, after_call: false });
+        cy.sent(InFlight { index: 1, sent_at: at(250), pushed: 4, after_call: false, counted_at: at(250) });
+        cy.sent(InFlight { index: 2, sent_at: at(500), pushed: 3, after_call: false, counted_at: at(500) });
         assert_eq!(cy.estimate(at(500)), 14 + 4 + 3 - 4);
         assert_eq!(cy.last_exchange(), Some(at(500)));
         assert_eq!(cy.oldest_in_flight().map(|c| c.index), Some(1));
@@ -762,7 +771,7 @@ mod tests {
         assert_eq!(cy.inputs_lost(0, counts(0, 0, 0)), 0);
         call(&mut cy, t0, 20, 0, 0, 0);
         // 8 cycles: 8 input frames, read by a call whose answer is lost.
-        cy.sent(InFlight { index: 1, sent_at: t0, pushed: 8, after_call: false });
+        cy.sent(InFlight { index: 1, sent_at: t0, pushed: 8, after_call: false, counted_at: t0 });
         cy.lost(1);
         // The next answer: 28 pushed, 20 queued, so 8 cycles; nothing
         // read, nothing waiting: the 8 frames are lost.
@@ -778,12 +787,12 @@ mod tests {
         call(&mut cy, t0, 20, 0, 0, 0);
         // 12 output frames queued and 8 input frames waiting as this call
         // arrives: it pushes 10 and reads the 8.
-        cy.sent(InFlight { index: 2, sent_at: cycles(8), pushed: 10, after_call: false });
+        cy.sent(InFlight { index: 2, sent_at: cycles(8), pushed: 10, after_call: false, counted_at: cycles(8) });
         assert_eq!(cy.inputs_lost(2, counts(12, 8, 0)), 0);
         cy.answered(2, counts(12, 8, 8), t0);
         // The next call goes right behind it, 3 cycles later: the chip took
         // its counts as the call before arrived (12 and 8 again).
-        cy.sent(InFlight { index: 3, sent_at: cycles(11), pushed: 5, after_call: true });
+        cy.sent(InFlight { index: 3, sent_at: cycles(11), pushed: 5, after_call: true, counted_at: cycles(11) });
         assert_eq!(cy.inputs_lost(3, counts(12, 8, 0)), 0, "the earlier call's read is not a loss");
         cy.answered(3, counts(12, 8, 3), t0);
         // 12 + 10 + 5 - 4 cycles since the earlier call.
@@ -802,11 +811,28 @@ mod tests {
         // 12 queued and 8 waiting as it arrives; it pushes 10 and reads
         // the 8. Its first answer and the first resend's were corrupt: the
         // second resend's counts were taken after it ran.
-        cy.sent(InFlight { index: 2, sent_at: t0, pushed: 10, after_call: false });
+        cy.sent(InFlight { index: 2, sent_at: t0, pushed: 10, after_call: false, counted_at: t0 });
         let after = Counts { count: 22, waiting: 0, read: 8, resends: 2 };
         assert_eq!(cy.inputs_lost(2, after), 0, "its own read is not a loss");
         cy.answered(2, after, t0);
         assert_eq!(cy.estimate(t0), 22);
+        assert_eq!(cy.backlog, 0);
+    }
+
+    #[test]
+    fn counts_noted_at_an_earlier_packet_are_dated_by_it() {
+        let (mut cy, _) = cyclic();
+        let t0 = Instant::now();
+        let cycles = |n: u32| t0 + Duration::from_micros(125) * n;
+        call(&mut cy, t0, 0, 14, 0, 0);
+        // The packet before the call (an emergency question, a resend) went
+        // out 3 cycles before it: 12 queued and 5 waiting then.
+        cy.sent(InFlight { index: 2, sent_at: cycles(10), pushed: 4, after_call: false, counted_at: cycles(7) });
+        cy.answered(2, counts(12, 5, 8), cycles(11));
+        // 3 cycles consumed by the call, 4 pushed: 13 as it ran, 12 a cycle on.
+        assert_eq!(cy.estimate(cycles(10)), 13);
+        assert_eq!(cy.estimate(cycles(11)), 12);
+        // 5 waiting and 3 come since, 8 read: none left behind.
         assert_eq!(cy.backlog, 0);
     }
 }

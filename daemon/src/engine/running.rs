@@ -509,10 +509,12 @@ impl<'a, L: Link> Running<'a, L> {
         let ahead = c.estimate(now).max(0) as u32;
         // Right behind the last call, this one's counts come from before it.
         let after_call = c.last_index().is_some_and(|i| self.core.port.ran_last(i, CommandCode::PdoDataFifoOp));
+        // The packet before this one: the chip notes its counts as it arrives.
+        let counted_at = self.core.port.last_began().unwrap_or(now);
         let outputs = c.push_frames(n, &mut self.core.frames);
         let req = PdoFifoOp { op, frames: n, outputs };
         let index = self.core.port.send_pipelined(&req)?;
-        c.sent(InFlight { index, sent_at: now, pushed: n, after_call });
+        c.sent(InFlight { index, sent_at: now, pushed: n, after_call, counted_at });
         if guarded {
             self.core.port.fetch_pipelined(index, CommandCode::PdoDataFifoOp)?;
         }
