@@ -26,7 +26,7 @@ use super::intake::Intake;
 use super::layout::NetworkLayout;
 use super::network_action::NetworkAction;
 use super::output_writes::{OutputAssembler, OutputWrite, Writers};
-use super::slot::{Active, FairQueue};
+use super::slot::{Active, FairQueue, PollPace};
 use super::telemetry::{self, CounterTotal, Phase, Telemetry};
 use crate::config::{Config, WriterGoneAction};
 use crate::link::Link;
@@ -95,6 +95,9 @@ pub(super) struct Core<L> {
     /// client's next request does not allocate.
     pub queue: FairQueue,
     pub active: Option<Active>,
+    /// How long PDO assignment reads take, learned across transactions and
+    /// runs (see `slot::PollPace`).
+    pub poll_pace: Arc<PollPace>,
     /// When the oldest client write not yet pushed reached the daemon.
     pub unplayed_write: Option<Instant>,
     /// What the last snapshot sent to waiters showed, and when it went.
@@ -143,6 +146,7 @@ impl<L: Link> Core<L> {
             events,
             queue: FairQueue::default(),
             active: None,
+            poll_pace: Arc::default(),
             unplayed_write: None,
             announced: (Default::default(), epoch),
             recovery_open: false,

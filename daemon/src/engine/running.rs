@@ -640,7 +640,7 @@ impl<'a, L: Link> Running<'a, L> {
                     self.held_below_target = state.to_u8() < self.core.config.cycle.target().to_u8();
                     self.core.telemetry.stall_excused.store(self.held_below_target, Relaxed);
                 }
-                if let Some(a) = Active::new(j, now, &self.core.telemetry) {
+                if let Some(a) = Active::new(j, now, &self.core.telemetry, &self.core.poll_pace) {
                     self.core.active = Some(a);
                     break;
                 }

@@ -49,4 +49,4 @@ pub(super) use fair::FairQueue;
 #[allow(unreachable_pub)]
 pub use request::{Immediate, TransferProgress};
 pub(crate) use request::{Job, SlotRequest};
-pub(super) use transaction::{Active, Progress};
+pub(super) use transaction::{Active, PollPace, Progress};

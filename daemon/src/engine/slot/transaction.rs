@@ -42,7 +42,10 @@ use crate::engine::telemetry::Telemetry;
 use crate::link::Link;
 use crate::port::{Port, PortError};
 
+mod pace;
 mod polls;
+
+pub(crate) use pace::PollPace;
 
 /// How long an operation may overstay its caller's deadline before it is
 /// abandoned.
@@ -89,6 +92,8 @@ pub(crate) struct Active {
     /// Counted as a finished transaction before its caller hears the
     /// result, so a caller that reads the status next sees it counted.
     finished: Arc<Telemetry>,
+    /// How long the engine's recent PDO assignment reads took (see `pace`).
+    pace: Arc<PollPace>,
 }
 
 /// What a step did.
@@ -104,7 +109,7 @@ pub(crate) enum Progress {
 
 impl Active {
     /// Takes a job into the slot; a job whose caller already left is dropped.
-    pub(crate) fn new(job: Job, now: Instant, finished: &Arc<Telemetry>) -> Option<Self> {
+    pub(crate) fn new(job: Job, now: Instant, finished: &Arc<Telemetry>, pace: &Arc<PollPace>) -> Option<Self> {
         if job.reply.is_closed() {
             return None;
         }
@@ -124,6 +129,7 @@ impl Active {
             sent_read: None,
             unsure_after: None,
             finished: Arc::clone(finished),
+            pace: Arc::clone(pace),
         })
     }
 
@@ -305,6 +311,8 @@ impl Active {
         let failed = status.errors.contains(ErrorFlags::BLOCKING_FAILED);
         if failed {
             port.pending_control |= ControlFlags::CLEAR_BLOCKING_ERROR;
+        } else if fetched.is_some() {
+            self.note_pace(now);
         }
         if self.orphaned() {
             return Ok((None, Progress::Done));

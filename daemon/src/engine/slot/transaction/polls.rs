@@ -104,10 +104,31 @@ impl Active {
 
     /// When the next poll is due: back to back while the operation is
     /// young, every quarter of its age later, at most every [`MAX_POLL`].
+    /// A PDO assignment read is polled at its start, then when the reads
+    /// before it ended ([`super::pace`]), and by the quarter rule only once
+    /// that time has passed.
     pub(crate) fn next_poll(&self) -> Instant {
         match self.polled {
             None => self.since,
-            Some((at, _)) => at + (at.saturating_duration_since(self.since) / 4).min(MAX_POLL),
+            Some((at, _)) => {
+                let paced = self.expected().and_then(|e| super::pace::paced_poll(self.since, at, e));
+                paced.unwrap_or_else(|| at + (at.saturating_duration_since(self.since) / 4).min(MAX_POLL))
+            }
+        }
+    }
+
+    /// How long this step should take, where the engine learns it: PDO
+    /// assignment reads only (see [`super::pace`]).
+    fn expected(&self) -> Option<std::time::Duration> {
+        (self.fetch() == Some(Fetch::PdoConfig)).then(|| self.pace.expected()).flatten()
+    }
+
+    /// The GET poll found this step's read ended: its time goes to the
+    /// pace, counted to the last timed poll (the one that found it, or the
+    /// one its answer was fetched with, an exchange later).
+    pub(super) fn note_pace(&self, now: Instant) {
+        if self.fetch() == Some(Fetch::PdoConfig) {
+            self.pace.ended(self.since, self.polled.map_or(now, |(at, _)| at));
         }
     }
 
