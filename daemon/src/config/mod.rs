@@ -457,8 +457,8 @@ pub struct RealtimeConfig {
     /// budget whose RxFIFO margin does not cover the link's refill and
     /// this is refused (`cycle.output_latency_us`). 1000 by default: what a
     /// stock kernel with SCHED_FIFO and memory locked held here (a 3 ms
-    /// budget at a 1 ms cycle, which the link alone allows, ran dry 5
-    /// times in 20 s). Lower it on a PREEMPT_RT kernel with an isolated
+    /// budget at a 1 ms cycle, which the link alone allows, ran dry in a
+    /// minute). Lower it on a PREEMPT_RT kernel with an isolated
     /// core, once measured (`ecmxf-latency-bench --rt`).
     pub host_stall_us: u32,
 }

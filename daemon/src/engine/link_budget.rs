@@ -49,8 +49,10 @@ pub const REFILL_PACKETS: u64 = PACKETS_PER_CALL + 2;
 /// the slaves get their last outputs again (an underrun) each time a
 /// transaction's packet goes before a late refill. Without the host's
 /// part this is the link's floor, which a stock kernel does not hold:
-/// `ecmxf-latency-bench --rt` (SCHED_FIFO, memory locked) ran 5 underruns
-/// in 20 s at 3 ms and a 1 ms cycle, where the link alone allows 3 ms.
+/// `ecmxf-latency-bench --rt --host-stall-us 0` (SCHED_FIFO, memory
+/// locked, 60 s) ran the RxFIFO dry at 3 ms and a 1 ms cycle, and twice
+/// at 2500 us and 125 us with 206 late writes, where the link alone
+/// allows both.
 pub fn min_output_latency_ns(packet_ns: u64, cycle_ns: u64, host_ns: u64) -> u64 {
     let cycle = cycle_ns.max(1);
     let refill_cycles = (REFILL_PACKETS * packet_ns + host_ns).div_ceil(cycle).max(1);

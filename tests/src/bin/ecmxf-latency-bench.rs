@@ -7,7 +7,8 @@
 //! gets: SCHED_FIFO priority 80, memory locked, 2000 us of spin before
 //! each exchange; they need root or the unit's limits, without which the
 //! daemon warns and runs without them; `--fifo-reads guarded|pipelined`
-//! sets `cycle.fifo_reads`, unset the daemon's default).
+//! sets `cycle.fifo_reads`, unset the daemon's default; `--host-stall-us N`
+//! sets `realtime.host_stall_us`, which decides the budgets refused).
 //!
 //! For each (cycle, budget) it checks the configuration as `ecmxfd
 //! --check-config` does (a budget the link cannot hold is refused there,
@@ -50,7 +51,13 @@ struct Outcome {
 const NO_REALTIME: &str = "priority = 0\nlock_memory = false\nspin_us = 0\n";
 
 /// The configuration of one run, refused as `--check-config` refuses it.
-fn checked_config(cycle_us: u32, budget_us: u32, realtime: bool, reads: Option<&str>) -> Result<String, String> {
+fn checked_config(
+    cycle_us: u32,
+    budget_us: u32,
+    realtime: bool,
+    reads: Option<&str>,
+    host_stall_us: Option<u32>,
+) -> Result<String, String> {
     let mut extra = format!("output_latency_us = {budget_us}\nsync0_us = {cycle_us}\n");
     if let Some(reads) = reads {
         extra.push_str(&format!("fifo_reads = \"{reads}\"\n"));
@@ -61,6 +68,9 @@ fn checked_config(cycle_us: u32, budget_us: u32, realtime: bool, reads: Option<&
             return Err("--rt: the test configuration's [realtime] is not the one this bench takes out".into());
         }
         config = config.replace(NO_REALTIME, "");
+    }
+    if let Some(us) = host_stall_us {
+        config = config.replace("[realtime]\n", &format!("[realtime]\nhost_stall_us = {us}\n"));
     }
     let dir = ecmxf_e2e::temp_dir("latency-check");
     let path = dir.join("ecmxfd.toml");
@@ -141,6 +151,7 @@ fn main() {
     let mut only: Option<(u32, u32)> = None;
     let mut realtime = false;
     let mut reads: Option<String> = None;
+    let mut host_stall_us: Option<u32> = None;
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
@@ -151,9 +162,10 @@ fn main() {
                 only = Some((c.parse().expect("cycle"), b.parse().expect("budget")));
             }
             "--rt" => realtime = true,
+            "--host-stall-us" => host_stall_us = args.next().and_then(|v| v.parse().ok()),
             "--fifo-reads" => reads = Some(args.next().expect("--fifo-reads guarded|pipelined")),
             other => panic!(
-                "unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US, --rt, --fifo-reads guarded|pipelined"
+                "unknown argument {other}; use --secs N, --only CYCLE_US:BUDGET_US, --rt, --fifo-reads guarded|pipelined, --host-stall-us N"
             ),
         }
     }
@@ -181,7 +193,7 @@ fn main() {
     // `--only` runs that pair, listed or not.
     let pairs: Vec<(u32, u32)> = only.map_or_else(|| all.to_vec(), |o| vec![o]);
     for (cycle_us, budget_us) in pairs {
-        let run = checked_config(cycle_us, budget_us, realtime, reads.as_deref())
+        let run = checked_config(cycle_us, budget_us, realtime, reads.as_deref(), host_stall_us)
             .map(|config| rt.block_on(measure(&config, secs)));
         let o = match run.and_then(|r| r) {
             Ok(o) => o,
