@@ -140,8 +140,7 @@ fn latency_fits(c: &Config, path: &Path, simulated_packet_ns: Option<u64>) -> Re
         _ => return Ok(()),
     };
     let cycle_ns = u64::from(c.cycle.sync0_us) * 1000;
-    let host_ns = u64::from(c.realtime.host_stall_us) * 1000;
-    match crate::master::link_budget::latency_refusal(budget_us, packet_ns, cycle_ns, host_ns) {
+    match crate::master::link_budget::latency_refusal(budget_us, packet_ns, cycle_ns, c.realtime.host_stall_ns()) {
         None => Ok(()),
         Some(message) => {
             Err(ConfigError::Invalid { file: path.into(), key: "cycle.output_latency_us".into(), message })

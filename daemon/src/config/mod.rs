@@ -463,6 +463,13 @@ pub struct RealtimeConfig {
     pub host_stall_us: u32,
 }
 
+impl RealtimeConfig {
+    /// `host_stall_us`, ns: what the output latency floor adds for the host.
+    pub fn host_stall_ns(&self) -> u64 {
+        u64::from(self.host_stall_us) * 1000
+    }
+}
+
 impl Default for RealtimeConfig {
     fn default() -> Self {
         Self { priority: 80, cpu: None, lock_memory: true, spin_us: 2000, host_stall_us: 1000 }

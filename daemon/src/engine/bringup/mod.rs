@@ -426,7 +426,6 @@ fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, B
     };
     let (rx_size, tx_size) = (frame_size(PdoDirection::Outputs)?, frame_size(PdoDirection::Inputs)?);
     let (cycle_ns, data_size) = (u64::from(c.sync0_us) * 1000, port.data_size());
-    let host_ns = u64::from(config.realtime.host_stall_us) * 1000;
     let check =
         |packet: Duration| super::link_budget::check(data_size, rx_size, tx_size, packet.as_nanos() as u64, cycle_ns);
     let budget = match check(packet_time(port)?) {
@@ -452,9 +451,9 @@ fn fifo_plan<L: Link>(port: &mut Port<L>, config: &Config) -> Result<FifoPlan, B
     // A budget the packets as measured now cannot hold (the offline check
     // had only the clock's bound): said, not refused, as a loaded host may
     // have slowed the measurement.
-    if let Some(why) =
-        c.output_latency_us.and_then(|us| super::link_budget::latency_refusal(us, budget.packet_ns, cycle_ns, host_ns))
-    {
+    if let Some(why) = c.output_latency_us.and_then(|us| {
+        super::link_budget::latency_refusal(us, budget.packet_ns, cycle_ns, config.realtime.host_stall_ns())
+    }) {
         warn!("cycle.output_latency_us: {why}");
     }
     if budget.load() > super::link_budget::WARN_LOAD {
